@@ -1,0 +1,13 @@
+"""fitting: parameters for jaxskin from measurements, with optimistix.
+
+- `fitting.measurements`: spectroradiometer CSVs (thin layer, opaque layer, background).
+- `fitting.km`: S(λ), K(λ) of a cosmetic (Huang et al. 2013 §4).
+- `fitting.report`: the PNG report of a fit.
+
+Fits run in float64 inside `jax.enable_x64(True)`; nothing here changes JAX's global settings.
+"""
+
+from .km import KMFit, closed_form, fit, identifiable
+from .measurements import Measurement, read_measurement
+
+__all__ = ["KMFit", "Measurement", "closed_form", "fit", "identifiable", "read_measurement"]

@@ -1,0 +1,247 @@
+"""Spectroradiometer measurement CSVs for Kubelka–Munk calibration (Huang et al. 2013 §4).
+
+The format, also in the README:
+
+    # name: foundation_1          (optional; default: the file's stem)
+    # thickness_mm: 0.15          (optional; the thickness of a bare `R` column)
+    wavelength_nm,R_0.05mm,R_0.15mm,R_inf,R_g
+    380,0.0712,0.1134,0.2051,0.0398
+    ...
+
+- `R_<X>mm`: reflectance of a thin layer X mm thick over the background (one or more).
+- `R`: a thin layer whose thickness comes from `--thickness` or `# thickness_mm:`.
+- `R_inf`: an opaque layer. `R_g`: the background alone (black or white card).
+- Reflectance factors in [0, 1] (or 0–100 with `percent=True`).
+- Raw radiance instead: the same columns with `E_` in place of `R_` (`E_0.15mm`, `E_inf`,
+  `E_g`; `E_R_0.15mm` is accepted too) plus `E_white`, the barium sulfate standard; then
+  R = E / E_white (eq. 8).
+
+Anything else is an `InputError` naming the file, the line and the column.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+
+from jaxskin.io import InputError
+
+__all__ = ["Measurement", "read_measurement"]
+
+_THIN = re.compile(r"^(?:R|E)_(?P<x>[^m]+)mm$")
+
+
+@dataclasses.dataclass(frozen=True)
+class Measurement:
+    """One cosmetic's reflectance measurements, all on one wavelength grid.
+
+    **Fields:** `path`, `name`, `wavelength_nm (n,)`, `thickness_mm (m,)`, `R (m, n)` of the
+    thin layers over the background, `R_inf (n,)`, `R_g (n,)`, `columns`: the CSV column
+    each thin layer came from, `header_line`: the header's line number in the file.
+    """
+
+    path: Path
+    name: str
+    wavelength_nm: np.ndarray
+    thickness_mm: np.ndarray
+    R: np.ndarray
+    R_inf: np.ndarray
+    R_g: np.ndarray
+    columns: tuple[str, ...]
+    header_line: int
+
+
+def read_measurement(path, thickness_mm: float | None = None, percent: bool = False):
+    """Read and check one measurement CSV.
+
+    **Arguments:**
+
+    - `path`: the CSV file.
+    - `thickness_mm`: thickness for a bare `R` column; overrides `# thickness_mm:`.
+    - `percent`: reflectance columns are 0–100 instead of 0–1 (radiance columns unaffected).
+
+    **Returns:** a `Measurement`. **Raises:** `InputError` on anything malformed.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise InputError("no such file", path) from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise InputError(f"cannot read as UTF-8 text ({e.__class__.__name__})", path) from None
+
+    meta: dict[str, tuple[str, int]] = {}
+    header, header_line, rows = None, 0, []
+    for number, raw in enumerate(text.splitlines(), start=1):
+        line = raw.strip()
+        if not line:
+            continue
+        if line.startswith("#"):
+            if header is None and ":" in line:
+                key, value = line[1:].split(":", 1)
+                meta[key.strip().lower()] = (value.strip(), number)
+            continue
+        cells = [c.strip() for c in line.split(",")]
+        if header is None:
+            header, header_line = cells, number
+        else:
+            rows.append((number, cells))
+    if header is None:
+        raise InputError("no header line; expected 'wavelength_nm,R_<X>mm,...,R_inf,R_g'", path)
+
+    comment_thickness = None
+    if "thickness_mm" in meta:
+        value, number = meta["thickness_mm"]
+        comment_thickness = _positive(value, path, number, "thickness_mm")
+    if thickness_mm is not None and not (math.isfinite(thickness_mm) and thickness_mm > 0):
+        raise InputError(f"--thickness must be a positive number of mm, got {thickness_mm}", path)
+    bare_thickness = thickness_mm if thickness_mm is not None else comment_thickness
+
+    columns = _classify(header, path, header_line, bare_thickness)
+    if len(rows) < 2:
+        raise InputError("fewer than two data rows", path, header_line)
+    data = np.empty((len(rows), len(header)))
+    for r, (number, cells) in enumerate(rows):
+        if len(cells) != len(header):
+            raise InputError(
+                f"{len(cells)} cells where the header has {len(header)}", path, number
+            )
+        for c, cell in enumerate(cells):
+            try:
+                value = float(cell)
+            except ValueError:
+                raise InputError(f"expected a number, got {cell!r}", path, number, header[c])
+            if not math.isfinite(value):
+                raise InputError(f"expected a finite number, got {cell!r}", path, number, header[c])
+            data[r, c] = value
+    numbers = [number for number, _ in rows]
+
+    wl = data[:, 0]
+    bad = np.flatnonzero(np.diff(wl) <= 0)
+    if bad.size:
+        raise InputError(
+            f"wavelengths must increase, got {wl[bad[0]]:g} then {wl[bad[0] + 1]:g}",
+            path, numbers[bad[0] + 1], header[0],
+        )
+    if wl[0] <= 0:
+        raise InputError("wavelengths must be positive nm", path, numbers[0], header[0])
+
+    reflectance = _reflectances(data, header, columns, path, numbers, percent)
+    thin = sorted((x, name) for name, (kind, x) in columns.items() if kind == "thin")
+    R = np.stack([reflectance[name] for _, name in thin])
+    R_inf, R_g = reflectance["inf"], reflectance["g"]
+    if np.all(np.abs(R_g - R_inf) <= 1e-12):
+        raise InputError(
+            "R_g equals R_inf at every wavelength: the background must differ from the opaque "
+            "layer (a black or white card)", path, header_line, _column_of(columns, "g"),
+        )
+    name = meta.get("name", (path.stem, 0))[0] or path.stem
+    if not re.fullmatch(r"[\w.+-]+", name):
+        raise InputError(
+            f"name {name!r} must be letters, digits, '.', '_', '+' or '-' (it names files)",
+            path, meta["name"][1],
+        )
+    return Measurement(
+        path=path, name=name, wavelength_nm=wl, thickness_mm=np.array([x for x, _ in thin]),
+        R=R, R_inf=R_inf, R_g=R_g, columns=tuple(n for _, n in thin), header_line=header_line,
+    )
+
+
+def _column_of(columns, role):
+    return next(name for name, (kind, _) in columns.items() if kind == role)
+
+
+def _is_radiance(name: str) -> bool:
+    return name == "E" or name.startswith("E_")
+
+
+def _positive(value, path, line, column) -> float:
+    try:
+        x = float(value)
+    except ValueError:
+        x = math.nan
+    if not (math.isfinite(x) and x > 0):
+        raise InputError(f"thickness must be a positive number of mm, got {value!r}",
+                         path, line, column)
+    return x
+
+
+def _classify(header, path, line, bare_thickness):
+    """Map each header name to (role, thickness); role is thin, inf, g or white."""
+    if header[0] != "wavelength_nm":
+        raise InputError("the first column must be 'wavelength_nm'", path, line, header[0])
+    expected = "expected R_<X>mm, R, R_inf, R_g (or E_… and E_white)"
+    columns: dict[str, tuple[str, float]] = {}
+    seen: dict[tuple[str, float], str] = {}
+    for name in header[1:]:
+        if name in columns or name == "wavelength_nm":
+            raise InputError("column appears twice", path, line, name)
+        short = "E_" + name[4:] if name.startswith("E_R_") else name
+        if short in ("R_inf", "E_inf"):
+            role = ("inf", 0.0)
+        elif short in ("R_g", "E_g"):
+            role = ("g", 0.0)
+        elif short == "E_white":
+            role = ("white", 0.0)
+        elif short in ("R", "E"):
+            if bare_thickness is None:
+                raise InputError(
+                    "a bare thin-layer column needs a thickness: add '# thickness_mm: X' "
+                    "or pass --thickness", path, line, name,
+                )
+            role = ("thin", bare_thickness)
+        elif m := _THIN.match(short):
+            role = ("thin", _positive(m["x"], path, line, name))
+        else:
+            raise InputError(f"unknown column; {expected}", path, line, name)
+        if role in seen:
+            raise InputError(f"the same quantity as column '{seen[role]}'", path, line, name)
+        seen[role] = name
+        columns[name] = role
+    roles = {kind for kind, _ in columns.values()}
+    for kind, what in (("thin", "R_<X>mm"), ("inf", "R_inf"), ("g", "R_g")):
+        if kind not in roles:
+            raise InputError(f"missing column {what}; {expected}", path, line)
+    radiance = [n for n in columns if _is_radiance(n) and n != "E_white"]
+    if radiance and "white" not in roles:
+        raise InputError("radiance columns need E_white (the white standard)", path, line,
+                         radiance[0])
+    return columns
+
+
+def _reflectances(data, header, columns, path, numbers, percent):
+    """Reflectance per role (thin columns by name), checked to lie in [0, 1]."""
+    index = {name: i + 1 for i, name in enumerate(header[1:])}
+    white = None
+    if "E_white" in columns:
+        white = data[:, index["E_white"]]
+        bad = np.flatnonzero(white <= 0)
+        if bad.size:
+            raise InputError(f"the white standard must be > 0, got {white[bad[0]]:g}",
+                             path, numbers[bad[0]], "E_white")
+    out = {}
+    for name, (kind, _) in columns.items():
+        if kind == "white":
+            continue
+        values = data[:, index[name]]
+        if _is_radiance(name):
+            neg = np.flatnonzero(values < 0)
+            if neg.size:
+                raise InputError(f"radiance must be >= 0, got {values[neg[0]]:g}",
+                                 path, numbers[neg[0]], name)
+            values = values / white
+            what = "R = E / E_white"
+        else:
+            values = values / 100.0 if percent else values
+            what = "reflectance" + (" (percent / 100)" if percent else "")
+        bad = np.flatnonzero((values < 0) | (values > 1))
+        if bad.size:
+            hint = "" if percent or _is_radiance(name) else " (percent data? use --percent)"
+            raise InputError(f"{what} must be in [0, 1], got {values[bad[0]]:g}{hint}",
+                             path, numbers[bad[0]], name)
+        out[name if kind == "thin" else kind] = values
+    return out

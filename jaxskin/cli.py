@@ -1,0 +1,145 @@
+"""The `jaxskin` command line.
+
+    jaxskin --version
+    jaxskin calibrate FILE.csv [FILE.csv ...] -o OUTDIR   # S(λ), K(λ) of cosmetics
+
+Bad input (a file, a column, a value) is reported as one line `jaxskin: error: …` with exit
+code 2 and no traceback. Output files are written under temporary names and renamed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+from . import __version__
+from .io import InputError, atomic_write
+
+EXIT_INPUT = 2
+
+
+def _enable_compilation_cache() -> None:
+    """Persist compiled programs across runs (JAXSKIN_NO_COMPILE_CACHE=1 switches it off)."""
+    if os.environ.get("JAXSKIN_NO_COMPILE_CACHE", "") not in ("", "0"):
+        return
+    import jax
+
+    root = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    path = os.environ.get("JAXSKIN_CACHE_DIR") or os.path.join(root, "jaxskin", "jax")
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError:
+        return  # an unwritable home is no reason to fail; we just compile again
+    jax.config.update("jax_compilation_cache_dir", path)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="jaxskin",
+        description="Differentiable rendering of human skin and cosmetics in JAX, with fitting.",
+        epilog="Environment: JAXSKIN_NO_COMPILE_CACHE=1 turns off the compilation cache kept in "
+        "$XDG_CACHE_HOME/jaxskin (or JAXSKIN_CACHE_DIR). Bad input exits with code 2.",
+    )
+    p.add_argument("--version", action="version", version=f"jaxskin {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+
+    c = sub.add_parser(
+        "calibrate",
+        help="fit Kubelka–Munk S(λ), K(λ) of cosmetics to spectroradiometer CSVs",
+        description="Fit scattering S(λ) and absorption K(λ) (per mm) of each cosmetic from a "
+        "CSV of thin-layer (R_<X>mm), opaque (R_inf) and background (R_g) reflectances, or raw "
+        "radiances (E_… and E_white). Writes OUTDIR/<name>.json (the material file the "
+        "renderer reads) and OUTDIR/<name>.png (a report). Every file is checked before any "
+        "fit runs: one bad file writes nothing. The CSV format is in the README.",
+    )
+    c.add_argument("files", nargs="+", metavar="FILE.csv", help="measurement CSVs")
+    c.add_argument("-o", "--output", required=True, metavar="OUTDIR",
+                   help="folder for <name>.json and <name>.png (created if missing)")
+    c.add_argument("--thickness", type=float, metavar="MM",
+                   help="thickness in mm of a bare 'R' column (overrides '# thickness_mm:')")
+    c.add_argument("--percent", action="store_true",
+                   help="reflectance columns are in percent (0–100) instead of 0–1")
+    c.add_argument("--smooth", type=float, default=0.0, metavar="W",
+                   help="weight of a smoothness prior on log S and log K across neighbouring "
+                   "bands; 0 (default) fits each band on its own")
+    c.add_argument("--noise", type=float, default=None, metavar="σ",
+                   help="standard deviation of one reflectance reading (default 0.002); a band "
+                   "is identifiable when some thin layer and the background each differ from "
+                   "R_inf by more than 3σ")
+    c.add_argument("--no-report", action="store_true", help="write the JSON only, no PNG")
+    return p
+
+
+def _calibrate(args) -> int:
+    from fitting import km as fit_km
+    from fitting.measurements import read_measurement
+
+    noise = fit_km.DEFAULT_NOISE if args.noise is None else args.noise
+    if not noise >= 0:
+        raise InputError(f"--noise must be >= 0, got {args.noise}")
+    if not args.smooth >= 0:
+        raise InputError(f"--smooth must be >= 0, got {args.smooth}")
+    out = Path(args.output)
+    inputs = {Path(f).resolve() for f in args.files}
+    # Check everything first: a bad file anywhere means nothing is written.
+    measurements, names = [], {}
+    for f in args.files:
+        m = read_measurement(f, thickness_mm=args.thickness, percent=args.percent)
+        if m.name in names:
+            raise InputError(f"name '{m.name}' is also the name of {names[m.name]}; "
+                             "give each a distinct '# name:'", f)
+        names[m.name] = f
+        for ext in (".json", ".png"):
+            if (out / (m.name + ext)).resolve() in inputs:
+                raise InputError("the output would overwrite this input; choose another -o", f)
+        if not fit_km.identifiable(m, noise).any():
+            fit_km.fit(m, noise=noise)  # raises the InputError that explains why
+        measurements.append(m)
+
+    import json
+
+    from tqdm import tqdm
+
+    from fitting.report import write_report
+
+    rows = []
+    for m in tqdm(measurements, desc="calibrate", unit="file", disable=None):
+        t0 = time.perf_counter()
+        result = fit_km.fit(m, smooth=args.smooth, noise=noise)
+        with atomic_write(out / f"{m.name}.json", "w") as fh:
+            json.dump(result.to_json(m), fh, indent=1)
+            fh.write("\n")
+        if not args.no_report:
+            write_report(m, result, out / f"{m.name}.png")
+        rows.append((m.name, result, time.perf_counter() - t0))
+    print(f"{'material':<24} {'bands':>5} {'identifiable':>12} {'rmse':>9} {'steps':>5} "
+          f"{'time s':>7}")
+    for name, r, dt in rows:
+        flag = "" if r.converged else "  (not converged: see report)"
+        print(f"{name:<24} {len(r.wavelength_nm):>5} {int(r.identifiable.sum()):>12} "
+              f"{r.rmse:>9.2e} {r.steps:>5} {dt:>7.2f}{flag}")
+    print(f"wrote {len(rows)} material(s) to {out}/")
+    return 0
+
+
+def main(argv=None) -> int:
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 0
+    _enable_compilation_cache()
+    try:
+        return {"calibrate": _calibrate}[args.command](args)
+    except InputError as e:
+        print(f"jaxskin: error: {e}", file=sys.stderr)
+        return EXIT_INPUT
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,73 @@
+"""Input errors, atomic output files and the shipped data folder.
+
+Everything that reads user files raises `InputError` with one line naming the file, the
+line or key, and what was expected; the CLI prints it and exits with code 2. Everything that
+writes goes through `atomic_write`, so no half-written file is ever left behind.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from pathlib import Path
+
+__all__ = ["InputError", "atomic_write", "data_dir"]
+
+
+class InputError(ValueError):
+    """Bad user input, reported as one line: `file:line: column 'c': message`.
+
+    **Arguments:**
+
+    - `message`: what is wrong and what was expected.
+    - `path`: the file (or `None`).
+    - `line`: 1-based line number in the file (or `None`).
+    - `column`: the column or key (or `None`).
+    """
+
+    def __init__(self, message: str, path=None, line: int | None = None, column=None):
+        self.path, self.line, self.column, self.message = path, line, column, message
+        where = "" if path is None else str(path)
+        if line is not None:
+            where += f":{line}"
+        parts = [p for p in (where, None if column is None else f"column '{column}'") if p]
+        super().__init__(": ".join([*parts, message]))
+
+
+@contextlib.contextmanager
+def atomic_write(path, mode: str = "wb"):
+    """Open a temporary file beside `path`; rename it onto `path` only if the block succeeds.
+
+    **Arguments:**
+
+    - `path`: the final file name.
+    - `mode`: `"wb"` or `"w"`.
+
+    **Returns:** a context manager yielding the open temporary file.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, mode) as f:
+            yield f
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+def data_dir() -> Path:
+    """The shipped `data/` folder (meshes, spectra, example measurements and materials)."""
+    here = Path(__file__).resolve().parent.parent / "data"
+    env = os.environ.get("JAXSKIN_DATA")
+    path = Path(env) if env else here
+    if not path.is_dir():
+        raise InputError(
+            "the shipped data folder is missing; install from a checkout with "
+            "`pip install -e .` or set JAXSKIN_DATA",
+            path,
+        )
+    return path

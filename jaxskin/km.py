@@ -1,0 +1,156 @@
+"""Kubelka–Munk layers: reflectance and transmittance of a layer, a stack, a background.
+
+Huang et al. 2013 eq. 1–2 (one layer) and the corrected eq. 3–4 (Kubelka's two-layer
+formula; the paper prints T1 R1 T1 where T1 R2 T1 is meant — see
+`shared/reference/constants.md`). S and K are per millimetre, thicknesses in millimetres.
+
+Every function is elementwise over broadcastable arrays of any shape, follows the dtype of
+its inputs, and is jit-, vmap- and grad-safe, including at the limits K → 0, S → 0, X → 0
+and X → ∞ (see `layer`).
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+__all__ = ["compose", "ks_from_r_inf", "layer", "over", "r_inf", "stack"]
+
+# Below this value of z² = (βX)² the layer uses power series in z² (no square root, so the
+# branch point at K = 0 has finite derivatives); above it, tanh/sech of z.
+_Q_SMALL = 0.25
+# Taylor coefficients in q = z² of sinh(z)/z and cosh(z), highest power first (Horner).
+# At q = 0.25 the first dropped terms are below 1e-16 relative.
+_SINHC = [1.0 / _f for _f in (1307674368000.0, 6227020800.0, 39916800.0, 362880.0, 5040.0,
+                              120.0, 6.0, 1.0)]
+_COSH = [1.0 / _f for _f in (20922789888000.0, 87178291200.0, 479001600.0, 3628800.0, 40320.0,
+                             720.0, 24.0, 2.0, 1.0)]
+
+
+def _horner(coefficients, q):
+    out = jnp.full_like(q, coefficients[0])
+    for c in coefficients[1:]:
+        out = out * q + c
+    return out
+
+
+def layer(
+    S: Float[ArrayLike, "*shape"],
+    K: Float[ArrayLike, "*shape"],
+    X: Float[ArrayLike, "*shape"],
+) -> tuple[Float[Array, "*shape"], Float[Array, "*shape"]]:
+    """Reflectance R0 (over black) and transmittance T of one Kubelka–Munk layer.
+
+    Huang et al. 2013 eq. 1–2, rewritten without overflow: with β = sqrt(K(K + 2S)) and
+    z = βX, dividing numerator and denominator of eq. 1–2 by β cosh z gives
+
+        R0 = S τ / ((S + K) τ + 1),   T = sech z / ((S + K) τ + 1),   τ = tanh(z) / β.
+
+    τ and sech z are even in β, so for small z they are evaluated as series in z² and the
+    square root never meets its branch point: values and gradients are finite and exact at
+    K = 0 (R0 = SX/(1 + SX)), S = 0 (T = exp(−KX)), X = 0 (R0 = 0, T = 1), and large z
+    (R0 → R∞, T → 0, no overflow for any finite z). Always 0 <= R0, T and R0 + T <= 1.
+
+    **Arguments:**
+
+    - `S`: scattering coefficient per mm, >= 0.
+    - `K`: absorption coefficient per mm, >= 0.
+    - `X`: thickness in mm, >= 0 and finite.
+
+    **Returns:** `(R0, T)`, broadcast to a common shape.
+    """
+    S, K, X = jnp.broadcast_arrays(*_promote(S, K, X))
+    q = X * X * K * (K + 2 * S)  # z²
+    small = q < _Q_SMALL
+    # Series branch (double-`where`: the unused branch sees harmless values).
+    qs = jnp.where(small, q, 0.0)
+    cosh_s = _horner(_COSH, qs)
+    tau_s = X * _horner(_SINHC, qs) / cosh_s
+    sech_s = 1.0 / cosh_s
+    # Large-z branch.
+    beta = jnp.sqrt(jnp.where(small, 1.0, K * (K + 2 * S)))
+    z = jnp.where(small, 1.0, X) * beta
+    e = jnp.exp(-z)
+    one_plus_e2 = 1.0 + e * e
+    tau_l = -jnp.expm1(-2.0 * z) / one_plus_e2 / beta
+    sech_l = 2.0 * e / one_plus_e2
+    tau = jnp.where(small, tau_s, tau_l)
+    sech = jnp.where(small, sech_s, sech_l)
+    denom = (S + K) * tau + 1.0
+    return S * tau / denom, sech / denom
+
+
+def r_inf(S: Float[ArrayLike, "*shape"], K: Float[ArrayLike, "*shape"]) -> Float[Array, "*shape"]:
+    """Reflectance of an opaque layer, R∞ = a − b = S / (S + K + sqrt(K² + 2KS)).
+
+    Needs S + K > 0. R∞ has a square-root branch point at K = 0: ∂R∞/∂K = −∞ there (it is
+    the physics, not the numerics), while ∂R∞/∂S stays finite (0). The root is written as
+    sqrt(K)·sqrt(K + 2S) so that the S-derivative at K = 0 is exactly 0 instead of NaN.
+    Fits parametrise by log K, where ∂R∞/∂log K → 0 as K → 0.
+
+    **Arguments:**
+
+    - `S`: scattering per mm, >= 0.
+    - `K`: absorption per mm, >= 0.
+
+    **Returns:** R∞ in [0, 1].
+    """
+    S, K = _promote(S, K)
+    return S / (S + K + jnp.sqrt(K) * jnp.sqrt(K + 2 * S))
+
+
+def ks_from_r_inf(R_inf: Float[ArrayLike, "*shape"]) -> Float[Array, "*shape"]:
+    """The inverse of `r_inf`: K/S = (1 − R∞)² / (2 R∞), for R∞ in (0, 1]."""
+    (R,) = _promote(R_inf)
+    return (1.0 - R) ** 2 / (2.0 * R)
+
+
+def compose(top, bottom):
+    """Kubelka's rule for a layer on top of another (the corrected Huang et al. eq. 3–4).
+
+        R12 = R1 + T1² R2 / (1 − R1 R2),   T12 = T1 T2 / (1 − R1 R2)
+
+    With a black backing (R2 = 0) the pair reflects exactly R1. Needs R1 R2 < 1.
+
+    **Arguments:**
+
+    - `top`: `(R1, T1)`.
+    - `bottom`: `(R2, T2)`.
+
+    **Returns:** `(R12, T12)`.
+    """
+    (R1, T1), (R2, T2) = top, bottom
+    inv = 1.0 / (1.0 - R1 * R2)
+    return R1 + T1 * T1 * R2 * inv, T1 * T2 * inv
+
+
+def over(R0, T, Rg):
+    """Reflectance of a layer `(R0, T)` over an opaque background of reflectance `Rg`.
+
+    R = R0 + T² Rg / (1 − R0 Rg): `compose` with a bottom that transmits nothing.
+    """
+    R0, T, Rg = _promote(R0, T, Rg)
+    return compose((R0, T), (Rg, jnp.zeros_like(Rg)))[0]
+
+
+def stack(R: Float[ArrayLike, "layers *shape"], T: Float[ArrayLike, "layers *shape"]):
+    """Reflectance and transmittance of a stack of layers (leading axis: layers, top first).
+
+    Folds `compose` from the bottom up; the number of layers is static, so the loop unrolls.
+
+    **Returns:** `(R, T)` of the whole stack, shape `*shape`.
+    """
+    R, T = _promote(R, T)
+    acc = (R[-1], T[-1])
+    for i in range(R.shape[0] - 2, -1, -1):
+        acc = compose((R[i], T[i]), acc)
+    return acc
+
+
+def _promote(*xs):
+    """Arrays of one floating dtype: the inputs' own if floating, else the default float."""
+    arrays = [jnp.asarray(x) for x in xs]
+    dtype = jnp.result_type(*arrays, jnp.float32)
+    if not jnp.issubdtype(dtype, jnp.floating):
+        dtype = jnp.float32
+    return [a.astype(dtype) for a in arrays]

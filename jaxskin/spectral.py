@@ -1,0 +1,128 @@
+"""Wavelength grids and spectrum → CIE XYZ → linear sRGB as one matrix product.
+
+A `Grid` names a uniform wavelength sampling and the light it is seen under. Its matrices
+are computed once (on the host, in float64, by colour-science) and are constants inside
+jit, so converting a spectral image is `spectra @ grid.rgb_matrix`, one matmul.
+
+The XYZ weights are exactly colour-science's ASTM E308 tristimulus weighting for that grid
+(`colour.sd_to_XYZ` is linear in the reflectance, so its weights are its values on unit
+spectra), scaled so that a perfect reflector has Y = 1. RGB is linear sRGB (D65 white); a
+non-D65 illuminant is first adapted to D65 with CAT02, so a perfect white stays white.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+__all__ = ["ILLUMINANTS", "STEPS", "Grid", "resample", "to_rgb", "to_xyz"]
+
+STEPS = (1, 5, 10, 20)
+ILLUMINANTS = ("D65", "D55", "D50", "A")
+_OBSERVER = "CIE 1931 2 Degree Standard Observer"
+
+
+@dataclasses.dataclass(frozen=True)
+class Grid:
+    """A uniform wavelength grid and an illuminant; hashable, so it can be a static jit argument.
+
+    **Arguments:**
+
+    - `step`: nm between samples, one of 1, 5 (default), 10, 20 (the ASTM E308 intervals).
+    - `start`, `stop`: first and last wavelength in nm (default 380–780, both included).
+    - `illuminant`: `"D65"` (default), `"D55"` (Huang et al.'s measurement light), `"D50"`, `"A"`.
+    """
+
+    step: int = 5
+    start: int = 380
+    stop: int = 780
+    illuminant: str = "D65"
+
+    def __post_init__(self):
+        if self.step not in STEPS:
+            raise ValueError(f"spectral step must be one of {STEPS} nm, got {self.step}")
+        if self.illuminant not in ILLUMINANTS:
+            raise ValueError(f"illuminant must be one of {ILLUMINANTS}, got {self.illuminant!r}")
+        if not (360 <= self.start < self.stop <= 830) or (self.stop - self.start) % self.step:
+            raise ValueError(
+                f"grid {self.start}–{self.stop} nm must lie in 360–830 nm and be a whole "
+                f"number of {self.step} nm steps"
+            )
+
+    @property
+    def wavelengths(self) -> np.ndarray:
+        """The sample wavelengths in nm, float64, shape `(n,)`."""
+        return np.arange(self.start, self.stop + self.step / 2, self.step, dtype=np.float64)
+
+    def __len__(self) -> int:
+        return (self.stop - self.start) // self.step + 1
+
+    @property
+    def xyz_matrix(self) -> np.ndarray:
+        """Weights `(n, 3)`: XYZ = reflectance @ W, with Y = 1 for a perfect reflector."""
+        return _xyz_matrix(self.start, self.stop, self.step, self.illuminant)
+
+    @property
+    def rgb_matrix(self) -> np.ndarray:
+        """Weights `(n, 3)`: linear sRGB = reflectance @ M (white under the illuminant → 1)."""
+        return _rgb_matrix(self.start, self.stop, self.step, self.illuminant)
+
+
+@functools.lru_cache(maxsize=None)
+def _xyz_matrix(start: int, stop: int, step: int, illuminant: str) -> np.ndarray:
+    import colour  # imported lazily: it takes a second and only grids need it
+
+    shape = colour.SpectralShape(start, stop, step)
+    n = len(shape.wavelengths)
+    basis = colour.MultiSpectralDistributions(np.eye(n), shape.wavelengths)
+    cmfs = colour.MSDS_CMFS[_OBSERVER]
+    W = colour.msds_to_XYZ(basis, cmfs, colour.SDS_ILLUMINANTS[illuminant], method="ASTM E308")
+    W = np.asarray(W, dtype=np.float64) / 100.0
+    W.setflags(write=False)
+    return W
+
+
+@functools.lru_cache(maxsize=None)
+def _rgb_matrix(start: int, stop: int, step: int, illuminant: str) -> np.ndarray:
+    import colour
+
+    W = _xyz_matrix(start, stop, step, illuminant)
+    srgb = colour.RGB_COLOURSPACES["sRGB"]
+    white = W.sum(axis=0)  # XYZ of a perfect reflector under this illuminant
+    d65 = colour.xy_to_XYZ(srgb.whitepoint)
+    adapt = colour.adaptation.matrix_chromatic_adaptation_VonKries(white, d65, transform="CAT02")
+    M = W @ adapt.T @ np.asarray(srgb.matrix_XYZ_to_RGB).T
+    M.setflags(write=False)
+    return M
+
+
+def to_xyz(spectra: Float[ArrayLike, "*shape n"], grid: Grid) -> Float[Array, "*shape 3"]:
+    """CIE XYZ (Y = 1 for a perfect reflector) of reflectance spectra sampled on `grid`."""
+    spectra = jnp.asarray(spectra)
+    return spectra @ jnp.asarray(grid.xyz_matrix, dtype=_float(spectra))
+
+
+def to_rgb(spectra: Float[ArrayLike, "*shape n"], grid: Grid) -> Float[Array, "*shape 3"]:
+    """Linear sRGB of reflectance spectra sampled on `grid` (last axis = wavelength)."""
+    spectra = jnp.asarray(spectra)
+    return spectra @ jnp.asarray(grid.rgb_matrix, dtype=_float(spectra))
+
+
+def resample(values: ArrayLike, wavelengths: ArrayLike, grid: Grid) -> np.ndarray:
+    """Linear interpolation of host-side spectra `(..., m)` from `wavelengths` onto `grid`.
+
+    Values outside the measured range are held at the end values (and should be avoided).
+    """
+    values = np.asarray(values, dtype=np.float64)
+    wl = np.asarray(wavelengths, dtype=np.float64)
+    flat = values.reshape(-1, values.shape[-1])
+    out = np.stack([np.interp(grid.wavelengths, wl, row) for row in flat])
+    return out.reshape(*values.shape[:-1], len(grid))
+
+
+def _float(x) -> jnp.dtype:
+    return x.dtype if jnp.issubdtype(x.dtype, jnp.floating) else jnp.float32
