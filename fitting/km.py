@@ -132,15 +132,15 @@ def model_reflectance(logS, logK, X, Rg):
 
 def _residuals(y, args):
     logS, logK = y
-    X, R, R_inf, Rg, root_smooth, ident, logS_fixed = args
+    X, R, R_inf, Rg, prior, ident, logS_fixed = args
     # Where S is not identifiable it is held (a zero Jacobian column), so it cannot drift.
     logS = jnp.where(ident, logS, logS_fixed)
     R_model, R_inf_model = model_reflectance(logS, logK, X, Rg)
     return (
         (R_model - R).ravel(),
         R_inf_model - R_inf,
-        root_smooth * jnp.diff(logS),
-        root_smooth * jnp.diff(logK),
+        prior * jnp.diff(logS),
+        prior * jnp.diff(logK),
     )
 
 
@@ -158,7 +158,9 @@ def fit(m: Measurement, smooth: float = 0.0, noise: float = DEFAULT_NOISE) -> KM
     **Arguments:**
 
     - `m`: the measurement (`read_measurement`).
-    - `smooth`: weight of the prior on neighbouring bands' log S and log K differences (0: off).
+    - `smooth`: W of a Gaussian prior that neighbouring bands' log S and log K differ by about
+      1/W (standard deviation), weighed against readings of σ = `noise`: the maximum a
+      posteriori fit. 0 (default) fits each band on its own; W = 20 allows ~5 % per band.
     - `noise`: σ of one reflectance reading; differences within 3σ count as equal when
       deciding which bands are identifiable.
 
@@ -184,16 +186,19 @@ def fit(m: Measurement, smooth: float = 0.0, noise: float = DEFAULT_NOISE) -> KM
 
     with jax.enable_x64(True):
         f64 = functools.partial(jnp.asarray, dtype=jnp.float64)
-        args = (f64(m.thickness_mm), f64(m.R), f64(m.R_inf), f64(m.R_g), f64(np.sqrt(smooth)),
-                jnp.asarray(ident), f64(logS0))
-        (logS, logK), ok, steps = _solve((f64(logS0), f64(logK0)), args)
-        logS, logK = np.asarray(logS), np.asarray(logK)
-        # Unidentifiable bands: S from identifiable neighbours, K/S kept from the fit.
-        log_ratio = logK - logS
-        logS = np.where(ident, logS, np.interp(wl, wl[ident], logS[ident]))
-        logK = logS + log_ratio
+        data = (f64(m.thickness_mm), f64(m.R), f64(m.R_inf), f64(m.R_g), f64(smooth * noise),
+                jnp.asarray(ident))
+        (logS, logK), ok, steps = _solve((f64(logS0), f64(logK0)), (*data, f64(logS0)))
+        if not ident.all():
+            # S where it is not identifiable: from the fitted neighbours (linear in log S),
+            # K/S kept; then fit again with S held there, so S, K and the fit agree.
+            logS_fill = np.interp(wl, wl[ident], np.asarray(logS)[ident])
+            y = (f64(logS_fill), f64(logS_fill) + logK - logS)
+            (logS, logK), ok, more = _solve(y, (*data, f64(logS_fill)))
+            steps = steps + more
+        logS, logK = (np.asarray(a) for a in (logS, logK))
         R_fit, R_inf_fit = (np.asarray(a) for a in model_reflectance(f64(logS), f64(logK),
-                                                                      *args[:1], args[3]))
+                                                                      data[0], data[3]))
     residual = np.concatenate([(R_fit - m.R).ravel(), R_inf_fit - m.R_inf])
     return KMFit(
         name=m.name, wavelength_nm=wl, S_per_mm=np.exp(logS), K_per_mm=np.exp(logK),

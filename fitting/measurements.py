@@ -114,7 +114,8 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
             try:
                 value = float(cell)
             except ValueError:
-                raise InputError(f"expected a number, got {cell!r}", path, number, header[c])
+                raise InputError(f"expected a number, got {cell!r}", path, number,
+                                 header[c]) from None
             if not math.isfinite(value):
                 raise InputError(f"expected a finite number, got {cell!r}", path, number, header[c])
             data[r, c] = value

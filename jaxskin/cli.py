@@ -65,8 +65,9 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--percent", action="store_true",
                    help="reflectance columns are in percent (0–100) instead of 0–1")
     c.add_argument("--smooth", type=float, default=0.0, metavar="W",
-                   help="weight of a smoothness prior on log S and log K across neighbouring "
-                   "bands; 0 (default) fits each band on its own")
+                   help="smoothness prior: neighbouring bands' log S and log K differ by about "
+                   "1/W (a Gaussian prior weighed against readings of σ = --noise); 0 (default) "
+                   "fits each band on its own; 20 allows about 5%% per band")
     c.add_argument("--noise", type=float, default=None, metavar="σ",
                    help="standard deviation of one reflectance reading (default 0.002); a band "
                    "is identifiable when some thin layer and the background each differ from "

@@ -11,10 +11,12 @@ and X → ∞ (see `layer`).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-__all__ = ["compose", "ks_from_r_inf", "layer", "over", "r_inf", "stack"]
+__all__ = ["Slab", "compose", "ks_from_r_inf", "layer", "over", "r_inf", "stack"]
 
 # Below this value of z² = (βX)² the layer uses power series in z² (no square root, so the
 # branch point at K = 0 has finite derivatives); above it, tanh/sech of z.
@@ -105,46 +107,67 @@ def ks_from_r_inf(R_inf: Float[ArrayLike, "*shape"]) -> Float[Array, "*shape"]:
     return (1.0 - R) ** 2 / (2.0 * R)
 
 
-def compose(top, bottom):
-    """Kubelka's rule for a layer on top of another (the corrected Huang et al. eq. 3–4).
+class Slab(NamedTuple):
+    """Reflectance from above `R`, transmittance `T` (the same both ways) and reflectance
+    from below `R_back` of a layer or a stack. One homogeneous layer has R_back = R."""
 
-        R12 = R1 + T1² R2 / (1 − R1 R2),   T12 = T1 T2 / (1 − R1 R2)
+    R: Array
+    T: Array
+    R_back: Array
 
-    With a black backing (R2 = 0) the pair reflects exactly R1. Needs R1 R2 < 1.
+
+def compose(top, bottom) -> Slab:
+    """Kubelka's rule for `top` lying on `bottom` (the corrected Huang et al. eq. 3–4).
+
+        R = R1 + T1² R2 / (1 − R1' R2),   T = T1 T2 / (1 − R1' R2),
+        R' = R2' + T2² R1' / (1 − R1' R2)
+
+    where ' marks reflectance seen from below. For a homogeneous top (R1' = R1) this is
+    eq. 3–4 as corrected; with a black backing (R2 = 0) the pair reflects exactly R1. Keeping
+    R' makes the rule exact for composites too, and associative.
 
     **Arguments:**
 
-    - `top`: `(R1, T1)`.
-    - `bottom`: `(R2, T2)`.
+    - `top`, `bottom`: `(R, T)` for one homogeneous layer, or `(R, T, R_back)` / a `Slab`.
 
-    **Returns:** `(R12, T12)`.
+    **Returns:** the `Slab` of the pair. Needs R1' R2 < 1.
     """
-    (R1, T1), (R2, T2) = top, bottom
-    inv = 1.0 / (1.0 - R1 * R2)
-    return R1 + T1 * T1 * R2 * inv, T1 * T2 * inv
+    R1, T1, R1b = _slab(top)
+    R2, T2, R2b = _slab(bottom)
+    inv = 1.0 / (1.0 - R1b * R2)
+    return Slab(R1 + T1 * T1 * R2 * inv, T1 * T2 * inv, R2b + T2 * T2 * R1b * inv)
 
 
-def over(R0, T, Rg):
-    """Reflectance of a layer `(R0, T)` over an opaque background of reflectance `Rg`.
+def over(R, T, Rg, R_back=None):
+    """Reflectance of a layer or stack `(R, T)` over an opaque background of reflectance `Rg`.
 
-    R = R0 + T² Rg / (1 − R0 Rg): `compose` with a bottom that transmits nothing.
+    R + T² Rg / (1 − R_back Rg): `compose` with a bottom that transmits nothing. `R_back`
+    (reflectance from below) defaults to `R`, exact for one homogeneous layer; for a stack
+    pass `stack(...).R_back`.
     """
-    R0, T, Rg = _promote(R0, T, Rg)
-    return compose((R0, T), (Rg, jnp.zeros_like(Rg)))[0]
+    top = (R, T) if R_back is None else (R, T, R_back)
+    return compose(top, (Rg, jnp.zeros_like(jnp.asarray(Rg))))[0]
 
 
-def stack(R: Float[ArrayLike, "layers *shape"], T: Float[ArrayLike, "layers *shape"]):
-    """Reflectance and transmittance of a stack of layers (leading axis: layers, top first).
+def stack(R: Float[ArrayLike, " layers *shape"], T: Float[ArrayLike, " layers *shape"]) -> Slab:
+    """A stack of homogeneous layers (leading axis: layers, top first) as one `Slab`.
 
-    Folds `compose` from the bottom up; the number of layers is static, so the loop unrolls.
+    Folds `compose` over the layers; the number of layers is static, so the loop unrolls.
 
-    **Returns:** `(R, T)` of the whole stack, shape `*shape`.
+    **Returns:** `Slab(R, T, R_back)` of the whole stack, each of shape `*shape`.
     """
     R, T = _promote(R, T)
-    acc = (R[-1], T[-1])
+    acc = Slab(R[-1], T[-1], R[-1])
     for i in range(R.shape[0] - 2, -1, -1):
         acc = compose((R[i], T[i]), acc)
     return acc
+
+
+def _slab(x):
+    if len(x) == 2:
+        R, T = _promote(*x)
+        return R, T, R
+    return _promote(*x)
 
 
 def _promote(*xs):

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import warnings
 
 import jax.numpy as jnp
 import numpy as np
@@ -72,7 +73,7 @@ class Grid:
         return _rgb_matrix(self.start, self.stop, self.step, self.illuminant)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _xyz_matrix(start: int, stop: int, step: int, illuminant: str) -> np.ndarray:
     import colour  # imported lazily: it takes a second and only grids need it
 
@@ -80,13 +81,16 @@ def _xyz_matrix(start: int, stop: int, step: int, illuminant: str) -> np.ndarray
     n = len(shape.wavelengths)
     basis = colour.MultiSpectralDistributions(np.eye(n), shape.wavelengths)
     cmfs = colour.MSDS_CMFS[_OBSERVER]
-    W = colour.msds_to_XYZ(basis, cmfs, colour.SDS_ILLUMINANTS[illuminant], method="ASTM E308")
+    with warnings.catch_warnings():  # colour announces the (expected) shape alignments
+        warnings.simplefilter("ignore", colour.utilities.ColourRuntimeWarning)
+        W = colour.msds_to_XYZ(basis, cmfs, colour.SDS_ILLUMINANTS[illuminant],
+                               method="ASTM E308")
     W = np.asarray(W, dtype=np.float64) / 100.0
     W.setflags(write=False)
     return W
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _rgb_matrix(start: int, stop: int, step: int, illuminant: str) -> np.ndarray:
     import colour
 

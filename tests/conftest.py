@@ -1,0 +1,33 @@
+"""Shared test fixtures.
+
+`x64` gives a test float64 (gradient checks, reference comparisons) through
+`jax.enable_x64(True)`, a context that ends with the test: the library's float32 default for
+rendering is never changed globally.
+"""
+
+import jax
+import pytest
+
+
+@pytest.fixture
+def x64():
+    with jax.enable_x64(True):
+        yield
+
+
+def check_grads_scaled(f, args, scales, order=2, eps=1e-5, **kw):
+    """`jax.test_util.check_grads` in scaled coordinates: argument i is `args[i] + scales[i]·δᵢ`,
+    checked at δ = 0, so one finite-difference step suits arguments of any magnitude (S ≈ 2
+    beside X = 5000 or X = 5e-7). Fwd and rev, float64 (use with the `x64` fixture)."""
+    import jax.numpy as jnp
+    from jax.test_util import check_grads
+
+    args = [jnp.asarray(a, jnp.float64) for a in args]
+    scales = [jnp.asarray(s, jnp.float64) for s in scales]
+
+    def g(*d):
+        return f(*(a + s * x for a, s, x in zip(args, scales, d, strict=True)))
+
+    check_grads(
+        g, [jnp.zeros_like(a) for a in args], order=order, modes=("fwd", "rev"), eps=eps, **kw
+    )

@@ -1,0 +1,135 @@
+"""The measurement CSV reader: every accepted form, and one precise line for each bad input."""
+
+import numpy as np
+import pytest
+
+from fitting.measurements import read_measurement
+from jaxskin.io import InputError
+
+GOOD = """# name: test_foundation
+wavelength_nm,R_0.05mm,R_0.15mm,R_inf,R_g
+400,0.30,0.40,0.45,0.04
+410,0.31,0.41,0.46,0.04
+420,0.32,0.42,0.47,0.04
+"""
+
+
+def write(tmp_path, text, name="m.csv"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_reads_thin_layers_sorted_by_thickness(tmp_path):
+    text = GOOD.replace("R_0.05mm,R_0.15mm", "R_0.15mm,R_0.05mm")
+    m = read_measurement(write(tmp_path, text))
+    assert m.name == "test_foundation"
+    np.testing.assert_array_equal(m.thickness_mm, [0.05, 0.15])
+    np.testing.assert_array_equal(m.R[0], [0.40, 0.41, 0.42])  # the 0.05 mm column, moved first
+    np.testing.assert_array_equal(m.wavelength_nm, [400, 410, 420])
+
+
+def test_bare_r_thickness_from_comment_or_flag(tmp_path):
+    text = "# thickness_mm: 0.2\nwavelength_nm,R,R_inf,R_g\n400,0.3,0.4,0.04\n410,0.3,0.4,0.04\n"
+    path = write(tmp_path, text, "bare.csv")
+    assert read_measurement(path).thickness_mm.tolist() == [0.2]
+    assert read_measurement(path, thickness_mm=0.1).thickness_mm.tolist() == [0.1]
+    assert read_measurement(path).name == "bare"
+
+
+def test_percent_and_radiance(tmp_path):
+    pct = write(
+        tmp_path,
+        GOOD.replace("0.30,0.40,0.45,0.04", "30,40,45,4")
+        .replace("0.31,0.41,0.46", "31,41,46")
+        .replace("0.32,0.42,0.47", "32,42,47")
+        .replace(",0.04", ",4"),
+        "pct.csv",
+    )
+    m = read_measurement(pct, percent=True)
+    np.testing.assert_allclose(m.R_inf, [0.45, 0.46, 0.47])
+    rad = write(
+        tmp_path,
+        "wavelength_nm,E_R_0.1mm,E_inf,E_g,E_white\n400,1.0,2.0,0.2,4.0\n410,1.5,3.0,0.3,6.0\n",
+        "rad.csv",
+    )
+    m = read_measurement(rad)
+    np.testing.assert_allclose(m.R[0], [0.25, 0.25])
+    np.testing.assert_allclose(m.R_inf, [0.5, 0.5])
+    np.testing.assert_allclose(m.R_g, [0.05, 0.05])
+
+
+def _bad(text_from_good):
+    return text_from_good(GOOD)
+
+
+BAD = [
+    # (what, how to break GOOD, line, column, words in the message)
+    (
+        "missing R_inf",
+        lambda t: (
+            t.replace(",R_inf", "").replace(",0.45", "").replace(",0.46", "").replace(",0.47", "")
+        ),
+        2,
+        None,
+        "missing column R_inf",
+    ),
+    ("unknown column", lambda t: t.replace("R_g", "R_ground"), 2, "R_ground", "unknown column"),
+    ("non-numeric cell", lambda t: t.replace("0.41", "abc"), 4, "R_0.15mm", "expected a number"),
+    ("NaN", lambda t: t.replace("0.41", "nan"), 4, "R_0.15mm", "finite"),
+    ("above 1", lambda t: t.replace("0.46", "46"), 4, "R_inf", "--percent"),
+    ("negative", lambda t: t.replace("0.04\n410", "-0.01\n410"), 3, "R_g", "[0, 1]"),
+    ("wavelength order", lambda t: t.replace("420,", "405,"), 5, "wavelength_nm", "increase"),
+    (
+        "ragged row",
+        lambda t: t.replace("0.41,0.46", "0.41"),
+        4,
+        None,
+        "4 cells where the header has 5",
+    ),
+    ("zero thickness", lambda t: t.replace("R_0.05mm", "R_0mm"), 2, "R_0mm", "positive"),
+    ("negative thickness", lambda t: t.replace("R_0.05mm", "R_-0.1mm"), 2, "R_-0.1mm", "positive"),
+    (
+        "R_g equal to R_inf",
+        lambda t: (
+            t.replace("0.45,0.04", "0.45,0.45")
+            .replace("0.46,0.04", "0.46,0.46")
+            .replace("0.47,0.04", "0.47,0.47")
+        ),
+        2,
+        "R_g",
+        "R_g equals R_inf",
+    ),
+    ("duplicate column", lambda t: t.replace("R_0.15mm", "R_0.05mm"), 2, "R_0.05mm", "twice"),
+    ("first column", lambda t: t.replace("wavelength_nm", "lambda"), 2, "lambda", "wavelength_nm"),
+    ("bare R without thickness", lambda t: t.replace("R_0.15mm", "R"), 2, "R", "thickness"),
+    (
+        "bad thickness comment",
+        lambda t: "# thickness_mm: thin\n" + t,
+        1,
+        "thickness_mm",
+        "positive",
+    ),
+    ("no data", lambda t: t.split("400")[0], 2, None, "fewer than two data rows"),
+    ("radiance without white", lambda t: t.replace("R_inf", "E_inf"), 2, "E_inf", "E_white"),
+]
+
+
+@pytest.mark.parametrize("what, breaker, line, column, words", BAD, ids=[b[0] for b in BAD])
+def test_bad_input_names_file_line_and_column(tmp_path, what, breaker, line, column, words):
+    path = write(tmp_path, breaker(GOOD), "bad.csv")
+    with pytest.raises(InputError) as info:
+        read_measurement(path)
+    message = str(info.value)
+    assert "\n" not in message
+    assert message.startswith(f"{path}:{line}"), message
+    if column is not None:
+        assert f"column '{column}'" in message, message
+    assert words in message, message
+
+
+def test_missing_file_and_bad_flag(tmp_path):
+    with pytest.raises(InputError, match="no such file"):
+        read_measurement(tmp_path / "nope.csv")
+    with pytest.raises(InputError, match="--thickness"):
+        read_measurement(write(tmp_path, GOOD), thickness_mm=-1.0)
