@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
@@ -61,25 +62,26 @@ def layer(
 
     **Returns:** `(R0, T)`, broadcast to a common shape.
     """
-    S, K, X = jnp.broadcast_arrays(*_promote(S, K, X))
-    q = X * X * K * (K + 2 * S)  # z²
-    small = q < _Q_SMALL
+    S, K, X = _promote(S, K, X)
+    # What depends on S and K only stays on their (small) shapes: in a render S, K are per
+    # (layer, wavelength) and X per texel, so this is hoisted out of the per-texel work.
+    q = K * (K + 2.0 * S)  # β²
+    inv_beta = jax.lax.rsqrt(jnp.where(q > 0, q, 1.0))  # safe: only read where z² >= 0.25
+    SK = S + K
+    z2 = q * (X * X)
+    small = z2 < _Q_SMALL
     # Series branch (double-`where`: the unused branch sees harmless values).
-    qs = jnp.where(small, q, 0.0)
-    cosh_s = _horner(_COSH, qs)
-    tau_s = X * _horner(_SINHC, qs) / cosh_s
-    sech_s = 1.0 / cosh_s
-    # Large-z branch.
-    beta = jnp.sqrt(jnp.where(small, 1.0, K * (K + 2 * S)))
-    z = jnp.where(small, 1.0, X) * beta
-    e = jnp.exp(-z)
-    one_plus_e2 = 1.0 + e * e
-    tau_l = -jnp.expm1(-2.0 * z) / one_plus_e2 / beta
-    sech_l = 2.0 * e / one_plus_e2
-    tau = jnp.where(small, tau_s, tau_l)
-    sech = jnp.where(small, sech_s, sech_l)
-    denom = (S + K) * tau + 1.0
-    return S * tau / denom, sech / denom
+    qs = jnp.where(small, z2, 0.0)
+    inv_cosh = 1.0 / _horner(_COSH, qs)
+    tau_s = X * _horner(_SINHC, qs) * inv_cosh
+    # Large-z branch: one exp; at z >= 0.5, 1 − e² has no cancellation.
+    e = jnp.exp(-X / inv_beta)
+    e2 = e * e
+    inv = 1.0 / (1.0 + e2)
+    tau = jnp.where(small, tau_s, (1.0 - e2) * inv * inv_beta)
+    sech = jnp.where(small, inv_cosh, 2.0 * e * inv)
+    inv_den = 1.0 / (SK * tau + 1.0)
+    return S * tau * inv_den, sech * inv_den
 
 
 def r_inf(S: Float[ArrayLike, "*shape"], K: Float[ArrayLike, "*shape"]) -> Float[Array, "*shape"]:
