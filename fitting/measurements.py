@@ -30,6 +30,8 @@ import numpy as np
 
 from jaxskin.io import InputError
 
+from .table import read_table
+
 __all__ = ["Measurement", "read_measurement"]
 
 _THIN = re.compile(r"^(?:R|E)_(?P<x>[^m]+)mm$")
@@ -66,32 +68,8 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
 
     **Returns:** a `Measurement`. **Raises:** `InputError` on anything malformed.
     """
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise InputError("no such file", path) from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise InputError(f"cannot read as UTF-8 text ({e.__class__.__name__})", path) from None
-
-    meta: dict[str, tuple[str, int]] = {}
-    header, header_line, rows = None, 0, []
-    for number, raw in enumerate(text.splitlines(), start=1):
-        line = raw.strip()
-        if not line:
-            continue
-        if line.startswith("#"):
-            if header is None and ":" in line:
-                key, value = line[1:].split(":", 1)
-                meta[key.strip().lower()] = (value.strip(), number)
-            continue
-        cells = [c.strip() for c in line.split(",")]
-        if header is None:
-            header, header_line = cells, number
-        else:
-            rows.append((number, cells))
-    if header is None:
-        raise InputError("no header line; expected 'wavelength_nm,R_<X>mm,...,R_inf,R_g'", path)
+    table = read_table(path, "wavelength_nm,R_<X>mm,...,R_inf,R_g", min_rows=2)
+    path, meta, header, header_line = table.path, table.meta, table.header, table.header_line
 
     comment_thickness = None
     if "thickness_mm" in meta:
@@ -102,24 +80,7 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
     bare_thickness = thickness_mm if thickness_mm is not None else comment_thickness
 
     columns = _classify(header, path, header_line, bare_thickness)
-    if len(rows) < 2:
-        raise InputError("fewer than two data rows", path, header_line)
-    data = np.empty((len(rows), len(header)))
-    for r, (number, cells) in enumerate(rows):
-        if len(cells) != len(header):
-            raise InputError(
-                f"{len(cells)} cells where the header has {len(header)}", path, number
-            )
-        for c, cell in enumerate(cells):
-            try:
-                value = float(cell)
-            except ValueError:
-                raise InputError(f"expected a number, got {cell!r}", path, number,
-                                 header[c]) from None
-            if not math.isfinite(value):
-                raise InputError(f"expected a finite number, got {cell!r}", path, number, header[c])
-            data[r, c] = value
-    numbers = [number for number, _ in rows]
+    data, numbers = table.data, table.lines
 
     wl = data[:, 0]
     bad = np.flatnonzero(np.diff(wl) <= 0)
@@ -179,7 +140,7 @@ def _classify(header, path, line, bare_thickness):
     columns: dict[str, tuple[str, float]] = {}
     seen: dict[tuple[str, float], str] = {}
     for name in header[1:]:
-        if name in columns or name == "wavelength_nm":
+        if name == "wavelength_nm":
             raise InputError("column appears twice", path, line, name)
         short = "E_" + name[4:] if name.startswith("E_R_") else name
         if short in ("R_inf", "E_inf"):

@@ -2,6 +2,7 @@
 
     jaxskin --version
     jaxskin calibrate FILE.csv [FILE.csv ...] -o OUTDIR   # S(λ), K(λ) of cosmetics
+    jaxskin fit-brdf FILE.csv -o OUT.json [--lobes N]     # Lafortune lobes
 
 Bad input (a file, a column, a value) is reported as one line `jaxskin: error: …` with exit
 code 2 and no traceback. Output files are written under temporary names and renamed.
@@ -73,6 +74,26 @@ def _parser() -> argparse.ArgumentParser:
                    "is identifiable when some thin layer and the background each differ from "
                    "R_inf by more than 3σ")
     c.add_argument("--no-report", action="store_true", help="write the JSON only, no PNG")
+
+    b = sub.add_parser(
+        "fit-brdf",
+        help="fit Lafortune lobes to BRDF samples",
+        description="Fit the diffuse term ρd and N Lafortune lobes (Cxy, Cz, n) per RGB channel "
+        "to BRDF samples: a CSV with theta_in_deg, phi_in_deg, theta_out_deg, phi_out_deg "
+        "(or unit vectors wi_x, wi_y, wi_z, wo_x, wo_y, wo_z; local frame, z = normal), R, G, B "
+        "in 1/sr, and an optional weight column. Writes OUT.json, the material file the "
+        "renderer reads ('diffuse' is ρd; the model divides by π), with the relative RMS error "
+        "per channel, and OUT.png, in-plane slices of samples and fit.",
+    )
+    b.add_argument("file", metavar="FILE.csv", help="BRDF samples")
+    b.add_argument("-o", "--output", required=True, metavar="OUT.json",
+                   help="the material file to write (the report goes beside it as .png)")
+    b.add_argument("--lobes", type=int, default=3, metavar="N", help="lobes per channel (3)")
+    b.add_argument("--starts", type=int, default=8, metavar="S",
+                   help="starts per channel, half from typical lobe shapes, half random (8); "
+                   "the best finite fit wins")
+    b.add_argument("--seed", type=int, default=0, help="seed of the random starts (0)")
+    b.add_argument("--no-report", action="store_true", help="write the JSON only, no PNG")
     return p
 
 
@@ -128,6 +149,38 @@ def _calibrate(args) -> int:
     return 0
 
 
+def _fit_brdf(args) -> int:
+    from fitting import brdf
+    from jaxskin.shading import lafortune
+
+    if args.lobes < 1:
+        raise InputError(f"--lobes must be >= 1, got {args.lobes}")
+    if args.starts < 1:
+        raise InputError(f"--starts must be >= 1, got {args.starts}")
+    out = Path(args.output)
+    report = out.with_suffix(".png")
+    samples = brdf.read_samples(args.file)
+    for target in (out, report):
+        if target.resolve() == Path(args.file).resolve():
+            raise InputError("the output would overwrite the input; choose another -o",
+                             args.file)
+    print(f"fitting {args.lobes} lobes x {args.starts} starts x 3 channels to "
+          f"{len(samples.f)} samples ...", flush=True)
+    t0 = time.perf_counter()
+    result = brdf.fit(samples, lobes=args.lobes, starts=args.starts, seed=args.seed)
+    seconds = time.perf_counter() - t0
+    lafortune.save(result.params, out, fit={"source": Path(args.file).name, **result.stats()})
+    if not args.no_report:
+        brdf.write_report(samples, result, report)
+    stats = result.stats()
+    print(f"{'channel':<8} {'rel. RMS error':>14} {'failed starts':>13} {'steps':>6}")
+    for k, name in enumerate("RGB"):
+        print(f"{name:<8} {result.rel_rms[k]:>14.2%} {stats['failed_starts'][k]:>13} "
+              f"{stats['steps_of_best'][k]:>6}")
+    print(f"wrote {out}" + ("" if args.no_report else f" and {report}") + f" ({seconds:.1f} s)")
+    return 0
+
+
 def main(argv=None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
@@ -136,7 +189,7 @@ def main(argv=None) -> int:
         return 0
     _enable_compilation_cache()
     try:
-        return {"calibrate": _calibrate}[args.command](args)
+        return {"calibrate": _calibrate, "fit-brdf": _fit_brdf}[args.command](args)
     except InputError as e:
         print(f"jaxskin: error: {e}", file=sys.stderr)
         return EXIT_INPUT

@@ -16,22 +16,27 @@ __all__ = ["InputError", "atomic_write", "data_dir"]
 
 
 class InputError(ValueError):
-    """Bad user input, reported as one line: `file:line: column 'c': message`.
+    """Bad user input, reported as one line: `file:line: column 'c': message` (or `key 'k'`).
 
     **Arguments:**
 
     - `message`: what is wrong and what was expected.
     - `path`: the file (or `None`).
     - `line`: 1-based line number in the file (or `None`).
-    - `column`: the column or key (or `None`).
+    - `column`: the CSV column (or `None`).
+    - `key`: the key, for JSON and scene files (or `None`).
     """
 
-    def __init__(self, message: str, path=None, line: int | None = None, column=None):
-        self.path, self.line, self.column, self.message = path, line, column, message
+    def __init__(self, message: str, path=None, line: int | None = None, column=None,
+                 key=None):
+        self.path, self.line, self.column, self.key = path, line, column, key
+        self.message = message
         where = "" if path is None else str(path)
         if line is not None:
             where += f":{line}"
-        parts = [p for p in (where, None if column is None else f"column '{column}'") if p]
+        named = f"column '{column}'" if column is not None else None
+        named = f"key '{key}'" if key is not None else named
+        parts = [p for p in (where, named) if p]
         super().__init__(": ".join([*parts, message]))
 
 

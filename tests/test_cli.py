@@ -21,7 +21,15 @@ def test_help_explains_every_option(capsys):
     text = capsys.readouterr().out
     for option in ("--output", "--thickness", "--percent", "--smooth", "--noise", "--no-report"):
         assert option in text
-    assert main([]) == 0 and "calibrate" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as info:
+        main(["fit-brdf", "--help"])
+    assert info.value.code == 0
+    text = capsys.readouterr().out
+    for option in ("--output", "--lobes", "--starts", "--seed", "--no-report"):
+        assert option in text
+    assert main([]) == 0
+    text = capsys.readouterr().out
+    assert "calibrate" in text and "fit-brdf" in text
 
 
 def test_version(capsys):

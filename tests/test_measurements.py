@@ -110,7 +110,7 @@ BAD = [
         "thickness_mm",
         "positive",
     ),
-    ("no data", lambda t: t.split("400")[0], 2, None, "fewer than two data rows"),
+    ("no data", lambda t: t.split("400")[0], 2, None, "needs at least 2 data rows"),
     ("radiance without white", lambda t: t.replace("R_inf", "E_inf"), 2, "E_inf", "E_white"),
 ]
 
