@@ -1,0 +1,71 @@
+"""Cut the foot and arm meshes out of the SMPL body (data/meshes/human_man.obj).
+
+    python data/make_meshes.py      # writes data/meshes/foot.obj and data/meshes/arm.obj
+
+The body (CC BY 4.0, Max Planck Society e.V. via SMPL; see meshes/human_README.md) stands
+in a T-pose, y up, facing +z, in metres. We keep the faces whose three vertices lie in a
+box (each box holds one limb and nothing else), and turn it to suit the paper's projections:
+
+- foot: the right foot below the ankle (y < 0.10 m, x > 0), turned so that its top faces
+  the viewer (+z) and the toes point up (+y): planar projection, like Bando's fig. 6.2;
+- arm: the right arm from below the shoulder to the wrist (0.30 m < x < 0.70 m), turned so
+  that its axis is the y axis through the origin: cylindrical projection, like fig. 6.3.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+HERE = Path(__file__).resolve().parent / "meshes"
+
+
+def cut(body: trimesh.Trimesh, keep_vertex) -> trimesh.Trimesh:
+    """The faces whose vertices all satisfy `keep_vertex` (each box holds one limb only)."""
+    inside = keep_vertex(body.vertices)
+    faces = np.flatnonzero(inside[body.faces].all(axis=1))
+    return body.submesh([faces], append=True)
+
+
+def foot(body):
+    m = cut(body, lambda v: (v[:, 1] < 0.10) & (v[:, 0] > 0.0))
+    v = m.vertices
+    # (x, y, z) -> (-x, z, y): top of the foot (+y) to +z, toes (+z) to +y. A proper rotation.
+    m.vertices = np.stack([-v[:, 0], v[:, 2], v[:, 1]], axis=1)
+    m.vertices -= m.bounds.mean(axis=0)
+    return m
+
+
+def arm(body):
+    m = cut(body, lambda v: (v[:, 0] > 0.30) & (v[:, 0] < 0.70))
+    v = m.vertices - m.vertices.mean(axis=0)
+    # Principal axis -> y; the rotation keeps the handedness.
+    _, _, vt = np.linalg.svd(v, full_matrices=False)
+    axis = vt[0] if vt[0][0] < 0 else -vt[0]  # shoulder (small x) up
+    third = np.cross(axis, vt[1])
+    R = np.stack([vt[1], axis, third])
+    if np.linalg.det(R) < 0:
+        R[0] = -R[0]
+    m.vertices = v @ R.T
+    return m
+
+
+def main():
+    body = trimesh.load(HERE / "human_man.obj", process=False)
+    header = ("# Cut from human_man.obj (SMPL, Max Planck Society e.V., CC BY 4.0) by "
+              "data/make_meshes.py; modified: cut and rotated.\n")
+    for name, make in (("foot", foot), ("arm", arm)):
+        mesh = make(body)
+        text = header + trimesh.exchange.obj.export_obj(mesh, include_normals=False,
+                                                         include_texture=False)
+        tmp = HERE / f".{name}.obj.tmp"
+        tmp.write_text(text)
+        tmp.replace(HERE / f"{name}.obj")
+        print(f"{name}: {len(mesh.vertices)} vertices, {len(mesh.faces)} faces, "
+              f"bounds {np.round(mesh.bounds, 3).tolist()}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,136 @@
+"""Mapping a mesh and its direction fields to texture space (Bando 2001 §3.2).
+
+- planar: (x, y, z) → (x, y); vectors keep (dx, dy). Where both sides of a part project
+  onto the same texels (the palm under the back of the hand), the side facing the viewer
+  (+z) owns them.
+- cylindrical (eq. 3.2): about the y axis, s = angle from +z (0 to 2π), t = y; a vector is
+  rotated by −s about y and keeps (dx', dy'). Texels are square at the mean radius, so a
+  long part gets a texture taller than wide. The seam at s = 0 wraps.
+- uv: the mesh's own texture coordinates (beyond the paper: the face); vectors through the
+  per-vertex map from the tangent plane to uv, keeping their magnitude.
+
+Pixel coordinates put x to the right and y down (row 0 at the top = largest t). Texture
+vectors are in the paper's abstract units (|d| in [0, 2]), in that pixel frame.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+
+import numpy as np
+
+from .mesh import Mesh
+from .raster import Raster, rasterize
+
+__all__ = ["KINDS", "TextureMap", "cylinder_to_xyz", "project"]
+
+KINDS = ("planar", "cylindrical", "uv")
+MARGIN = 0.04  # of the texture, around planar and cylindrical maps
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class TextureMap:
+    """A mesh in texture space: vertex `xy (V, 2)` in pixels, the rasterizer's `depth`, and
+    the map of tangent vectors `vector_map (V, 2, 3)` (texture vector = M @ d)."""
+
+    kind: str
+    mesh: Mesh
+    width: int
+    height: int
+    xy: np.ndarray
+    depth: np.ndarray | None
+    wrap_x: bool
+    vector_map: np.ndarray
+    keep_magnitude: bool = False
+
+    @functools.cached_property
+    def raster(self) -> Raster:
+        return rasterize(self.xy, self.mesh.faces, self.height, self.width, self.depth,
+                         self.wrap_x)
+
+    def vectors(self, d: np.ndarray) -> np.ndarray:
+        """Texture-space vectors `(V, 2)` of tangent vectors `d (V, 3)`."""
+        v = np.einsum("vij,vj->vi", self.vector_map, d)
+        if self.keep_magnitude:
+            length = np.linalg.norm(v, axis=1, keepdims=True)
+            v = np.where(length > 0, v / np.maximum(length, 1e-300), 0.0) * np.linalg.norm(
+                d, axis=1, keepdims=True)
+        return v
+
+    def centroids(self) -> np.ndarray:
+        """Triangle centroids `(F, 2)` in pixels (wrapped for a cylinder)."""
+        corners = self.xy[self.mesh.faces]
+        if self.wrap_x:
+            x = corners[..., 0]
+            straddle = (x.max(axis=1) - x.min(axis=1)) > self.width / 2
+            corners[..., 0] = np.where(straddle[:, None] & (x < self.width / 2), x + self.width, x)
+        c = corners.mean(axis=1)
+        if self.wrap_x:
+            c[:, 0] %= self.width
+        return c
+
+
+def project(kind: str, mesh: Mesh, size: int) -> TextureMap:
+    """Map `mesh` to a texture `size` texels wide by `kind` ('planar', 'cylindrical', 'uv')."""
+    if kind == "planar":
+        return _planar(mesh, size)
+    if kind == "cylindrical":
+        return _cylindrical(mesh, size)
+    if kind == "uv":
+        return _uv(mesh, size)
+    raise ValueError(f"projection must be one of {KINDS}, got {kind!r}")
+
+
+def _planar(mesh: Mesh, size: int) -> TextureMap:
+    p = mesh.vertices
+    lo, hi = p[:, :2].min(axis=0), p[:, :2].max(axis=0)
+    scale = size * (1 - 2 * MARGIN) / max(float(np.max(hi - lo)), 1e-300)
+    centre = (lo + hi) / 2
+    xy = np.stack([(p[:, 0] - centre[0]) * scale + size / 2,
+                   size / 2 - (p[:, 1] - centre[1]) * scale], axis=1)
+    M = np.broadcast_to(np.array([[1.0, 0, 0], [0, -1.0, 0]]), (len(p), 2, 3))
+    return TextureMap("planar", mesh, size, size, xy, -p[:, 2], False, np.array(M))
+
+
+def _cylindrical(mesh: Mesh, size: int) -> TextureMap:
+    p = mesh.vertices
+    r = np.hypot(p[:, 0], p[:, 2])
+    s = np.mod(np.arctan2(p[:, 0], p[:, 2]), 2 * math.pi)  # eq. 3.2: arccos(z/r), 2π − … if x <= 0
+    texel = 2 * math.pi * float(np.mean(r)) / size  # square texels at the mean radius
+    t_lo, t_hi = p[:, 1].min(), p[:, 1].max()
+    height = int(math.ceil((t_hi - t_lo) / texel / (1 - 2 * MARGIN)))
+    xy = np.stack([s / (2 * math.pi) * size,
+                   height / 2 - (p[:, 1] - (t_lo + t_hi) / 2) / texel], axis=1)
+    c, n = np.cos(s), np.sin(s)
+    # Rotate by −s about y, keep (x', y') with y down: x' = cos s dx − sin s dz.
+    M = np.zeros((len(p), 2, 3))
+    M[:, 0, 0], M[:, 0, 2], M[:, 1, 1] = c, -n, -1.0
+    return TextureMap("cylindrical", mesh, size, height, xy, -r, True, M)
+
+
+def cylinder_to_xyz(s, t, r):
+    """The inverse of the cylindrical projection: a point from (s, t) and its radius r."""
+    return np.stack([r * np.sin(s), t, r * np.cos(s)], axis=-1)
+
+
+def _uv(mesh: Mesh, size: int) -> TextureMap:
+    if mesh.uv is None:
+        raise ValueError(f"mesh '{mesh.name}' has no texture coordinates; use planar or "
+                         "cylindrical projection")
+    xy = np.stack([mesh.uv[:, 0] * size, (1 - mesh.uv[:, 1]) * size], axis=1)
+    # Per face, the linear map M from the face plane to pixels: M [e1 e2] = [f1 f2].
+    f = mesh.faces
+    E = np.stack([mesh.vertices[f[:, 1]] - mesh.vertices[f[:, 0]],
+                  mesh.vertices[f[:, 2]] - mesh.vertices[f[:, 0]]], axis=2)  # (F, 3, 2)
+    Fp = np.stack([xy[f[:, 1]] - xy[f[:, 0]], xy[f[:, 2]] - xy[f[:, 0]]], axis=2)  # (F, 2, 2)
+    M_face = Fp @ np.linalg.pinv(E)  # (F, 2, 3)
+    area = 0.5 * np.linalg.norm(np.cross(E[..., 0], E[..., 1]), axis=1)
+    M = np.zeros((len(xy), 2, 3))
+    weight = np.zeros(len(xy))
+    for i in range(3):
+        np.add.at(M, f[:, i], M_face * area[:, None, None])
+        np.add.at(weight, f[:, i], area)
+    M /= np.maximum(weight, 1e-300)[:, None, None]
+    return TextureMap("uv", mesh, size, size, xy, None, False, M, keep_magnitude=True)
