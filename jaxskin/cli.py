@@ -3,6 +3,7 @@
     jaxskin --version
     jaxskin calibrate FILE.csv [FILE.csv ...] -o OUTDIR   # S(λ), K(λ) of cosmetics
     jaxskin fit-brdf FILE.csv -o OUT.json [--lobes N]     # Lafortune lobes
+    jaxskin render SCENE [SCENE ...] -o DIR --maps        # wrinkle height and normal maps
 
 Bad input (a file, a column, a value) is reported as one line `jaxskin: error: …` with exit
 code 2 and no traceback. Output files are written under temporary names and renamed.
@@ -74,6 +75,24 @@ def _parser() -> argparse.ArgumentParser:
                    "is identifiable when some thin layer and the background each differ from "
                    "R_inf by more than 3σ")
     c.add_argument("--no-report", action="store_true", help="write the JSON only, no PNG")
+
+    r = sub.add_parser(
+        "render",
+        help="render scenes (now: their texture-space maps, with --maps)",
+        description="Render one or more scenes: a built-in name (hand, foot, arm: Bando 2001 "
+        "figs. 6.1-6.3) or a TOML scene file (format in the README). With --maps, writes "
+        "DIR/<scene>_height.png (16-bit grey), DIR/<scene>_normal.png (the bump-mapped normal "
+        "map) and DIR/<scene>_field.png (the mesh with d1 in red and d2 in green, as in the "
+        "paper's fig. 3.4). Every scene is checked before anything is written. The shaded "
+        "image itself is not implemented yet (see the README's status).",
+    )
+    r.add_argument("scenes", nargs="+", metavar="SCENE", help="built-in name or TOML file")
+    r.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
+    r.add_argument("--maps", action="store_true",
+                   help="write the texture-space maps (height, normals, fields)")
+    r.add_argument("-D", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene value, e.g. -D wrinkles.k_scale=1.3 (repeatable; "
+                   "applies to every scene)")
 
     b = sub.add_parser(
         "fit-brdf",
@@ -149,6 +168,42 @@ def _calibrate(args) -> int:
     return 0
 
 
+def _render(args) -> int:
+    from tqdm import tqdm
+
+    from . import maps, texture
+    from .scene import load_scene
+
+    scenes = [load_scene(name, args.overrides) for name in args.scenes]
+    names = [sc.name for sc in scenes]
+    if len(set(names)) != len(names):
+        raise InputError(f"two scenes are both named {max(names, key=names.count)!r}; their "
+                         "outputs would collide (set 'name' in the scene file)")
+    if not args.maps:
+        raise InputError("the shaded image is not implemented yet (Blinn/Lafortune shading "
+                         "and camera views are the next step); pass --maps for the "
+                         "texture-space maps")
+    for sc in scenes:  # static setup of every scene (mesh, projection, fields) before output
+        texture.setup(sc.config)
+    out = Path(args.output)
+    rows = []
+    for sc in tqdm(scenes, desc="render", unit="scene", disable=None):
+        t0 = time.perf_counter()
+        s = texture.setup(sc.config)
+        result = texture.texture_maps(sc.config, sc.params)
+        maps.write_height(result["height"], out / f"{sc.name}_height.png")
+        maps.write_normals(result["normals"], s.mask, out / f"{sc.name}_normal.png")
+        maps.write_field_plot(s, out / f"{sc.name}_field.png")
+        furrows = texture.furrows(sc.config)[1].count if sc.config.wrinkles else (0, 0)
+        rows.append((sc.name, s.tmap.width, s.tmap.height, [int(c) for c in furrows],
+                     time.perf_counter() - t0))
+    print(f"{'scene':<16} {'texture':>10} {'furrows F1, F2':>15} {'time s':>7}")
+    for name, w, h, n, dt in rows:
+        print(f"{name:<16} {f'{w}x{h}':>10} {f'{n[0]}, {n[1]}':>15} {dt:>7.2f}")
+    print(f"wrote {3 * len(rows)} map(s) to {out}/")
+    return 0
+
+
 def _fit_brdf(args) -> int:
     from fitting import brdf
     from jaxskin.shading import lafortune
@@ -189,7 +244,8 @@ def main(argv=None) -> int:
         return 0
     _enable_compilation_cache()
     try:
-        return {"calibrate": _calibrate, "fit-brdf": _fit_brdf}[args.command](args)
+        commands = {"calibrate": _calibrate, "fit-brdf": _fit_brdf, "render": _render}
+        return commands[args.command](args)
     except InputError as e:
         print(f"jaxskin: error: {e}", file=sys.stderr)
         return EXIT_INPUT

@@ -38,8 +38,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["END_BORDER", "END_FURROW", "END_LIMIT", "END_ZERO", "FurrowRecord", "furrow",
-           "height_field", "window_radius"]
+__all__ = ["END_BORDER", "END_FURROW", "END_LIMIT", "END_ZERO", "FurrowRecord", "add_noise",
+           "furrow", "height_field", "to_numpy_record", "window_radius"]
 
 END_LIMIT, END_FURROW, END_BORDER, END_ZERO = 0, 1, 2, 3
 MAX_STEPS = 32  # f_limit <= 30 segments after the first
@@ -71,16 +71,15 @@ class FurrowRecord(NamedTuple):
 
 
 @functools.partial(jax.jit, static_argnames=("radius", "records"))
-def height_field(mask, field1, field2, centroids, k_scale, k_noise, key, radius: int,
-                 records: int = 0):
-    """The wrinkle height field.
+def height_field(mask, field1, field2, centroids, k_scale, key, radius: int, records: int = 0):
+    """The wrinkle height field before noise (steps 1–8 of §3.3; `add_noise` is step 9).
 
     **Arguments:**
 
     - `mask (H, W)` bool: texels on the mesh.
     - `field1`, `field2 (H, W, 2)`: the fields in texture space (pixel frame, |d| in [0, 2]).
     - `centroids (F, 2)`: triangle centroids in pixels, the first seeds.
-    - `k_scale`, `k_noise`: the paper's scale and noise.
+    - `k_scale`: the paper's scale.
     - `key`: a `jax.random` key.
     - `radius`: static window half-size, `window_radius(max k_scale)`.
     - `records`: how many furrows per pass to record in the returned `FurrowRecord`.
@@ -96,9 +95,14 @@ def height_field(mask, field1, field2, centroids, k_scale, k_noise, key, radius:
     # scatter that copies the whole image (measured 10x slower).
     (img1, rec1), (img2, rec2) = run(fields[0], keys[0]), run(fields[1], keys[1])
     rec = jax.tree.map(lambda a, b: jnp.stack([a, b]), rec1, rec2)
-    h = jnp.minimum(img1, img2)
-    h = h - k_noise * jax.random.uniform(jax.random.fold_in(key, 3), h.shape)
-    return jnp.where(mask, h, 1.0), rec
+    return jnp.where(mask, jnp.minimum(img1, img2), 1.0), rec
+
+
+def add_noise(h, mask, k_noise, key):
+    """Step 9: h − r·k_noise, r uniform in [0, 1) per texel (the mesh only). Linear in
+    k_noise and h, so differentiable; the furrows themselves are computed once per scene."""
+    r = jax.random.uniform(jax.random.fold_in(key, 3), jnp.shape(h), jnp.asarray(h).dtype)
+    return jnp.where(mask, h - k_noise * r, h)
 
 
 def _pass(mask, centroids, k_scale, field, key, *, radius, records):

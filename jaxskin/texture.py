@@ -1,0 +1,90 @@
+"""Texture-space maps of a scene: fields, furrow height, bump normals.
+
+`setup(config)` does the static, host-side work once per configuration (mesh, projection,
+raster, fields); `furrows(config)` runs the furrow program once per configuration;
+`texture_maps(config, params)` is the differentiable part (noise and bump, in JAX). A scene
+without wrinkles never calls the furrow program and never traces it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import bump, wrinkles
+from .fields import Edit, interpolate_fields
+from .io import InputError
+from .mesh import Mesh, load_mesh
+from .projection import TextureMap, project
+from .raster import interpolate
+from .scene import SceneConfig
+
+__all__ = ["TextureSetup", "furrows", "setup", "texture_maps"]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class TextureSetup:
+    config: SceneConfig
+    mesh: Mesh
+    tmap: TextureMap
+    edits: tuple[Edit, ...]
+    d1: np.ndarray  # (V, 3) vertex fields
+    d2: np.ndarray
+    field1: jax.Array  # (H, W, 2) texture-space fields
+    field2: jax.Array
+    normals: jax.Array  # (H, W, 3) interpolated unit vertex normals (0 off the mesh)
+    mask: jax.Array  # (H, W)
+
+
+@functools.lru_cache(maxsize=8)
+def setup(config: SceneConfig) -> TextureSetup:
+    mesh = load_mesh(config.mesh)
+    try:
+        tmap = project(config.projection, mesh, config.size)
+    except ValueError as e:
+        raise InputError(str(e), key="mesh.projection") from None
+    edits = []
+    for i, e in enumerate(config.edits):
+        if e.vertex is not None:
+            if e.vertex >= len(mesh.vertices):
+                raise InputError(f"vertex {e.vertex} does not exist; the mesh has "
+                                 f"{len(mesh.vertices)} vertices", key=f"fields.edit[{i}].vertex")
+            v = e.vertex
+        else:
+            v = int(np.argmin(np.linalg.norm(mesh.vertices - np.asarray(e.at), axis=1)))
+        edits.append(Edit(v, e.d1, e.d2, e.weight))
+    d1, d2 = interpolate_fields(mesh, edits)
+    raster = tmap.raster
+    field1 = interpolate(tmap.vectors(d1).astype(np.float32), mesh.faces, raster)
+    field2 = interpolate(tmap.vectors(d2).astype(np.float32), mesh.faces, raster)
+    n = interpolate(mesh.normals.astype(np.float32), mesh.faces, raster)
+    n = n / jnp.maximum(jnp.linalg.norm(n, axis=-1, keepdims=True), 1e-12)
+    return TextureSetup(config, mesh, tmap, tuple(edits), d1, d2, field1, field2, n,
+                        jnp.asarray(raster.mask))
+
+
+RECORDS = 4096
+
+
+@functools.lru_cache(maxsize=8)
+def furrows(config: SceneConfig):
+    """The furrow height field before noise, `(H, W)`, and the furrow records."""
+    s = setup(config)
+    return wrinkles.height_field(
+        s.mask, s.field1, s.field2, jnp.asarray(s.tmap.centroids(), jnp.float32),
+        config.k_scale, jax.random.key(config.seed),
+        radius=wrinkles.window_radius(config.k_scale), records=RECORDS)
+
+
+def texture_maps(config: SceneConfig, params: dict) -> dict:
+    """`height (H, W)` and `normals (H, W, 3)` for a scene; differentiable in `params`."""
+    s = setup(config)
+    if not config.wrinkles:
+        return {"height": jnp.where(s.mask, 1.0, 1.0), "normals": s.normals}
+    h0, _ = furrows(config)
+    h = wrinkles.add_noise(h0, s.mask, params["wrinkles.k_noise"], jax.random.key(config.seed))
+    return {"height": h, "normals": bump.bump_normals(s.normals, h, params["wrinkles.k_bump"])}
