@@ -220,7 +220,7 @@ def _edit(i, e, path) -> EditSpec:
         raise InputError("expected a table with at (or vertex), d1, d2, weight", path, key=where)
     for k in e:
         if k not in EDIT_KEYS:
-            near = difflib.get_close_matches(k, EDIT_KEYS, n=1)
+            near = difflib.get_close_matches(k, sorted(EDIT_KEYS), n=1, cutoff=0.5)
             hint = f"; did you mean '{near[0]}'?" if near else ""
             raise InputError(f"unknown key{hint}", path, key=f"{where}.{k}")
     if ("at" in e) == ("vertex" in e):

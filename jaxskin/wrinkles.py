@@ -60,7 +60,8 @@ def window_radius(k_scale: float) -> int:
 
 class FurrowRecord(NamedTuple):
     """Per furrow (first `records` of each pass) and half (+d, −d): how it ended
-    (`END_*`), where (`end (…, 2)` pixels), its `segments` and `length` in texels; `seed`."""
+    (`END_*`), where (`end (…, 2)` pixels), its `segments` and `length` in texels; `seed`;
+    per pass the number of furrows and the `owner` image (furrow id per texel)."""
 
     seed: jax.Array
     end: jax.Array
@@ -68,6 +69,7 @@ class FurrowRecord(NamedTuple):
     segments: jax.Array
     length: jax.Array
     count: jax.Array  # furrows drawn in the pass
+    owner: jax.Array  # (H, W) the furrow that drew each texel (-1: none)
 
 
 @functools.partial(jax.jit, static_argnames=("radius", "records"))
@@ -236,8 +238,9 @@ def _pass(mask, centroids, k_scale, field, key, *, radius, records):
     found, idx, point = next_seed(B, row_free[pad:pad + H], jnp.int32(0))
     carry = (img, owner, B, row_free, jnp.int32(0), jnp.int32(0), found, idx, point, rec)
     carry = jax.lax.while_loop(lambda c: c[6], furrow_body, carry)
-    img, fid, rec = carry[0], carry[5], carry[9]
-    return img[pad:pad + H, pad:pad + W], FurrowRecord(*rec, count=fid)
+    img, owner, fid, rec = carry[0], carry[1], carry[5], carry[9]
+    return img[pad:pad + H, pad:pad + W], FurrowRecord(*rec, count=fid,
+                                                       owner=owner[pad:pad + H, pad:pad + W])
 
 
 def to_numpy_record(rec: FurrowRecord, records: int) -> dict:
@@ -248,4 +251,5 @@ def to_numpy_record(rec: FurrowRecord, records: int) -> dict:
         out[p] = {f: np.asarray(getattr(rec, f)[p][:n]) for f in
                   ("seed", "end", "reason", "segments", "length")}
         out[p]["count"] = int(rec.count[p])
+        out[p]["owner"] = np.asarray(rec.owner[p])
     return out

@@ -1,0 +1,139 @@
+"""Meshes, the rasterizer, projections and direction fields."""
+
+import math
+import warnings
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxskin.fields import Edit, initial_fields, interpolate_fields
+from jaxskin.io import InputError
+from jaxskin.mesh import load_mesh
+from jaxskin.projection import cylinder_to_xyz, project
+from jaxskin.raster import interpolate, rasterize
+
+
+def test_two_triangles_cover_a_pixel_aligned_square_once():
+    xy = np.array([[2.0, 3.0], [6.0, 3.0], [6.0, 8.0], [2.0, 8.0]])
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    r = rasterize(xy, faces, 10, 10)
+    assert r.mask.sum() == 4 * 5  # pixel centres 2.5..5.5 x 3.5..7.5, none twice, no gap
+    assert set(np.unique(r.tri[r.mask])) == {0, 1}
+    assert np.all(r.mask[3:8, 2:6])
+    np.testing.assert_allclose(r.bary[r.mask].sum(axis=1), 1.0, rtol=1e-6)
+
+
+def test_nearest_triangle_wins_where_they_overlap():
+    xy = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]] * 2)
+    faces = np.array([[0, 1, 2], [3, 4, 5]])
+    for depth, winner in (([2, 2, 2, 1, 1, 1], 1), ([1, 1, 1, 2, 2, 2], 0)):
+        r = rasterize(xy, faces, 10, 10, depth=np.array(depth, float))
+        assert set(np.unique(r.tri[r.mask])) == {winner}
+
+
+def test_a_triangle_across_the_cylinder_seam_wraps():
+    xy = np.array([[30.0, 2.0], [34.0 - 32.0, 2.0], [32.0 - 32.0 + 1.0, 8.0]])  # x 30 -> 2 -> 1
+    r = rasterize(xy, np.array([[0, 1, 2]]), 10, 32, wrap_x=True)
+    cols = np.unique(np.nonzero(r.mask)[1])
+    assert set(cols) <= {30, 31, 0, 1} and {31, 0} <= set(cols)
+    assert r.mask.sum() < 20  # drawn across the seam, not across the whole image
+
+
+def test_interpolation_of_a_linear_attribute_is_exact():
+    xy = np.array([[1.0, 1.0], [15.0, 2.0], [3.0, 14.0]])
+    faces = np.array([[0, 1, 2]])
+    r = rasterize(xy, faces, 16, 16)
+    got = interpolate(jnp.asarray(xy, jnp.float32), faces, r)
+    ii, jj = np.nonzero(r.mask)
+    np.testing.assert_allclose(np.asarray(got)[ii, jj], np.stack([jj + 0.5, ii + 0.5], 1),
+                               atol=1e-4)
+
+
+def test_cylindrical_projection_round_trips():
+    mesh = load_mesh("arm")
+    tm = project("cylindrical", mesh, 512)
+    s = tm.xy[:, 0] / tm.width * 2 * math.pi
+    r = np.hypot(mesh.vertices[:, 0], mesh.vertices[:, 2])
+    texel = 2 * math.pi * r.mean() / tm.width
+    lo, hi = mesh.vertices[:, 1].min(), mesh.vertices[:, 1].max()
+    t = (tm.height / 2 - tm.xy[:, 1]) * texel + (lo + hi) / 2
+    np.testing.assert_allclose(cylinder_to_xyz(s, t, r), mesh.vertices, atol=1e-9)
+    # A vector along the circumference maps to +x, one along the axis to -y (rows down).
+    n = len(mesh.vertices)
+    around = np.stack([np.cos(s), np.zeros(n), -np.sin(s)], 1)
+    np.testing.assert_allclose(tm.vectors(around), np.tile([1.0, 0.0], (n, 1)), atol=1e-9)
+    np.testing.assert_allclose(tm.vectors(np.tile([0, 1.0, 0], (n, 1))),
+                               np.tile([0.0, -1.0], (n, 1)), atol=1e-9)
+    assert tm.raster.mask.mean() > 0.8  # the seam leaves no gap
+
+
+def test_planar_projection_keeps_the_front_side():
+    mesh = load_mesh("hand")
+    tm = project("planar", mesh, 256)
+    tri = tm.raster.tri[tm.raster.mask]
+    assert np.mean(mesh.face_normals()[tri, 2] > 0) > 0.95
+
+
+def test_initial_fields_and_exact_edits():
+    mesh = load_mesh("hand")
+    d1, d2 = initial_fields(mesh)
+    np.testing.assert_allclose(np.sum(d1 * mesh.normals, 1), 0, atol=1e-12)
+    np.testing.assert_allclose(d2, np.cross(d1, mesh.normals))
+    n = mesh.normals
+    # Edits given tangent at their vertex are reproduced exactly there.
+    picks = [10, 300, 700]
+    edits = []
+    for k, v in enumerate(picks):
+        t = np.cross(n[v], [0.3, 0.1, 0.9 + k])
+        t = t / np.linalg.norm(t) * (0.5 + 0.5 * k)
+        edits.append(Edit(v, tuple(t), tuple(-0.7 * t), weight=1 + k))
+    f1, f2 = interpolate_fields(mesh, edits)
+    for e in edits:
+        np.testing.assert_allclose(f1[e.vertex], e.d1, atol=1e-12)
+        np.testing.assert_allclose(f2[e.vertex], e.d2, atol=1e-12)
+    np.testing.assert_allclose(np.sum(f1 * n, 1), 0, atol=1e-9)  # tangent everywhere
+    mags = np.linalg.norm(f1, axis=1)
+    assert mags.min() >= 0.5 - 1e-9 and mags.max() <= 1.5 + 1e-9  # between the edits'
+
+
+def test_zero_weight_edit_is_exact_at_itself_only():
+    mesh = load_mesh("hand")
+    t = np.cross(mesh.normals[5], [0, 0, 1.0])
+    base = [Edit(400, tuple(np.cross(mesh.normals[400], [1, 0, 0.0])), (0.0, 0.0, 0.0), 1.0)]
+    with_zero = base + [Edit(5, tuple(t), tuple(t), 0.0)]
+    a, _ = interpolate_fields(mesh, base)
+    b, _ = interpolate_fields(mesh, with_zero)
+    others = np.setdiff1d(np.arange(len(a)), [5])
+    np.testing.assert_allclose(a[others], b[others], atol=1e-12)
+    np.testing.assert_allclose(b[5], t / np.linalg.norm(t) * np.linalg.norm(t), atol=1e-12)
+
+
+BAD_MESHES = [
+    ("empty.obj", "", "empty"),
+    ("points.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n", "empty"),
+    ("flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "degenerate"),
+    ("garbage.stl", "this is not a mesh", "empty"),  # trimesh reads it as no triangles
+]
+
+
+@pytest.mark.parametrize("name, text, words", BAD_MESHES)
+def test_bad_meshes_are_clear_errors(tmp_path, name, text, words):
+    path = tmp_path / name
+    path.write_text(text)
+    with pytest.raises(InputError, match=words) as info:
+        load_mesh(path)
+    assert str(path) in str(info.value)
+
+
+def test_degenerate_faces_are_removed_with_a_warning(tmp_path):
+    path = tmp_path / "quad.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0\n"
+                    "f 1 2 3 4\nf 1 2 5\n")  # a quad (triangulated) and a zero-area triangle
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        mesh = load_mesh(path)
+    assert len(mesh.faces) == 2
+    assert any("degenerate" in str(w.message) for w in caught)
+    with pytest.raises(InputError, match="no such mesh"):
+        load_mesh(tmp_path / "missing.obj")

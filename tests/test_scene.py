@@ -1,0 +1,127 @@
+"""Scene files: every bad value gets a one-line error naming the key; -D overrides; the
+static/param split; stages a scene does not use are not run; the render command."""
+
+import subprocess
+import sys
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+
+from jaxskin import texture, wrinkles
+from jaxskin.io import InputError
+from jaxskin.scene import load_scene
+
+GOOD = """
+[mesh]
+file = "foot"
+projection = "planar"
+[texture]
+size = 64
+[wrinkles]
+k_scale = 1.0
+k_bump = 0.5
+[[fields.edit]]
+at = [0.0, 0.0, 0.04]
+d1 = [0.6, 0.8, 0.0]
+d2 = [-0.6, 0.8, 0.0]
+"""
+
+BAD = [
+    ("unknown key", GOOD.replace("k_bump", "k_bumb"), "wrinkles.k_bumb", "did you mean 'wrinkles.k_bump'"),
+    ("unknown table", GOOD + "\n[camra]\nfov = 3\n", "camra.fov", "unknown key"),
+    ("out of range", GOOD.replace("k_scale = 1.0", "k_scale = 3.0"), "wrinkles.k_scale", "[0.5, 2]"),
+    ("wrong type", GOOD.replace("size = 64", 'size = "big"'), "texture.size", "expected int"),
+    ("bool for int", GOOD.replace("size = 64", "size = true"), "texture.size", "expected int"),
+    ("bad choice", GOOD.replace('"planar"', '"spherical"'), "mesh.projection", "planar, cylindrical, uv"),
+    ("edit without at", GOOD.replace("at = [0.0, 0.0, 0.04]", ""), "fields.edit[0]", "exactly one of 'at'"),
+    ("edit too long", GOOD.replace("d1 = [0.6, 0.8, 0.0]", "d1 = [3.0, 0.0, 0.0]"), "fields.edit[0].d1", "[0, 2]"),
+    ("edit bad key", GOOD.replace("d2 =", "d3 = [0,0,0]\nd2 ="), "fields.edit[0].d3", "did you mean 'd2'"),
+    ("edit weight", GOOD + "weight = 11\n", "fields.edit[0].weight", "[0, 10]"),
+]
+
+
+@pytest.mark.parametrize("what, text, key, words", BAD, ids=[b[0] for b in BAD])
+def test_bad_scene_files(tmp_path, what, text, key, words):
+    path = tmp_path / "scene.toml"
+    path.write_text(text)
+    with pytest.raises(InputError) as info:
+        load_scene(path)
+    message = str(info.value)
+    assert "\n" not in message and message.startswith(f"{path}: key '{key}'"), message
+    assert words in message, message
+
+
+def test_invalid_toml_and_unknown_scene(tmp_path):
+    path = tmp_path / "broken.toml"
+    path.write_text("[mesh\n")
+    with pytest.raises(InputError, match="not valid TOML"):
+        load_scene(path)
+    with pytest.raises(InputError, match="built-in scenes: hand, foot, arm"):
+        load_scene("elbow")
+
+
+def test_overrides_are_checked_like_the_file(tmp_path):
+    path = tmp_path / "s.toml"
+    path.write_text(GOOD)
+    sc = load_scene(path, ["wrinkles.k_bump=0.8", "texture.size=32", "mesh.projection=uv"])
+    assert sc.values["wrinkles.k_bump"] == 0.8 and sc.config.size == 32
+    assert sc.config.projection == "uv"
+    with pytest.raises(InputError, match="-D wrinkles.k_bump=7: key 'wrinkles.k_bump'"):
+        load_scene(path, ["wrinkles.k_bump=7"])
+    with pytest.raises(InputError, match="did you mean 'texture.size'"):
+        load_scene(path, ["texture.sise=32"])
+
+
+def test_static_config_and_params_split(tmp_path):
+    path = tmp_path / "s.toml"
+    path.write_text(GOOD)
+    a, b = load_scene(path), load_scene(path, ["wrinkles.k_bump=0.9"])
+    assert a.config == b.config and hash(a.config) == hash(b.config)  # same jit cache key
+    assert set(a.params) == {"wrinkles.k_bump", "wrinkles.k_noise"}
+    assert float(b.params["wrinkles.k_bump"]) == pytest.approx(0.9)
+    assert load_scene(path, ["wrinkles.k_scale=1.5"]).config != a.config
+
+
+def test_a_scene_without_wrinkles_runs_no_furrow_program(tmp_path, monkeypatch):
+    path = tmp_path / "s.toml"
+    path.write_text(GOOD)
+    calls = []
+    original = wrinkles.height_field
+
+    def counting(*args, **kwargs):
+        calls.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(wrinkles, "height_field", counting)
+    texture.furrows.cache_clear()
+    plain = load_scene(path, ["wrinkles.enabled=false"])
+    maps = texture.texture_maps(plain.config, plain.params)
+    assert calls == []
+    np.testing.assert_array_equal(maps["normals"], texture.setup(plain.config).normals)
+    wrinkled = load_scene(path)
+    texture.texture_maps(wrinkled.config, wrinkled.params)
+    assert calls == [1]
+    texture.furrows.cache_clear()
+
+
+def test_render_maps_command(tmp_path):
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "jaxskin.cli", "render", "foot", "-o", str(out),
+                           "--maps", "-D", "texture.size=96"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    height = iio.imread(out / "foot_height.png")
+    assert height.dtype == np.uint16 and height.shape == (96, 96) and height.min() < 60000
+    assert iio.imread(out / "foot_normal.png").shape == (96, 96, 3)
+    assert iio.imread(out / "foot_field.png").ndim == 3
+
+
+def test_render_bad_scene_exit_2_and_nothing_written(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(GOOD.replace("k_scale = 1.0", "k_scale = 9.0"))
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "jaxskin.cli", "render", "foot", str(bad), "-o",
+                           str(out), "--maps"], capture_output=True, text=True)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1
+    assert "wrinkles.k_scale" in proc.stderr and "Traceback" not in proc.stderr
+    assert not out.exists()
