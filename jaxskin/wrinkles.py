@@ -121,29 +121,39 @@ def _pass(mask, centroids, k_scale, field, key, *, radius, records):
     samples = jnp.arange(1, 2 * int(math.ceil(6.0 * 2)) + 1, dtype=jnp.float32)
     samples = samples / samples.shape[0]
 
-    def next_seed(B, row_free, cursor):
-        """First seed index >= cursor not marked in B (centroids, then texels by row)."""
-        c_free = c_ok & ~B[cpix[:, 1] + pad, cpix[:, 0] + pad] & (jnp.arange(n_cent) >= cursor)
+    def next_seed(state, cursor):
+        """First seed index >= cursor not marked in B: centroids, then texels row by row.
+
+        Rows are scanned from the cursor's; the cursor only moves forward, so over a whole
+        pass the scan costs O(H W) plus O(W) per furrow."""
+        c_free = c_ok & ~_marked(state[cpix[:, 1] + pad, cpix[:, 0] + pad]) & (
+            jnp.arange(n_cent) >= cursor)
         c_any = jnp.any(c_free)
         c_idx = jnp.argmax(c_free)
         start = jnp.maximum(cursor - n_cent, 0)
         r0, col0 = start // W, start % W
-        r0c = jnp.minimum(r0, H - 1)
-        row0 = jax.lax.dynamic_slice(inside & ~B, (r0c + pad, pad), (1, W))[0]
-        row0 = row0 & (jnp.arange(W) >= col0) & (r0 < H)
-        later = (row_free > 0) & (jnp.arange(H) > r0)
-        r = jnp.where(jnp.any(row0), r0c, jnp.argmax(later))
-        row = jax.lax.dynamic_slice(inside & ~B, (r + pad, pad), (1, W))[0]
-        row = row & jnp.where(r == r0, jnp.arange(W) >= col0, True)
-        t_any = jnp.any(row0) | jnp.any(later)
-        t_idx = n_cent + r * W + jnp.argmax(row)
+
+        def free_row(r):
+            row = (jax.lax.dynamic_slice(inside, (r + pad, pad), (1, W))[0]
+                   & ~_marked(jax.lax.dynamic_slice(state, (r + pad, pad), (1, W))[0]))
+            return row & (jnp.arange(W) >= jnp.where(r == r0, col0, 0))
+
+        def scan(c):
+            r, _, _ = c
+            row = free_row(r)
+            found = jnp.any(row)
+            return jnp.where(found, r, r + 1), found, jnp.argmax(row).astype(jnp.int32)
+
+        r, t_any, col = jax.lax.while_loop(lambda c: ~c[1] & (c[0] < H), scan,
+                                           (jnp.minimum(r0, H), jnp.bool_(False), jnp.int32(0)))
+        t_idx = n_cent + r * W + col
         idx = jnp.where(c_any, c_idx, t_idx)
         point = jnp.where(c_any, centroids[jnp.minimum(c_idx, n_cent - 1)],
-                          jnp.stack([jnp.argmax(row) + 0.5, r + 0.5]).astype(jnp.float32))
+                          jnp.stack([col + 0.5, r + 0.5]).astype(jnp.float32))
         return c_any | t_any, idx, point
 
     def step(carry):
-        (P, n_limit, s, alive, img, owner, B, row_free, length, reason, fid, sign, hkey) = carry
+        (P, n_limit, s, alive, img, state, length, reason, fid, sign, hkey, search) = carry
         ix = jnp.clip(jnp.floor(P[0]).astype(jnp.int32), 0, W - 1)
         iy = jnp.clip(jnp.floor(P[1]).astype(jnp.int32), 0, H - 1)
         d = sign * field[iy, ix]
@@ -158,7 +168,7 @@ def _pass(mask, centroids, k_scale, field, key, *, radius, records):
         pts = P + samples[:, None] * (Q0 - P)
         pi = jnp.floor(pts).astype(jnp.int32) + pad
         on_mesh = inside[pi[:, 1], pi[:, 0]]
-        who = owner[pi[:, 1], pi[:, 0]]
+        who = _owner(state[pi[:, 1], pi[:, 0]])
         hit_furrow = (who >= 0) & (who != fid)
         hit = ~on_mesh | hit_furrow
         any_hit = jnp.any(hit)
@@ -178,43 +188,48 @@ def _pass(mask, centroids, k_scale, field, key, *, radius, records):
         draw = alive & ~zero
         img_w = jax.lax.dynamic_slice(img, corner, size)
         img_w = jnp.where(draw, jnp.minimum(img_w, 1.0 - depth * cover), img_w)
-        own_w = jax.lax.dynamic_slice(owner, corner, size)
+        # Everything that reads `state` here feeds its in-place update below. (A reader that
+        # did not, a per-row count of free texels, made XLA copy the whole image each step.)
+        st_w = jax.lax.dynamic_slice(state, corner, size)
+        own_w, marked_w = _owner(st_w), _marked(st_w)
         own_w = jnp.where(draw & (cover > 0) & (own_w < 0), fid, own_w)
-        B_w = jax.lax.dynamic_slice(B, corner, size)
-        in_w = jax.lax.dynamic_slice(inside, corner, size)
         mark = draw & (dist <= density / 2)
-        newly = mark & ~B_w & in_w
-        rows = jax.lax.dynamic_slice(row_free, (c0[1] + pad,), (2 * R + 1,))
-        row_free = jax.lax.dynamic_update_slice(row_free, rows - newly.sum(axis=1),
-                                                (c0[1] + pad,))
         img = jax.lax.dynamic_update_slice(img, img_w, corner)
-        owner = jax.lax.dynamic_update_slice(owner, own_w, corner)
-        B = jax.lax.dynamic_update_slice(B, B_w | mark, corner)
+        state = jax.lax.dynamic_update_slice(state, _pack(own_w, marked_w | mark), corner)
         stop = zero | any_hit | (n_limit == 0)
         new_reason = jnp.where(zero, END_ZERO, jnp.where(
             any_hit, jnp.where(hit_furrow[k], END_FURROW, END_BORDER), END_LIMIT))
+        # After the last step of a furrow's second half, find the next seed here, inside
+        # this loop: a read of `state` in the outer loop makes XLA copy it at every step.
+        is_second, cursor, found, nidx, npoint = search
+        last = alive & (stop | (s + 1 >= MAX_STEPS)) & is_second
+        found, nidx, npoint = jax.lax.cond(last, lambda: next_seed(state, cursor),
+                                           lambda: (found, nidx, npoint))
         return (jnp.where(draw, Q, P), jnp.minimum(n_limit, limit) - 1, s + 1, alive & ~stop,
-                img, owner, B, row_free, length + jnp.where(draw, jnp.linalg.norm(v), 0.0),
-                jnp.where(alive & stop, new_reason, reason), fid, sign, hkey)
+                img, state, length + jnp.where(draw, jnp.linalg.norm(v), 0.0),
+                jnp.where(alive & stop, new_reason, reason), fid, sign, hkey,
+                (is_second, cursor, found, nidx, npoint))
 
-    def half(state, seed_point, fid, sign, hkey):
-        img, owner, B, row_free = state
-        carry = (seed_point, jnp.int32(2**30), jnp.int32(0), jnp.bool_(True), img, owner, B,
-                 row_free, jnp.float32(0.0), jnp.int32(END_LIMIT), fid, sign, hkey)
+    def half(buffers, seed_point, fid, sign, hkey, search):
+        img, state = buffers
+        carry = (seed_point, jnp.int32(2**30), jnp.int32(0), jnp.bool_(True), img, state,
+                 jnp.float32(0.0), jnp.int32(END_LIMIT), fid, sign, hkey, search)
         carry = jax.lax.while_loop(lambda c: c[3] & (c[2] < MAX_STEPS), step, carry)
-        P, _, s, _, img, owner, B, row_free, length, reason = carry[:10]
-        return (img, owner, B, row_free), (P, reason, s, length)
+        P, _, s, _, img, state, length, reason = carry[:8]
+        return (img, state), (P, reason, s, length), carry[11]
 
     def furrow_body(carry):
-        (img, owner, B, row_free, cursor, fid, _, idx, seed_point, rec) = carry
+        (img, state, cursor, fid, _, idx, seed_point, rec) = carry
         fkey = jax.random.fold_in(key, fid)
-        state = (img, owner, B, row_free)
+        buffers = (img, state)
         outs = []
+        search = (jnp.bool_(False), idx + 1, jnp.bool_(False), idx, seed_point)
         for h, sign in enumerate((1.0, -1.0)):
-            state, out = half(state, seed_point, fid, jnp.float32(sign),
-                              jax.random.fold_in(fkey, h))
+            search = (jnp.bool_(h == 1), *search[1:])
+            buffers, out, search = half(buffers, seed_point, fid, jnp.float32(sign),
+                                        jax.random.fold_in(fkey, h), search)
             outs.append(out)
-        img, owner, B, row_free = state
+        img, state = buffers
         slot = jnp.minimum(fid, records - 1)
         keep = fid < records
         seed_r, end_r, reason_r, seg_r, len_r = rec
@@ -224,23 +239,39 @@ def _pass(mask, centroids, k_scale, field, key, *, radius, records):
             jnp.where(keep, jnp.stack([o[1] for o in outs]), reason_r[slot]))
         seg_r = seg_r.at[slot].set(jnp.where(keep, jnp.stack([o[2] for o in outs]), seg_r[slot]))
         len_r = len_r.at[slot].set(jnp.where(keep, jnp.stack([o[3] for o in outs]), len_r[slot]))
-        found, nidx, npoint = next_seed(B, row_free[pad:pad + H], idx + 1)
-        return (img, owner, B, row_free, idx + 1, fid + 1, found, nidx, npoint,
+        _, _, found, nidx, npoint = search
+        return (img, state, idx + 1, fid + 1, found, nidx, npoint,
                 (seed_r, end_r, reason_r, seg_r, len_r))
 
     img = jnp.ones((Hp, Wp), jnp.float32)
-    owner = jnp.full((Hp, Wp), -1, jnp.int32)
-    B = jnp.zeros((Hp, Wp), bool)
-    row_free = jnp.pad(mask.sum(axis=1).astype(jnp.int32), pad)
+    state = jnp.zeros((Hp, Wp), jnp.int32)  # owner and B in one buffer: see _pack
     rec = (jnp.zeros((records, 2), jnp.float32), jnp.zeros((records, 2, 2), jnp.float32),
            jnp.full((records, 2), -1, jnp.int32), jnp.zeros((records, 2), jnp.int32),
            jnp.zeros((records, 2), jnp.float32))
-    found, idx, point = next_seed(B, row_free[pad:pad + H], jnp.int32(0))
-    carry = (img, owner, B, row_free, jnp.int32(0), jnp.int32(0), found, idx, point, rec)
-    carry = jax.lax.while_loop(lambda c: c[6], furrow_body, carry)
-    img, owner, fid, rec = carry[0], carry[1], carry[5], carry[9]
-    return img[pad:pad + H, pad:pad + W], FurrowRecord(*rec, count=fid,
-                                                       owner=owner[pad:pad + H, pad:pad + W])
+    found, idx, point = next_seed(state, jnp.int32(0))
+    carry = (img, state, jnp.int32(0), jnp.int32(0), found, idx, point, rec)
+    carry = jax.lax.while_loop(lambda c: c[4], furrow_body, carry)
+    img, state, fid, rec = carry[0], carry[1], carry[3], carry[7]
+    owner = _owner(state[pad:pad + H, pad:pad + W])
+    return img[pad:pad + H, pad:pad + W], FurrowRecord(*rec, count=fid, owner=owner)
+
+
+# Owner and buffer B share one int32 array: bits 0–29 hold the owning furrow's id + 1
+# (0: none), bit 30 the mark of B. Three separate image buffers made XLA:CPU copy one of
+# them at every step (O(H W) per step); two are updated in place.
+_MARK = 1 << 30
+
+
+def _owner(v):
+    return (v & (_MARK - 1)) - 1
+
+
+def _marked(v):
+    return (v & _MARK) != 0
+
+
+def _pack(owner, marked):
+    return (owner + 1) | jnp.where(marked, _MARK, 0)
 
 
 def to_numpy_record(rec: FurrowRecord, records: int) -> dict:
