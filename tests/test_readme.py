@@ -17,7 +17,7 @@ def test_readme_starts_with_two_commands():
     commands = readme_commands()
     assert len(commands) == 2
     install_run, install_test = commands
-    assert "pip install -e ." in install_run and "jaxskin " in install_run
+    assert "pip install -e ." in install_run and "jaxskin render" in install_run
     assert "'.[test]'" in install_test and "pytest" in install_test
 
 
@@ -26,7 +26,7 @@ def test_ci_runs_the_readme_test_command_verbatim():
     assert readme_commands()[1] in ci
 
 
-def test_readme_main_command_inputs_exist():
+def test_readme_main_command_renders_the_default_scene():
     install_run = readme_commands()[0]
-    assert "data/measurements/*.csv" in install_run
-    assert list((ROOT / "data" / "measurements").glob("*.csv"))
+    assert "jaxskin render hand" in install_run
+    assert (ROOT / "data" / "scenes" / "hand.toml").is_file()
