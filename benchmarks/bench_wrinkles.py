@@ -29,7 +29,7 @@ from jaxskin.scene import load_scene  # noqa: E402
 
 def inputs(size):
     sc = load_scene("hand", [f"texture.size={size}"])
-    s = texture.setup(sc.config)
+    s = texture.setup(sc.config.texture)
     cent = jnp.asarray(s.tmap.centroids(), jnp.float32)
     radius = wrinkles.window_radius(sc.config.k_scale)
     return sc, s, cent, radius

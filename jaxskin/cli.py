@@ -78,18 +78,22 @@ def _parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser(
         "render",
-        help="render scenes (now: their texture-space maps, with --maps)",
+        help="render scenes to PNG (and their texture-space maps)",
         description="Render one or more scenes: a built-in name (hand, foot, arm: Bando 2001 "
-        "figs. 6.1-6.3) or a TOML scene file (format in the README). With --maps, writes "
-        "DIR/<scene>_height.png (16-bit grey), DIR/<scene>_normal.png (the bump-mapped normal "
-        "map) and DIR/<scene>_field.png (the mesh with d1 in red and d2 in green, as in the "
-        "paper's fig. 3.4). Every scene is checked before anything is written. The shaded "
-        "image itself is not implemented yet (see the README's status).",
+        "figs. 6.1-6.3) or a TOML scene file (format in the README). Writes DIR/<scene>.png; "
+        "with --maps also DIR/<scene>_height.png (16-bit grey), DIR/<scene>_normal.png (the "
+        "bump-mapped normal map) and DIR/<scene>_field.png (the mesh with d1 in red and d2 in "
+        "green, as in the paper's fig. 3.4). Every scene is checked before anything is "
+        "written. All scenes render in one process; each static configuration compiles once.",
     )
     r.add_argument("scenes", nargs="+", metavar="SCENE", help="built-in name or TOML file")
     r.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
     r.add_argument("--maps", action="store_true",
-                   help="write the texture-space maps (height, normals, fields)")
+                   help="also write the texture-space maps (height, normals, fields)")
+    r.add_argument("--sweep", action="append", default=[], metavar="KEY=START:STOP:COUNT",
+                   help="render COUNT images with a parameter from START to STOP, vmapped in "
+                   "one compiled program, e.g. --sweep material.melanin=0:1:5; writes "
+                   "DIR/<scene>_<key>=<value>.png")
     r.add_argument("-D", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene value, e.g. -D wrinkles.k_scale=1.3 (repeatable; "
                    "applies to every scene)")
@@ -168,10 +172,33 @@ def _calibrate(args) -> int:
     return 0
 
 
+def _parse_sweep(text: str, params: dict):
+    """`key=start:stop:count` over a scalar parameter → (key, values)."""
+    import numpy as np
+
+    key, _, spec = text.partition("=")
+    parts = spec.split(":")
+    try:
+        start, stop, count = float(parts[0]), float(parts[1]), int(parts[2])
+        ok = len(parts) == 3 and count >= 1
+    except (ValueError, IndexError):
+        ok = False
+    if not ok:
+        raise InputError(f"--sweep expects key=start:stop:count, got {text!r}")
+    if key not in params or params[key].ndim != 0:
+        scalars = ", ".join(k for k, v in params.items() if getattr(v, "ndim", 1) == 0)
+        raise InputError(f"--sweep: '{key}' is not a scalar parameter of this scene; "
+                         f"parameters: {scalars}")
+    return key, np.linspace(start, stop, count)
+
+
 def _render(args) -> int:
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
     from tqdm import tqdm
 
-    from . import maps, texture
+    from . import maps, render, texture
     from .scene import load_scene
 
     scenes = [load_scene(name, args.overrides) for name in args.scenes]
@@ -179,28 +206,41 @@ def _render(args) -> int:
     if len(set(names)) != len(names):
         raise InputError(f"two scenes are both named {max(names, key=names.count)!r}; their "
                          "outputs would collide (set 'name' in the scene file)")
-    if not args.maps:
-        raise InputError("the shaded image is not implemented yet (Blinn/Lafortune shading "
-                         "and camera views are the next step); pass --maps for the "
-                         "texture-space maps")
-    for sc in scenes:  # static setup of every scene (mesh, projection, fields) before output
-        texture.setup(sc.config)
+    sweeps = [[_parse_sweep(text, sc.params) for text in args.sweep] for sc in scenes]
+    for sc in scenes:  # every scene's static setup (mesh, projection, fields) before output
+        texture.setup(sc.config.texture)
+        sc.params  # noqa: B018  (loads a Lafortune file: a bad one fails here)
     out = Path(args.output)
     rows = []
-    for sc in tqdm(scenes, desc="render", unit="scene", disable=None):
+    for sc, sweep in tqdm(list(zip(scenes, sweeps, strict=True)), desc="render", unit="scene",
+                          disable=None):
         t0 = time.perf_counter()
-        s = texture.setup(sc.config)
-        result = texture.texture_maps(sc.config, sc.params)
-        maps.write_height(result["height"], out / f"{sc.name}_height.png")
-        maps.write_normals(result["normals"], s.mask, out / f"{sc.name}_normal.png")
-        maps.write_field_plot(s, out / f"{sc.name}_field.png")
-        furrows = texture.furrows(sc.config)[1].count if sc.config.wrinkles else (0, 0)
-        rows.append((sc.name, s.tmap.width, s.tmap.height, [int(c) for c in furrows],
-                     time.perf_counter() - t0))
-    print(f"{'scene':<16} {'texture':>10} {'furrows F1, F2':>15} {'time s':>7}")
-    for name, w, h, n, dt in rows:
-        print(f"{name:<16} {f'{w}x{h}':>10} {f'{n[0]}, {n[1]}':>15} {dt:>7.2f}")
-    print(f"wrote {3 * len(rows)} map(s) to {out}/")
+        config, params = sc.config, sc.params
+        if sweep:
+            key, values = sweep[0]
+            for extra_key, _ in sweep[1:]:
+                raise InputError(f"one --sweep at a time for now (got {key} and {extra_key})")
+            batch = jax.jit(jax.vmap(lambda v, key=key, params=params, config=config:
+                                     render.render(config, {**params, key: v})))
+            images = batch(jnp.asarray(values, jnp.float32))
+            for v, image in zip(values, np.asarray(images), strict=True):
+                maps.write_image(image, out / f"{sc.name}_{key}={v:g}.png")
+            written = len(values)
+        else:
+            maps.write_image(np.asarray(render.render(config, params)), out / f"{sc.name}.png")
+            written = 1
+        if args.maps:
+            s = texture.setup(config.texture)
+            result = texture.texture_maps(config, params)
+            maps.write_height(result["height"], out / f"{sc.name}_height.png")
+            maps.write_normals(result["normals"], s.mask, out / f"{sc.name}_normal.png")
+            maps.write_field_plot(s, out / f"{sc.name}_field.png")
+            written += 3
+        rows.append((sc.name, config.image, written, time.perf_counter() - t0))
+    print(f"{'scene':<16} {'image':>7} {'files':>6} {'time s':>7}")
+    for name, size, n, dt in rows:
+        print(f"{name:<16} {size:>7} {n:>6} {dt:>7.2f}")
+    print(f"wrote {sum(r[2] for r in rows)} file(s) to {out}/")
     return 0
 
 

@@ -6,7 +6,7 @@ import numpy as np
 
 from .io import atomic_write
 
-__all__ = ["png_bytes", "write_field_plot", "write_height", "write_normals"]
+__all__ = ["png_bytes", "write_field_plot", "write_height", "write_image", "write_normals"]
 
 
 def png_bytes(image: np.ndarray) -> bytes:
@@ -18,6 +18,12 @@ def png_bytes(image: np.ndarray) -> bytes:
 def _write(path, data: bytes) -> None:
     with atomic_write(path, "wb") as fh:
         fh.write(data)
+
+
+def write_image(image, path) -> None:
+    """An 8-bit RGB PNG of display values in [0, 1] (clipped)."""
+    image = np.clip(np.asarray(image, np.float64), 0.0, 1.0)
+    _write(path, png_bytes(np.round(image * 255).astype(np.uint8)))
 
 
 def write_height(h, path) -> None:

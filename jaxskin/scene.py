@@ -13,6 +13,25 @@ k_scale = 1.1                      # 0.5–2 (lengths, in texels; static)
 k_noise = 0.0                      # 0–1
 k_bump = 0.5                       # 0–1
 seed = 0
+[material]
+model = "blinn"                    # blinn | lafortune
+melanin = 0.2                      # Blinn (eq. 5.7): melanin, blood 0–1; specular 0–1;
+blood = 0.5                        #   shininess 0–10000
+specular = 0.2
+shininess = 100.0
+brdf = "skin"                      # Lafortune: the preset, or a JSON from jaxskin fit-brdf
+[light]
+direction = [0.0, 0.0, 1.0]        # toward the light, camera space (parallel light)
+ambient = 0.3                      # I_ambient
+intensity = 0.7                    # I_light
+[camera]
+projection = "orthographic"        # orthographic | perspective
+size = 512                         # image pixels across
+supersample = 1                    # 1–4 samples per pixel per axis
+fov = 30.0                         # perspective only, degrees
+rotate = [0.0, 0.0, 0.0]           # degrees about x, y, z: turns the mesh
+[view]
+mode = "wrinkles"                  # wrinkles | overview (no wrinkles) | height
 [[fields.edit]]                    # any number; none: the initial fields
 at = [0.0, 0.4, 0.1]               # the vertex nearest to this point (or: vertex = 123)
 d1 = [0.6, 1.0, 0.0]               # direction and magnitude (|d| <= 2)
@@ -41,7 +60,8 @@ import jax.numpy as jnp
 from .io import InputError, data_dir
 from .projection import KINDS
 
-__all__ = ["BUILTIN_SCENES", "Scene", "SceneConfig", "builtin_scenes", "load_scene"]
+__all__ = ["BUILTIN_SCENES", "Scene", "SceneConfig", "TextureConfig", "builtin_scenes",
+           "load_scene"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -64,7 +84,25 @@ SCHEMA: dict[str, _Key] = {
     "wrinkles.k_noise": _Key(float, 0.0, 0.0, 1.0, param=True),
     "wrinkles.k_bump": _Key(float, 0.5, 0.0, 1.0, param=True),
     "wrinkles.seed": _Key(int, 0, 0, 2**31 - 1),
+    "material.model": _Key(str, "blinn", choices=("blinn", "lafortune")),
+    "material.melanin": _Key(float, 0.2, 0.0, 1.0, param=True),
+    "material.blood": _Key(float, 0.5, 0.0, 1.0, param=True),
+    "material.specular": _Key(float, 0.2, 0.0, 1.0, param=True),
+    "material.shininess": _Key(float, 100.0, 0.0, 10000.0, param=True),
+    "material.brdf": _Key(str, "skin"),
+    "light.direction": _Key("vec3", (0.0, 0.0, 1.0), param=True),
+    "light.ambient": _Key(float, 0.3, 0.0, 1.0, param=True),
+    "light.intensity": _Key(float, 0.7, 0.0, 10.0, param=True),
+    "camera.projection": _Key(str, "orthographic", choices=("orthographic", "perspective")),
+    "camera.size": _Key(int, 512, 16, 8192),
+    "camera.supersample": _Key(int, 1, 1, 4),
+    "camera.fov": _Key(float, 30.0, 1.0, 120.0),
+    "camera.rotate": _Key("vec3", (0.0, 0.0, 0.0)),
+    "view.mode": _Key(str, "wrinkles", choices=("wrinkles", "overview", "height")),
 }
+# Parameters that only one material model uses: the other model's are left out.
+_MODEL_PARAMS = {"blinn": {"material.melanin", "material.blood", "material.specular",
+                           "material.shininess"}, "lafortune": set()}
 EDIT_KEYS = {"at", "vertex", "d1", "d2", "weight"}
 
 
@@ -80,8 +118,8 @@ class EditSpec:
 
 
 @dataclasses.dataclass(frozen=True)
-class SceneConfig:
-    """The static part of a scene (hashable; the jit cache key)."""
+class TextureConfig:
+    """What the texture-space maps depend on (the furrows are cached per one of these)."""
 
     mesh: str
     projection: str
@@ -90,6 +128,25 @@ class SceneConfig:
     k_scale: float
     seed: int
     edits: tuple[EditSpec, ...]
+
+
+@dataclasses.dataclass(frozen=True)
+class SceneConfig:
+    """The static part of a scene (hashable; the jit cache key)."""
+
+    texture: TextureConfig
+    material: str  # blinn | lafortune
+    brdf: str  # the Lafortune preset or file
+    camera: str  # orthographic | perspective
+    image: int
+    supersample: int
+    fov: float
+    rotate: tuple[float, float, float]
+    mode: str  # wrinkles | overview | height
+
+    @property
+    def needs_furrows(self) -> bool:
+        return self.texture.wrinkles and self.mode in ("wrinkles", "height")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -102,15 +159,28 @@ class Scene:
     @property
     def config(self) -> SceneConfig:
         v = self.values
-        return SceneConfig(v["mesh.file"], v["mesh.projection"], v["texture.size"],
-                           v["wrinkles.enabled"], v["wrinkles.k_scale"], v["wrinkles.seed"],
-                           self.edits)
+        tex = TextureConfig(v["mesh.file"], v["mesh.projection"], v["texture.size"],
+                            v["wrinkles.enabled"], v["wrinkles.k_scale"], v["wrinkles.seed"],
+                            self.edits)
+        return SceneConfig(tex, v["material.model"], v["material.brdf"], v["camera.projection"],
+                           v["camera.size"], v["camera.supersample"], v["camera.fov"],
+                           tuple(v["camera.rotate"]), v["view.mode"])
 
     @property
     def params(self) -> dict:
-        """Differentiable values as float32 arrays, keyed by their dotted names."""
-        return {k: jnp.asarray(self.values[k], jnp.float32) for k, spec in SCHEMA.items()
-                if spec.param}
+        """Differentiable values as float32 arrays, keyed by their dotted names; only those
+        the scene uses (no Blinn parameters in a Lafortune scene, no lobes in a Blinn one)."""
+        model = self.values["material.model"]
+        unused = set().union(*(p for m, p in _MODEL_PARAMS.items() if m != model))
+        out = {k: jnp.asarray(self.values[k], jnp.float32) for k, spec in SCHEMA.items()
+               if spec.param and k not in unused}
+        if model == "lafortune":
+            from .shading import lafortune
+
+            brdf = self.values["material.brdf"]
+            out["material.lafortune"] = (lafortune.skin() if brdf == "skin" else
+                                         lafortune.load(brdf))
+        return out
 
 
 BUILTIN_SCENES = ("hand", "foot", "arm")
@@ -147,6 +217,14 @@ def load_scene(name_or_path, overrides=()) -> Scene:
     mesh = values["mesh.file"]
     if not _is_builtin_mesh(mesh) and not Path(mesh).is_absolute():
         values["mesh.file"] = str((path.parent / mesh).resolve())
+    brdf = values["material.brdf"]
+    if brdf != "skin":
+        brdf_path = Path(brdf) if Path(brdf).is_absolute() else (path.parent / brdf).resolve()
+        if not brdf_path.is_file():
+            raise InputError("expected 'skin' (the preset) or a Lafortune JSON file (as "
+                             f"written by jaxskin fit-brdf); no file {brdf_path}", path,
+                             key="material.brdf")
+        values["material.brdf"] = str(brdf_path)
     edits = tuple(_edit(i, e, path) for i, e in enumerate(edits_raw))
     return Scene(values["name"], str(path), values, edits)
 
@@ -177,6 +255,11 @@ def _check(key: str, value, where):
         hint = f"; did you mean '{near[0]}'?" if near else f"; valid keys: {', '.join(SCHEMA)}"
         raise InputError(f"unknown key{hint}", where, key=key)
     kind = spec.kind
+    if kind == "vec3":
+        value = _vector(value, key, where)
+        if spec.param and key == "light.direction" and not any(value):
+            raise InputError("the light direction must not be zero", where, key=key)
+        return value
     ok = isinstance(value, kind) and not (kind is not bool and isinstance(value, bool))
     if kind is float and isinstance(value, int) and not isinstance(value, bool):
         value, ok = float(value), True

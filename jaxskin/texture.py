@@ -21,14 +21,14 @@ from .io import InputError
 from .mesh import Mesh, load_mesh
 from .projection import TextureMap, project
 from .raster import interpolate
-from .scene import SceneConfig
+from .scene import SceneConfig, TextureConfig
 
 __all__ = ["TextureSetup", "furrows", "setup", "texture_maps"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class TextureSetup:
-    config: SceneConfig
+    config: TextureConfig
     mesh: Mesh
     tmap: TextureMap
     edits: tuple[Edit, ...]
@@ -41,7 +41,7 @@ class TextureSetup:
 
 
 @functools.lru_cache(maxsize=8)
-def setup(config: SceneConfig) -> TextureSetup:
+def setup(config: TextureConfig) -> TextureSetup:
     mesh = load_mesh(config.mesh)
     try:
         tmap = project(config.projection, mesh, config.size)
@@ -71,7 +71,7 @@ RECORDS = 4096
 
 
 @functools.lru_cache(maxsize=8)
-def furrows(config: SceneConfig):
+def furrows(config: TextureConfig):
     """The furrow height field before noise, `(H, W)`, and the furrow records."""
     s = setup(config)
     return wrinkles.height_field(
@@ -81,10 +81,17 @@ def furrows(config: SceneConfig):
 
 
 def texture_maps(config: SceneConfig, params: dict) -> dict:
-    """`height (H, W)` and `normals (H, W, 3)` for a scene; differentiable in `params`."""
-    s = setup(config)
-    if not config.wrinkles:
-        return {"height": jnp.where(s.mask, 1.0, 1.0), "normals": s.normals}
-    h0, _ = furrows(config)
-    h = wrinkles.add_noise(h0, s.mask, params["wrinkles.k_noise"], jax.random.key(config.seed))
+    """`height (H, W)` and `normals (H, W, 3)` for a scene; differentiable in `params`.
+    A scene that does not show wrinkles (disabled, or the overview mode) runs no furrows."""
+    tex = config.texture
+    s = setup(tex)
+    if not config.needs_furrows:
+        return {"height": jnp.ones(s.mask.shape, jnp.float32), "normals": s.normals}
+    h0, _ = furrows(tex)
+    return bumped(s, h0, params, jax.random.key(tex.seed))
+
+
+def bumped(s: TextureSetup, h0, params, key) -> dict:
+    """Noise (step 9) and bump normals (eq. 4.10) on a furrow height field."""
+    h = wrinkles.add_noise(h0, s.mask, params["wrinkles.k_noise"], key)
     return {"height": h, "normals": bump.bump_normals(s.normals, h, params["wrinkles.k_bump"])}

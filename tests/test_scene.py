@@ -65,8 +65,8 @@ def test_overrides_are_checked_like_the_file(tmp_path):
     path = tmp_path / "s.toml"
     path.write_text(GOOD)
     sc = load_scene(path, ["wrinkles.k_bump=0.8", "texture.size=32", "mesh.projection=uv"])
-    assert sc.values["wrinkles.k_bump"] == 0.8 and sc.config.size == 32
-    assert sc.config.projection == "uv"
+    assert sc.values["wrinkles.k_bump"] == 0.8 and sc.config.texture.size == 32
+    assert sc.config.texture.projection == "uv"
     with pytest.raises(InputError, match="-D wrinkles.k_bump=7: key 'wrinkles.k_bump'"):
         load_scene(path, ["wrinkles.k_bump=7"])
     with pytest.raises(InputError, match="did you mean 'texture.size'"):
@@ -78,7 +78,9 @@ def test_static_config_and_params_split(tmp_path):
     path.write_text(GOOD)
     a, b = load_scene(path), load_scene(path, ["wrinkles.k_bump=0.9"])
     assert a.config == b.config and hash(a.config) == hash(b.config)  # same jit cache key
-    assert set(a.params) == {"wrinkles.k_bump", "wrinkles.k_noise"}
+    assert {"wrinkles.k_bump", "wrinkles.k_noise", "material.melanin", "light.direction"} <= set(
+        a.params)
+    assert not set(a.params) & {"mesh.file", "texture.size", "camera.size", "view.mode"}
     assert float(b.params["wrinkles.k_bump"]) == pytest.approx(0.9)
     assert load_scene(path, ["wrinkles.k_scale=1.5"]).config != a.config
 
@@ -98,7 +100,7 @@ def test_a_scene_without_wrinkles_runs_no_furrow_program(tmp_path, monkeypatch):
     plain = load_scene(path, ["wrinkles.enabled=false"])
     maps = texture.texture_maps(plain.config, plain.params)
     assert calls == []
-    np.testing.assert_array_equal(maps["normals"], texture.setup(plain.config).normals)
+    np.testing.assert_array_equal(maps["normals"], texture.setup(plain.config.texture).normals)
     wrinkled = load_scene(path)
     texture.texture_maps(wrinkled.config, wrinkled.params)
     assert calls == [1]

@@ -92,7 +92,7 @@ def test_crossing_furrows_end_on_each_other():
     """Of the furrow ends (not at the mesh border) that touch another furrow of the same
     pass, most stopped on it: T-junctions. Measured on the hand: 97 % and 100 %."""
     sc = load_scene("hand", ["texture.size=256"])
-    _, rec = texture.furrows(sc.config)
+    _, rec = texture.furrows(sc.config.texture)
     rec = wrinkles.to_numpy_record(rec, texture.RECORDS)
     for p in range(2):
         r = rec[p]

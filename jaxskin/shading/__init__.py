@@ -1,5 +1,5 @@
-"""Shading models. `lafortune`: the Lafortune BRDF (Bando 2001 eq. 4.15)."""
+"""Shading models: `blinn` (eq. 4.12 with melanin and blood) and `lafortune` (eq. 4.15–4.16)."""
 
-from . import lafortune
+from . import blinn, lafortune
 
-__all__ = ["lafortune"]
+__all__ = ["blinn", "lafortune"]

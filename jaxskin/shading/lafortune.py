@@ -28,7 +28,8 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ..io import InputError, atomic_write
 
-__all__ = ["Lafortune", "brdf", "from_json", "load", "save", "skin", "to_json"]
+__all__ = ["Lafortune", "brdf", "from_json", "load", "positive_power", "save", "shade", "skin",
+           "to_json"]
 
 
 class Lafortune(NamedTuple):
@@ -49,13 +50,36 @@ def brdf(p: Lafortune, u: Float[ArrayLike, "*shape 3"], v: Float[ArrayLike, "*sh
     - `u`, `v`: unit vectors to the light and to the viewer, local frame (z = normal).
     """
     u, v = jnp.asarray(u), jnp.asarray(v)
-    xy = (u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1])[..., None, None]  # (*shape, 1, 1)
-    zz = (u[..., 2] * v[..., 2])[..., None, None]
-    base = p.Cxy * xy + p.Cz * zz  # (*shape, lobes, 3)
+    return _evaluate(p, u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1], u[..., 2] * v[..., 2])
+
+
+def _evaluate(p: Lafortune, xy, zz):
+    """f from the two products the isotropic model needs: ux vx + uy vy and uz vz."""
+    base = p.Cxy * xy[..., None, None] + p.Cz * zz[..., None, None]  # (*shape, lobes, 3)
+    return p.diffuse / math.pi + jnp.sum(positive_power(base, p.n), axis=-2)
+
+
+def positive_power(base, n):
+    """max(0, base)^n with the clamp before the power; finite values and gradients at
+    base <= 0, for any n > 0 (exp(n log base) behind a double `where`)."""
     positive = base > 0
     safe = jnp.where(positive, base, 1.0)
-    lobes = jnp.where(positive, jnp.exp(p.n * jnp.log(safe)), 0.0)
-    return p.diffuse / math.pi + jnp.sum(lobes, axis=-2)
+    return jnp.where(positive, jnp.exp(n * jnp.log(safe)), 0.0)
+
+
+def shade(p: Lafortune, N, L, V, ambient=0.3, light=0.7):
+    """Bando 2001 eq. 4.16: c = I_ambient ρd + I_light f(L, V) cos θ, in the local frame of
+    the (bumped) normal N. Isotropic lobes need no tangent frame: uz vz = (N·L)(N·V) and
+    ux vx + uy vy = L·V − (N·L)(N·V). The ambient reflectance is ρd (the paper's D).
+
+    **Arguments:** `N (..., 3)` unit normals, `L`, `V` unit vectors to light and viewer
+    (broadcastable), `ambient`, `light`: I_ambient and I_light. **Returns:** `(..., 3)`.
+    """
+    cos_l = jnp.sum(N * L, axis=-1)
+    cos_v = jnp.sum(N * V, axis=-1)
+    zz = cos_l * cos_v
+    f = _evaluate(p, jnp.sum(L * V, axis=-1) - zz, zz)
+    return ambient * p.diffuse + light * f * jnp.maximum(cos_l, 0.0)[..., None]
 
 
 def skin(dtype=jnp.float32) -> Lafortune:

@@ -1,0 +1,158 @@
+"""Shading (Blinn, Lafortune) and the render: analytic checks, gradients at grazing light
+and huge exponents, what a scene leaves out, sweeps."""
+
+import subprocess
+import sys
+
+import imageio.v3 as iio
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from conftest import check_grads_scaled
+
+from jaxskin import render, texture, wrinkles
+from jaxskin.scene import load_scene
+from jaxskin.shading import blinn, lafortune
+
+
+def unit(v):
+    v = np.asarray(v, np.float64)
+    return v / np.linalg.norm(v)
+
+
+def test_blinn_flat_plane_by_hand():
+    """Light = view = (0, 0, 1) on a flat plane: cos θ = cos γ = 1, so by eq. 4.12 with the
+    paper's defaults c = 0.3 r + 0.7 r + 0.7 × 0.2 = r + 0.14."""
+    z = np.array([0.0, 0.0, 1.0])
+    c = blinn.shade(z, z, z, 0.2, 0.5, 0.2, 100.0)
+    r = np.array([0.97, 0.87, 0.67]) - 0.2 * np.array([0.69, 0.71, 0.90]) - 0.5 * np.array(
+        [0.0, 0.24, 0.24])
+    np.testing.assert_allclose(c, r + 0.14, rtol=1e-6)
+    # Light from the side (60°): cos θ = 0.5, H halfway: cos γ = cos 30°.
+    L = unit([np.sin(np.pi / 3), 0, 0.5])
+    c = blinn.shade(z, L, z, 0.2, 0.5, 0.2, 100.0)
+    np.testing.assert_allclose(c, 0.3 * r + 0.7 * r * 0.5 + 0.7 * 0.2 * np.cos(np.pi / 6) ** 100,
+                               rtol=1e-5)
+    # Light behind the surface: ambient only, no highlight.
+    np.testing.assert_allclose(blinn.shade(z, -z, z, 0.2, 0.5, 0.2, 100.0), 0.3 * r, rtol=1e-6)
+
+
+def test_lafortune_shade_matches_the_brdf_in_the_local_frame(x64):
+    p = lafortune.skin(jnp.float64)
+    N, L, V = unit([0.1, 0.2, 0.97]), unit([0.5, -0.3, 0.8]), unit([-0.4, 0.1, 0.9])
+    # An explicit local frame around N.
+    t = unit(np.cross(N, [1.0, 0, 0]))
+    b = np.cross(N, t)
+    local = lambda w: np.array([w @ t, w @ b, w @ N])  # noqa: E731
+    f = lafortune.brdf(p, local(L), local(V))
+    expected = 0.3 * np.asarray(p.diffuse) + 0.7 * np.asarray(f) * (N @ L)
+    np.testing.assert_allclose(lafortune.shade(p, N, L, V), expected, rtol=1e-12)
+
+
+POINTS = {
+    "ordinary": (unit([0.1, 0.2, 0.97]), unit([0.5, -0.3, 0.8]), 100.0),
+    "grazing light": (unit([0.0, 0.0, 1.0]), unit([1.0, 0.0, 1e-5]), 100.0),
+    "n_z -> 0": (unit([1.0, 0.2, 1e-7]), unit([0.6, 0.1, 0.8]), 100.0),
+    "huge shininess": (unit([0.0, 0.05, 1.0]), unit([0.0, -0.05, 1.0]), 1e4),
+}
+
+
+@pytest.mark.parametrize("name", POINTS)
+def test_blinn_gradients(x64, name):
+    N, L, n = POINTS[name]
+    V = np.array([0.0, 0.0, 1.0])
+    check_grads_scaled(lambda m, b, s, sh, l_: blinn.shade(N, l_, V, m, b, s, sh),
+                       [0.2, 0.5, 0.2, n, L], [0.05, 0.05, 0.05, n / 100, 1e-3], eps=1e-4)
+
+
+@pytest.mark.parametrize("name", ["ordinary", "grazing light", "n_z -> 0"])
+def test_lafortune_shade_gradients(x64, name):
+    N, L, _ = POINTS[name]
+    V = unit([0.1, 0.0, 1.0])
+    p = lafortune.skin(jnp.float64)
+
+    def f(Cxy, Cz, n, l_):
+        return lafortune.shade(lafortune.Lafortune(p.diffuse, Cxy, Cz, n), N, l_, V)
+
+    check_grads_scaled(f, [p.Cxy, p.Cz, p.n, L], [0.05, 0.05, 1.0, 1e-3], eps=1e-4)
+
+
+@pytest.fixture(scope="module")
+def small_hand():
+    return load_scene("hand", ["texture.size=96", "camera.size=48"])
+
+
+def test_render_gradients_wrt_material_light_and_bump(small_hand):
+    config, params = small_hand.config, small_hand.params
+    keys = ["material.melanin", "material.blood", "material.specular", "material.shininess",
+            "wrinkles.k_bump", "light.direction"]
+
+    def loss(sub):
+        image = render.render(config, {**params, **sub})
+        return jnp.mean((image - 0.5) ** 2)
+
+    sub = {k: params[k] for k in keys}
+    grads = jax.grad(loss)(sub)
+    for k in keys:
+        assert bool(jnp.all(jnp.isfinite(grads[k]))) and float(jnp.abs(grads[k]).sum()) > 0, k
+    # Gradient against central differences in melanin (float32 render: loose tolerance).
+    h = 1e-2
+    plus = loss({**sub, "material.melanin": sub["material.melanin"] + h})
+    minus = loss({**sub, "material.melanin": sub["material.melanin"] - h})
+    np.testing.assert_allclose(grads["material.melanin"], (plus - minus) / (2 * h), rtol=2e-2)
+
+
+def test_view_sampling_gradient(x64):
+    """The view is linear in the texture-space image: check_grads through the sampler."""
+    from jaxskin.view import sample
+
+    tex = jnp.asarray(np.random.default_rng(0).uniform(1, 7, (5, 6, 2)))
+    mask = jnp.ones((5, 6), bool).at[0, 0].set(False)
+    image = jnp.asarray(np.random.default_rng(1).uniform(0, 1, (8, 8, 3)))
+    check_grads_scaled(lambda im: sample(im, tex, mask, True), [image], [1.0], order=2)
+
+
+def test_a_blinn_scene_traces_no_lafortune_and_the_overview_no_furrows(small_hand, monkeypatch):
+    config, params = small_hand.config, small_hand.params
+    assert "material.lafortune" not in params
+    jaxpr = str(jax.make_jaxpr(lambda p: render._render(config, p, render.prepare(
+        config).arrays))(params))
+    assert "log" in jaxpr  # the Blinn highlight's power
+    lf = load_scene("hand", ["texture.size=96", "camera.size=48", "material.model=lafortune"])
+    assert "material.melanin" not in lf.params and "material.lafortune" in lf.params
+    calls = []
+    monkeypatch.setattr(wrinkles, "height_field", lambda *a, **k: calls.append(1))
+    texture.furrows.cache_clear()
+    render.prepare.cache_clear()
+    overview = load_scene("hand", ["texture.size=96", "camera.size=48", "view.mode=overview"])
+    image = render.render(overview.config, overview.params)
+    assert calls == [] and image.shape == (48, 48, 3)
+    texture.furrows.cache_clear()
+    render.prepare.cache_clear()
+
+
+def test_overview_has_no_wrinkles_and_wrinkles_mode_does(small_hand):
+    config, params = small_hand.config, small_hand.params
+    wrinkled = np.asarray(render.render(config, params))
+    overview = load_scene("hand", ["texture.size=96", "camera.size=48", "view.mode=overview"])
+    smooth = np.asarray(render.render(overview.config, overview.params))
+    on = wrinkled.sum(-1) > 0
+    assert np.mean(np.abs(wrinkled - smooth)[on]) > 1e-3
+    flat = load_scene("hand", ["texture.size=96", "camera.size=48", "wrinkles.k_bump=0"])
+    np.testing.assert_allclose(np.asarray(render.render(flat.config, flat.params)), smooth,
+                               atol=1e-5)
+
+
+def test_render_command_with_a_vmapped_sweep(tmp_path):
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "jaxskin.cli", "render", "foot", "-o", str(out),
+                           "-D", "texture.size=64", "-D", "camera.size=32", "--sweep",
+                           "material.melanin=0:1:3"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    images = [iio.imread(out / f"foot_material.melanin={v}.png") for v in ("0", "0.5", "1")]
+    means = [im[im.sum(-1) > 0].mean() for im in images]
+    assert means[0] > means[1] > means[2]  # more melanin, darker skin
+    bad = subprocess.run([sys.executable, "-m", "jaxskin.cli", "render", "foot", "-o", str(out),
+                          "--sweep", "camera.size=1:2:2"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "not a scalar parameter" in bad.stderr
