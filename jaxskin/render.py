@@ -4,8 +4,9 @@ The static configuration (a `SceneConfig`: which stages run, sizes, mesh, camera
 what is traced; the parameters (a dict of arrays: melanin, blood, light, lobes, k_bump …)
 are what is differentiable. Host-side work — mesh, projection, fields, rasterization of
 texture space and of the view, the furrows — happens once per configuration (`prepare`);
-`render` then shades in texture space (the paper's normal map lit per texel, §4.2) and
-samples the view. Stages a scene does not use are not traced: no furrows without wrinkles
+`render` then computes the bumped normal map in texture space (§4.1), samples it into
+the view (bilinear) and shades there (§4.2): the paper lights every texel of the texture,
+we light the texels the camera sees, which is the same map read at the same places. Stages a scene does not use are not traced: no furrows without wrinkles
 or in the overview mode, no Lafortune code in a Blinn scene and the reverse.
 """
 
@@ -43,6 +44,7 @@ def prepare(config: SceneConfig) -> Prepared:
               "view_mask": jnp.asarray(view.mask)}
     if config.needs_furrows:
         arrays["h0"] = texture.furrows(config.texture)[0]
+        arrays["noise"] = texture.noise(config.texture)
     if view.eye is not None:  # perspective: the view direction varies per texel
         arrays["positions"] = interpolate(s.mesh.vertices.astype(np.float32), s.mesh.faces,
                                           s.tmap.raster)
@@ -58,24 +60,33 @@ def render(config: SceneConfig, params: dict):
 @functools.partial(jax.jit, static_argnums=0)
 def _render(config: SceneConfig, params: dict, arrays: dict):
     p = prepare(config)  # host-side, cached: only static facts (rotation, eye) are used
-    mask = arrays["mask"]
+    mask, view_mask, k = arrays["mask"], arrays["view_mask"], config.supersample
+
+    def to_view(texture_image):  # bilinear samples at every (super)sample, not averaged
+        return sample(texture_image, arrays["tex"], view_mask, p.view.wrap_x, 1)
+
     if config.needs_furrows:
-        maps = texture.bumped(p.setup, arrays["h0"], params, jax.random.key(config.texture.seed))
+        maps = texture.bumped(arrays["normals"], mask, arrays["h0"], arrays["noise"], params)
         height, normals = maps["height"], maps["normals"]
     else:
         height, normals = jnp.ones(mask.shape, jnp.float32), arrays["normals"]
     if config.mode == "height":
-        colour = jnp.repeat(height[..., None], 3, axis=-1)
+        colour = jnp.repeat(to_view(height[..., None]), 3, axis=-1)
     else:
+        # Shade where the camera looks: the bumped normal map sampled into the view (fewer
+        # samples than texels), in the object's frame (L and V turned by Rᵀ instead of
+        # every normal by R: N·L = n·RᵀL).
+        n = to_view(normals)
+        nn = jnp.sum(n * n, axis=-1, keepdims=True)
+        N = jnp.where(nn > 0, n / jnp.sqrt(jnp.where(nn > 0, nn, 1.0)), 0.0)
         R = jnp.asarray(p.view.R, jnp.float32)
-        N = normals @ R.T
         d = params["light.direction"]
-        L = d / jnp.linalg.norm(d)
+        L = (d / jnp.linalg.norm(d)) @ R
         if p.view.eye is None:
-            V = jnp.asarray([0.0, 0.0, 1.0], jnp.float32)
+            V = jnp.asarray([0.0, 0.0, 1.0], jnp.float32) @ R
         else:
-            to_eye = jnp.asarray(p.view.eye, jnp.float32) - arrays["positions"] @ R.T
-            V = to_eye / jnp.linalg.norm(to_eye, axis=-1, keepdims=True)
+            to_eye = jnp.asarray(p.view.eye, jnp.float32) - to_view(arrays["positions"]) @ R.T
+            V = (to_eye / jnp.linalg.norm(to_eye, axis=-1, keepdims=True)) @ R
         ambient, light = params["light.ambient"], params["light.intensity"]
         if config.material == "blinn":
             colour = blinn.shade(N, L, V, params["material.melanin"], params["material.blood"],
@@ -83,6 +94,8 @@ def _render(config: SceneConfig, params: dict, arrays: dict):
                                  ambient, light)
         else:
             colour = lafortune.shade(params["material.lafortune"], N, L, V, ambient, light)
-    colour = jnp.where(mask[..., None], colour, 0.0)
-    return sample(colour, arrays["tex"], arrays["view_mask"], p.view.wrap_x,
-                  config.supersample)
+        colour = jnp.where(view_mask[..., None], colour, 0.0)
+    if k > 1:
+        H, W, C = colour.shape
+        colour = colour.reshape(H // k, k, W // k, k, C).mean(axis=(1, 3))
+    return colour

@@ -88,10 +88,17 @@ def texture_maps(config: SceneConfig, params: dict) -> dict:
     if not config.needs_furrows:
         return {"height": jnp.ones(s.mask.shape, jnp.float32), "normals": s.normals}
     h0, _ = furrows(tex)
-    return bumped(s, h0, params, jax.random.key(tex.seed))
+    return bumped(s.normals, s.mask, h0, noise(tex), params)
 
 
-def bumped(s: TextureSetup, h0, params, key) -> dict:
+@functools.lru_cache(maxsize=8)
+def noise(config: TextureConfig):
+    """The noise field r of step 9 for this configuration's seed (computed once)."""
+    return wrinkles.noise_field((setup(config).tmap.height, config.size),
+                                jax.random.key(config.seed))
+
+
+def bumped(normals, mask, h0, r, params) -> dict:
     """Noise (step 9) and bump normals (eq. 4.10) on a furrow height field."""
-    h = wrinkles.add_noise(h0, s.mask, params["wrinkles.k_noise"], key)
-    return {"height": h, "normals": bump.bump_normals(s.normals, h, params["wrinkles.k_bump"])}
+    h = wrinkles.add_noise(h0, mask, params["wrinkles.k_noise"], r)
+    return {"height": h, "normals": bump.bump_normals(normals, h, params["wrinkles.k_bump"])}

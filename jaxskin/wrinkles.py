@@ -39,7 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 
 __all__ = ["END_BORDER", "END_FURROW", "END_LIMIT", "END_ZERO", "FurrowRecord", "add_noise",
-           "furrow", "height_field", "to_numpy_record", "window_radius"]
+           "furrow", "height_field", "noise_field", "to_numpy_record", "window_radius"]
 
 END_LIMIT, END_FURROW, END_BORDER, END_ZERO = 0, 1, 2, 3
 MAX_STEPS = 32  # f_limit <= 30 segments after the first
@@ -100,10 +100,14 @@ def height_field(mask, field1, field2, centroids, k_scale, key, radius: int, rec
     return jnp.where(mask, jnp.minimum(img1, img2), 1.0), rec
 
 
-def add_noise(h, mask, k_noise, key):
-    """Step 9: h − r·k_noise, r uniform in [0, 1) per texel (the mesh only). Linear in
-    k_noise and h, so differentiable; the furrows themselves are computed once per scene."""
-    r = jax.random.uniform(jax.random.fold_in(key, 3), jnp.shape(h), jnp.asarray(h).dtype)
+def noise_field(shape, key, dtype=jnp.float32):
+    """The r of step 9: uniform in [0, 1) per texel; fixed for a seed (compute it once)."""
+    return jax.random.uniform(jax.random.fold_in(key, 3), shape, dtype)
+
+
+def add_noise(h, mask, k_noise, r):
+    """Step 9: h − r·k_noise on the mesh, `r` from `noise_field`. Linear in k_noise and h,
+    so differentiable; the furrows and r are computed once per scene."""
     return jnp.where(mask, h - k_noise * r, h)
 
 

@@ -163,7 +163,8 @@ def test_jitted_program_matches_the_numpy_transcription():
 def test_noise_is_step_nine():
     h = jnp.full((8, 8), 0.9)
     mask = jnp.ones((8, 8), bool).at[0].set(False)
-    out = np.asarray(wrinkles.add_noise(h, mask, 0.3, jax.random.key(0)))
+    out = np.asarray(wrinkles.add_noise(h, mask, 0.3, wrinkles.noise_field((8, 8),
+                                                                           jax.random.key(0))))
     assert np.all(out[0] == 0.9) and np.all((out[1:] <= 0.9) & (out[1:] > 0.9 - 0.3))
 
 
