@@ -220,9 +220,10 @@ def _render(args) -> int:
             key, values = sweep[0]
             for extra_key, _ in sweep[1:]:
                 raise InputError(f"one --sweep at a time for now (got {key} and {extra_key})")
-            batch = jax.jit(jax.vmap(lambda v, key=key, params=params, config=config:
-                                     render.render(config, {**params, key: v})))
-            images = batch(jnp.asarray(values, jnp.float32))
+            batch = jax.jit(jax.vmap(lambda v, a, key=key, params=params, config=config:
+                                     render.render_prepared(config, {**params, key: v}, a),
+                                     in_axes=(0, None)))
+            images = batch(jnp.asarray(values, jnp.float32), render.prepare(config).arrays)
             for v, image in zip(values, np.asarray(images), strict=True):
                 maps.write_image(image, out / f"{sc.name}_{key}={v:g}.png")
             written = len(values)

@@ -6,7 +6,8 @@ are what is differentiable. Host-side work — mesh, projection, fields, rasteri
 texture space and of the view, the furrows — happens once per configuration (`prepare`);
 `render` then computes the bumped normal map in texture space (§4.1), samples it into
 the view (bilinear) and shades there (§4.2): the paper lights every texel of the texture,
-we light the texels the camera sees, which is the same map read at the same places. Stages a scene does not use are not traced: no furrows without wrinkles
+we light the texels the camera sees, which is the same map read at the same places.
+Stages a scene does not use are not traced: no furrows without wrinkles
 or in the overview mode, no Lafortune code in a Blinn scene and the reverse.
 """
 
@@ -25,7 +26,7 @@ from .scene import SceneConfig
 from .shading import blinn, lafortune
 from .view import View, make_view, sample
 
-__all__ = ["Prepared", "prepare", "render"]
+__all__ = ["Prepared", "prepare", "render", "render_prepared"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -53,8 +54,13 @@ def prepare(config: SceneConfig) -> Prepared:
 
 def render(config: SceneConfig, params: dict):
     """The image `(size, size, 3)` of a scene, float32, display values (clip to [0, 1])."""
-    p = prepare(config)
-    return _render(config, params, p.arrays)
+    return _render(config, params, prepare(config).arrays)
+
+
+def render_prepared(config: SceneConfig, params: dict, arrays: dict):
+    """`render` with the prepared arrays (`prepare(config).arrays`) passed in: inside your
+    own jit, grad or vmap, pass them as arguments, or XLA folds them in as constants."""
+    return _render(config, params, arrays)
 
 
 @functools.partial(jax.jit, static_argnums=0)
