@@ -90,6 +90,9 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
     r.add_argument("--maps", action="store_true",
                    help="also write the texture-space maps (height, normals, fields)")
+    r.add_argument("--glb", action="store_true",
+                   help="also write DIR/<scene>.glb: the mesh with its skin colour and the "
+                   "wrinkle normal map as textures (opens in Blender or any glTF viewer)")
     r.add_argument("--sweep", action="append", default=[], metavar="KEY=START:STOP:COUNT",
                    help="render COUNT images with a parameter from START to STOP, vmapped in "
                    "one compiled program, e.g. --sweep material.melanin=0:1:5; writes "
@@ -230,9 +233,18 @@ def _render(args) -> int:
         else:
             maps.write_image(np.asarray(render.render(config, params)), out / f"{sc.name}.png")
             written = 1
-        if args.maps:
+        if args.maps or args.glb:
             s = texture.setup(config.texture)
             result = texture.texture_maps(config, params)
+        if args.glb:
+            from .export import write_glb
+            from .shading import blinn
+
+            albedo = (blinn.skin_colour(params["material.melanin"], params["material.blood"])
+                      if config.material == "blinn" else params["material.lafortune"].diffuse)
+            write_glb(s, np.asarray(albedo), result["normals"], out / f"{sc.name}.glb")
+            written += 1
+        if args.maps:
             maps.write_height(result["height"], out / f"{sc.name}_height.png")
             maps.write_normals(result["normals"], s.mask, out / f"{sc.name}_normal.png")
             maps.write_field_plot(s, out / f"{sc.name}_field.png")

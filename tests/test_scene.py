@@ -38,6 +38,16 @@ BAD = [
     ("edit too long", GOOD.replace("d1 = [0.6, 0.8, 0.0]", "d1 = [3.0, 0.0, 0.0]"), "fields.edit[0].d1", "[0, 2]"),
     ("edit bad key", GOOD.replace("d2 =", "d3 = [0,0,0]\nd2 ="), "fields.edit[0].d3", "did you mean 'd2'"),
     ("edit weight", GOOD + "weight = 11\n", "fields.edit[0].weight", "[0, 10]"),
+    ("material model", GOOD + "[material]\nmodel = \"phong\"\n", "material.model", "blinn, lafortune"),
+    ("melanin", GOOD + "[material]\nmelanin = 1.5\n", "material.melanin", "[0, 1]"),
+    ("shininess", GOOD + "[material]\nshininess = -1\n", "material.shininess", "[0, 10000]"),
+    ("brdf file", GOOD + "[material]\nbrdf = \"nope.json\"\n", "material.brdf", "fit-brdf"),
+    ("light zero", GOOD + "[light]\ndirection = [0, 0, 0]\n", "light.direction", "must not be zero"),
+    ("light shape", GOOD + "[light]\ndirection = [0, 1]\n", "light.direction", "three finite numbers"),
+    ("camera", GOOD + "[camera]\nprojection = \"fisheye\"\n", "camera.projection", "orthographic, perspective"),
+    ("supersample", GOOD + "[camera]\nsupersample = 8\n", "camera.supersample", "[1, 4]"),
+    ("view mode", GOOD + "[view]\nmode = \"wire\"\n", "view.mode", "wrinkles, overview, height"),
+    ("camera typo", GOOD + "[camera]\nsise = 8\n", "camera.sise", "did you mean 'camera.size'"),
 ]
 
 
