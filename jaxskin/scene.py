@@ -209,17 +209,24 @@ def load_scene(name_or_path, overrides=()) -> Scene:
     values = {k: spec.default for k, spec in SCHEMA.items()}
     for k, v in flat.items():
         values[k] = _check(k, v, path)
+    from_command_line = set()
     for item in overrides:
         k, v = _parse_override(item)
         values[k] = _check(k, v, f"-D {item}")
+        from_command_line.add(k)
+
+    def base(key):  # a path in the file is relative to it; one given with -D, to the cwd
+        return Path.cwd() if key in from_command_line else path.parent
+
     if values["name"] is None:
         values["name"] = path.stem
     mesh = values["mesh.file"]
     if not _is_builtin_mesh(mesh) and not Path(mesh).is_absolute():
-        values["mesh.file"] = str((path.parent / mesh).resolve())
+        values["mesh.file"] = str((base("mesh.file") / mesh).resolve())
     brdf = values["material.brdf"]
     if brdf != "skin":
-        brdf_path = Path(brdf) if Path(brdf).is_absolute() else (path.parent / brdf).resolve()
+        brdf_path = Path(brdf) if Path(brdf).is_absolute() else (
+            base("material.brdf") / brdf).resolve()
         if not brdf_path.is_file():
             raise InputError("expected 'skin' (the preset) or a Lafortune JSON file (as "
                              f"written by jaxskin fit-brdf); no file {brdf_path}", path,

@@ -137,3 +137,19 @@ def test_render_bad_scene_exit_2_and_nothing_written(tmp_path):
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1
     assert "wrinkles.k_scale" in proc.stderr and "Traceback" not in proc.stderr
     assert not out.exists()
+
+
+def test_paths_from_the_file_and_from_the_command_line(tmp_path, monkeypatch):
+    from jaxskin.shading import lafortune
+
+    (tmp_path / "scenes").mkdir()
+    (tmp_path / "fits").mkdir()
+    lafortune.save(lafortune.skin(), tmp_path / "scenes" / "mine.json")
+    lafortune.save(lafortune.skin(), tmp_path / "fits" / "other.json")
+    scene = tmp_path / "scenes" / "s.toml"
+    scene.write_text(GOOD + '\n[material]\nmodel = "lafortune"\nbrdf = "mine.json"\n')
+    assert load_scene(scene).values["material.brdf"] == str(tmp_path / "scenes" / "mine.json")
+    monkeypatch.chdir(tmp_path)
+    over = load_scene(scene, ["material.brdf=fits/other.json"])
+    assert over.values["material.brdf"] == str(tmp_path / "fits" / "other.json")
+    assert over.params["material.lafortune"].n.shape == (3, 3)
