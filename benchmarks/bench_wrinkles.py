@@ -31,7 +31,7 @@ def inputs(size):
     sc = load_scene("hand", [f"texture.size={size}"])
     s = texture.setup(sc.config.texture)
     cent = jnp.asarray(s.tmap.centroids(), jnp.float32)
-    radius = wrinkles.window_radius(sc.config.k_scale)
+    radius = wrinkles.window_radius(sc.config.texture.k_scale)
     return sc, s, cent, radius
 
 
@@ -40,8 +40,8 @@ def main():
     rows, counts = [], {}
     for size in (512, 2048):
         sc, s, cent, radius = inputs(size)
-        key = jax.random.key(sc.config.seed)
-        args = (s.mask, s.field1, s.field2, cent, sc.config.k_scale, key)
+        key = jax.random.key(sc.config.texture.seed)
+        args = (s.mask, s.field1, s.field2, cent, sc.config.texture.k_scale, key)
         t0 = time.perf_counter()
         h, rec = wrinkles.height_field(*args, radius=radius)
         jax.block_until_ready(h)
@@ -52,7 +52,7 @@ def main():
         t0 = time.perf_counter()
         h_np = numpy_furrows.height_field(np.asarray(s.mask), np.asarray(s.field1),
                                           np.asarray(s.field2), np.asarray(cent),
-                                          sc.config.k_scale, key, radius,
+                                          sc.config.texture.k_scale, key, radius,
                                           table_size=max(counts[size]) + 16)
         base = time.perf_counter() - t0
         same = float(np.mean(np.abs(np.asarray(h) - h_np) < 1e-4))

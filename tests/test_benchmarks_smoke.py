@@ -1,0 +1,46 @@
+"""The benchmark scripts are not run by the suite (they take minutes); their entry points
+are, on tiny inputs, so that an API change cannot break them unnoticed."""
+
+import sys
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
+import bench_brdf  # noqa: E402
+import bench_km  # noqa: E402
+import bench_render  # noqa: E402
+import bench_wrinkles  # noqa: E402
+
+
+def test_bench_km_pipelines_agree_on_a_tiny_texture():
+    grid_wl = np.arange(380.0, 781.0, 40.0)
+    S, K = bench_km.load_materials(grid_wl)
+    X = bench_km.thickness_maps(8)
+    Rg = bench_km.skin_reflectance(grid_wl)
+    args = [jnp.asarray(a, jnp.float32) for a in (S, K, X, Rg)]
+    np.testing.assert_allclose(bench_km.over_skin(*args), bench_km.naive_over_skin(*args),
+                               atol=1e-5)
+
+
+def test_bench_wrinkles_and_render_inputs():
+    sc, s, cent, radius = bench_wrinkles.inputs(32)
+    assert s.mask.shape == (32, 32) and radius > 0 and cent.shape[1] == 2
+    assert bench_render.OVERRIDES and callable(bench_render.main)
+
+
+def test_bench_brdf_baseline_model_matches_ours():
+    from jaxskin.shading import lafortune
+
+    rng = np.random.default_rng(0)
+    theta = np.concatenate([[np.log(0.4)], [-1.0, -0.5, -1.0], [0.8, 0.4, -1.2],
+                            np.log([60.0, 4.0, 6.0])])
+    wi = np.abs(rng.normal(size=(5, 3)))
+    wo = np.abs(rng.normal(size=(5, 3)))
+    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    from fitting.brdf import _unpack
+
+    ours = np.asarray(lafortune.brdf(_unpack(jnp.asarray(theta), 3), wi, wo))[:, 0]
+    np.testing.assert_allclose(bench_brdf.numpy_model(theta, wi, wo), ours, rtol=1e-5)
