@@ -1,0 +1,134 @@
+"""Numerical stability of every differentiable stage on stiff and extreme inputs.
+
+    python benchmarks/stability.py           # seconds; writes the `stability` section
+
+For each stage, a grid of extreme inputs (K/S from 0 to 1e6, S·X from 0 to 1e4, thickness 0,
+grazing light and view, n_z → 0, shininess and lobe exponents to 1e4, steep bumps) is run in
+float32 and float64: the count of non-finite values and of non-finite gradients (both must
+be 0; tests/test_stability.py fails otherwise) and the largest float32 error against float64
+(absolute, on outputs that live in [0, 1] or are unit vectors).
+"""
+
+from __future__ import annotations
+
+import itertools
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxskin import bump, km
+from jaxskin.shading import blinn, lafortune
+
+
+def _grid(*axes):
+    return [np.array(c, np.float64) for c in zip(*itertools.product(*axes), strict=True)]
+
+
+def _unit(v):
+    v = np.asarray(v, np.float64)
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _directions(thetas_deg):
+    t = np.radians(np.asarray(thetas_deg, np.float64))
+    return np.stack([np.sin(t), np.zeros_like(t), np.cos(t)], -1)
+
+
+def cases():
+    """(stage, function of float arrays -> array, inputs as float64 arrays)."""
+    out = []
+    S, ratio, SX = _grid([1e-3, 1.0, 1e3], [0.0, 1e-9, 1e-3, 1.0, 1e3, 1e6],
+                         [0.0, 1e-6, 1e-3, 1.0, 1e2, 1e4])
+    out.append(("km.layer (K/S 0–1e6, S·X 0–1e4)",
+                lambda s, k, x: jnp.stack(km.layer(s, k, x)), [S, ratio * S, SX / S]))
+    S2, ratio2 = _grid([1e-3, 1.0, 1e3], [1e-9, 1e-3, 1.0, 1e3, 1e6])
+    out.append(("km.r_inf (K/S 1e-9–1e6)", km.r_inf, [S2, ratio2 * S2]))
+
+    def stack_over(s, k, x):
+        st = km.stack(*km.layer(s[:, None] * jnp.array([1.0, 5.0, 0.5]),
+                                k[:, None] * jnp.array([1.0, 0.3, 2.0]),
+                                x[:, None] * jnp.array([1.0, 1.0, 1.0])))
+        return km.over(st.R, st.T, 0.45, st.R_back)
+
+    out.append(("km.stack + over (3 layers, thickness 0–huge)",
+                lambda s, k, x: stack_over(s, k, x).T, [S, ratio * S, SX / S]))
+
+    light = _directions([0, 30, 60, 85, 89.9, 89.9999, 90.0])
+    normals = _unit([[0, 0, 1], [0.3, 0.1, 0.95], [1, 0, 1e-7], [0, 1, 0]])
+    L, N = (np.repeat(light, len(normals), 0), np.tile(normals, (len(light), 1)))
+    V = np.broadcast_to([0.0, 0.0, 1.0], L.shape).copy()
+    for shininess in (1.0, 100.0, 1e4):
+        out.append((f"blinn.shade (grazing light, n_z → 0, shininess {shininess:g})",
+                    lambda n, l_, v, sh=shininess: blinn.shade(n, l_, v, 0.2, 0.5, 0.2, sh),
+                    [N, L, V]))
+    def lafortune_shade(n, l_, v, scale):
+        p = lafortune.skin(n.dtype)  # built in the run's own precision
+        return lafortune.shade(lafortune.Lafortune(p.diffuse, p.Cxy, p.Cz, p.n * scale), n,
+                               l_, v)
+
+    for scale in (1.0, 100.0):
+        out.append((f"lafortune.shade (grazing, exponents × {scale:g})",
+                    lambda n, l_, v, sc=scale: lafortune_shade(n, l_, v, sc),
+                    [N, L, _unit(V + [0.01, 0, 0])]))
+    rng = np.random.default_rng(0)
+    nmap = _unit(np.concatenate([np.tile([0.0, 0.0, 1.0], (4, 8, 1)),
+                                 np.tile([1.0, 0.0, 1e-7], (4, 8, 1))], 0)
+                 + 1e-4 * rng.normal(size=(8, 8, 3)))
+    h = rng.uniform(0, 1, (8, 8))
+    for k in (0.5, 1e3):
+        out.append((f"bump.bump_normals (n_z → 0, k_bump {k:g})",
+                    lambda n, hh, kk=k: bump.bump_normals(n, hh, kk), [nmap, h]))
+    return out
+
+
+def run(stage, fn, inputs):
+    """Non-finite counts and the float32 error for one stage."""
+    row = {"stage": stage, "cases": int(np.prod(np.shape(inputs[0])[:1] or [1]))}
+    results = {}
+    for dtype in (jnp.float32, jnp.float64):
+        with jax.enable_x64(dtype == jnp.float64):
+            args = [jnp.asarray(a, dtype) for a in inputs]
+            value = fn(*args)
+            grads = jax.grad(lambda *a: jnp.sum(fn(*a)), argnums=tuple(range(len(args))))(*args)
+            name = "f32" if dtype == jnp.float32 else "f64"
+            row[f"nonfinite_{name}"] = int(np.sum(~np.isfinite(np.asarray(value))))
+            row[f"nonfinite_grad_{name}"] = int(sum(np.sum(~np.isfinite(np.asarray(g)))
+                                                    for g in grads))
+            results[name] = np.asarray(value, np.float64)
+    row["max_f32_error"] = float(np.max(np.abs(results["f32"] - results["f64"])))
+    return row
+
+
+def sweep():
+    return [run(*c) for c in cases()]
+
+
+def main():
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from common import machine, table, write_section
+
+    rows = sweep()
+    t = table(["stage", "non-finite values f32 / f64", "non-finite gradients f32 / f64",
+               "max |f32 − f64|"],
+              [(r["stage"], f"{r['nonfinite_f32']} / {r['nonfinite_f64']}",
+                f"{r['nonfinite_grad_f32']} / {r['nonfinite_grad_f64']}",
+                f"{r['max_f32_error']:.1e}") for r in rows])
+    print(t)
+    write_section("stability", f"""## Numerical stability (part of issue 8)
+
+Command: `python benchmarks/stability.py`. Machine: {machine()}.
+
+Every differentiable stage that exists so far, on grids of stiff and extreme inputs, in
+float32 and float64. Gradients are of the sum of the outputs with respect to every input.
+`tests/test_stability.py` runs the same sweep and fails on any non-finite value or
+gradient. (Not yet covered: the cosmetics stages of issue 6, which do not exist yet.)
+
+{t}
+""")
+
+
+if __name__ == "__main__":
+    main()
