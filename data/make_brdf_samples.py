@@ -39,6 +39,18 @@ def samples(m=4000, noise=0.02, seed=1997):
     return wi, wo, f * (1 + noise * rng.normal(size=f.shape)), f
 
 
+def held_out_error(params, m=20000, seed=12345):
+    """Relative RMS error per channel of `params` against the true (preset) BRDF on `m` new
+    direction pairs: how well a fit generalises beyond its samples."""
+    rng = np.random.default_rng(seed)
+    wi, wo = random_directions(rng, m), random_directions(rng, m)
+    with jax.enable_x64(True):
+        true = np.asarray(lafortune.brdf(lafortune.skin(np.float64), wi, wo))
+        fitted = lafortune.Lafortune(*(np.asarray(a, np.float64) for a in params))
+        got = np.asarray(lafortune.brdf(fitted, wi, wo))
+    return np.sqrt(np.mean((got - true) ** 2, axis=0) / np.mean(true**2, axis=0))
+
+
 def main():
     wi, wo, f, _ = samples()
     deg = np.degrees
