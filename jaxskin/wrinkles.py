@@ -43,6 +43,7 @@ __all__ = ["END_BORDER", "END_FURROW", "END_LIMIT", "END_ZERO", "FurrowRecord", 
 
 END_LIMIT, END_FURROW, END_BORDER, END_ZERO = 0, 1, 2, 3
 MAX_STEPS = 32  # f_limit <= 30 segments after the first
+_MAX_LENGTH = 12  # the longest step, f_length at |d| = 2 and k_scale = 2, in texels
 
 
 def furrow(x, k_scale):
@@ -114,7 +115,7 @@ def add_noise(h, mask, k_noise, r):
 def _pass(mask, centroids, k_scale, field, key, *, radius, records):
     H, W = mask.shape
     R = radius
-    pad = R + int(math.ceil(6.0 * 2)) + 2  # room for a window and a full step past the edge
+    pad = R + _MAX_LENGTH + 2  # room for a window and a full step past the edge
     Hp, Wp = H + 2 * pad, W + 2 * pad
     inside = jnp.pad(mask, pad)
     n_cent = centroids.shape[0]
@@ -122,7 +123,7 @@ def _pass(mask, centroids, k_scale, field, key, *, radius, records):
     c_ok = (cpix[:, 0] >= 0) & (cpix[:, 0] < W) & (cpix[:, 1] >= 0) & (cpix[:, 1] < H)
     c_ok = c_ok & inside[cpix[:, 1] + pad, cpix[:, 0] + pad]
     win = jnp.arange(2 * R + 1)
-    samples = jnp.arange(1, 2 * int(math.ceil(6.0 * 2)) + 1, dtype=jnp.float32)
+    samples = jnp.arange(1, 2 * _MAX_LENGTH + 1, dtype=jnp.float32)  # <= half a texel apart
     samples = samples / samples.shape[0]
 
     def next_seed(state, cursor):
@@ -223,7 +224,7 @@ def _pass(mask, centroids, k_scale, field, key, *, radius, records):
         return (img, state), (P, reason, s, length), carry[11]
 
     def furrow_body(carry):
-        (img, state, cursor, fid, _, idx, seed_point, rec) = carry
+        (img, state, fid, _, idx, seed_point, rec) = carry
         fkey = jax.random.fold_in(key, fid)
         buffers = (img, state)
         outs = []
@@ -244,8 +245,7 @@ def _pass(mask, centroids, k_scale, field, key, *, radius, records):
         seg_r = seg_r.at[slot].set(jnp.where(keep, jnp.stack([o[2] for o in outs]), seg_r[slot]))
         len_r = len_r.at[slot].set(jnp.where(keep, jnp.stack([o[3] for o in outs]), len_r[slot]))
         _, _, found, nidx, npoint = search
-        return (img, state, idx + 1, fid + 1, found, nidx, npoint,
-                (seed_r, end_r, reason_r, seg_r, len_r))
+        return (img, state, fid + 1, found, nidx, npoint, (seed_r, end_r, reason_r, seg_r, len_r))
 
     img = jnp.ones((Hp, Wp), jnp.float32)
     state = jnp.zeros((Hp, Wp), jnp.int32)  # owner and B in one buffer: see _pack
@@ -253,16 +253,15 @@ def _pass(mask, centroids, k_scale, field, key, *, radius, records):
            jnp.full((records, 2), -1, jnp.int32), jnp.zeros((records, 2), jnp.int32),
            jnp.zeros((records, 2), jnp.float32))
     found, idx, point = next_seed(state, jnp.int32(0))
-    carry = (img, state, jnp.int32(0), jnp.int32(0), found, idx, point, rec)
-    carry = jax.lax.while_loop(lambda c: c[4], furrow_body, carry)
-    img, state, fid, rec = carry[0], carry[1], carry[3], carry[7]
+    carry = (img, state, jnp.int32(0), found, idx, point, rec)
+    carry = jax.lax.while_loop(lambda c: c[3], furrow_body, carry)
+    img, state, fid, rec = carry[0], carry[1], carry[2], carry[6]
     owner = _owner(state[pad:pad + H, pad:pad + W])
     return img[pad:pad + H, pad:pad + W], FurrowRecord(*rec, count=fid, owner=owner)
 
 
 # Owner and buffer B share one int32 array: bits 0–29 hold the owning furrow's id + 1
-# (0: none), bit 30 the mark of B. Three separate image buffers made XLA:CPU copy one of
-# them at every step (O(H W) per step); two are updated in place.
+# (0: none), bit 30 the mark of B; one buffer instead of two halves what a step moves.
 _MARK = 1 << 30
 
 
