@@ -2,9 +2,13 @@
 
 Modules, one idea each:
 
-- `jaxskin.km`: Kubelka–Munk layers (reflectance and transmittance, stacks, backgrounds).
-- `jaxskin.spectral`: wavelength grids and spectrum → XYZ → linear sRGB in one matmul.
-- `jaxskin.io`: input errors, atomic output files, the shipped data folder.
+- `mesh`, `fields`, `projection`, `raster`: a body part, its direction fields (Bando 2001
+  §3.1), texture space (§3.2) and the one rasterizer (texture space and camera views).
+- `wrinkles`, `bump`, `texture`: the furrow height field (§3.3) and bump normals (§4.1).
+- `shading.blinn`, `shading.lafortune`: skin shading (§4.2).
+- `scene`, `view`, `render`: TOML scenes → `render(config, params)`, the pure function.
+- `km`, `spectral`: Kubelka–Munk layers and spectra → colour (Huang et al. 2013).
+- `maps`, `export`, `io`, `cli`: PNG/GLB output, input errors, the command line.
 
 Everything numeric follows the dtype of its inputs; rendering defaults to float32
 (`jaxskin.DEFAULT_DTYPE`), fitting (`fitting`) runs in float64.

@@ -212,7 +212,7 @@ def _render(args) -> int:
     sweeps = [[_parse_sweep(text, sc.params) for text in args.sweep] for sc in scenes]
     for sc in scenes:  # every scene's static setup (mesh, projection, fields) before output
         texture.setup(sc.config.texture)
-        sc.params  # noqa: B018  (loads a Lafortune file: a bad one fails here)
+        _ = sc.params  # loads a Lafortune file: a bad one fails here, before any output
     out = Path(args.output)
     rows = []
     for sc, sweep in tqdm(list(zip(scenes, sweeps, strict=True)), desc="render", unit="scene",

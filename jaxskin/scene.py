@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 import math
 import tomllib
 from pathlib import Path
@@ -58,6 +59,7 @@ from typing import Any
 import jax.numpy as jnp
 
 from .io import InputError, data_dir
+from .mesh import BUILTIN as BUILTIN_MESHES
 from .projection import KINDS
 
 __all__ = ["BUILTIN_SCENES", "Scene", "SceneConfig", "TextureConfig", "builtin_scenes",
@@ -156,7 +158,7 @@ class Scene:
     values: dict
     edits: tuple[EditSpec, ...]
 
-    @property
+    @functools.cached_property
     def config(self) -> SceneConfig:
         v = self.values
         tex = TextureConfig(v["mesh.file"], v["mesh.projection"], v["texture.size"],
@@ -166,7 +168,7 @@ class Scene:
                            v["camera.size"], v["camera.supersample"], v["camera.fov"],
                            tuple(v["camera.rotate"]), v["view.mode"])
 
-    @property
+    @functools.cached_property
     def params(self) -> dict:
         """Differentiable values as float32 arrays, keyed by their dotted names; only those
         the scene uses (no Blinn parameters in a Lafortune scene, no lobes in a Blinn one)."""
@@ -221,7 +223,7 @@ def load_scene(name_or_path, overrides=()) -> Scene:
     if values["name"] is None:
         values["name"] = path.stem
     mesh = values["mesh.file"]
-    if not _is_builtin_mesh(mesh) and not Path(mesh).is_absolute():
+    if mesh not in BUILTIN_MESHES and not Path(mesh).is_absolute():
         values["mesh.file"] = str((base("mesh.file") / mesh).resolve())
     brdf = values["material.brdf"]
     if brdf != "skin":
@@ -234,12 +236,6 @@ def load_scene(name_or_path, overrides=()) -> Scene:
         values["material.brdf"] = str(brdf_path)
     edits = tuple(_edit(i, e, path) for i, e in enumerate(edits_raw))
     return Scene(values["name"], str(path), values, edits)
-
-
-def _is_builtin_mesh(name: str) -> bool:
-    from .mesh import BUILTIN
-
-    return name in BUILTIN
 
 
 def _flatten(doc, path, prefix="") -> dict:
