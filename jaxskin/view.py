@@ -40,13 +40,12 @@ def rotation(degrees) -> np.ndarray:
 class View:
     """Per image pixel (at the supersampled size): the texture coordinate it sees
     `tex (H, W, 2)` in texels, `mask (H, W)`; the model rotation `R`, the `eye` (None for
-    orthographic) and the supersampling factor."""
+    orthographic), and whether texture x wraps (a cylinder)."""
 
     tex: np.ndarray
     mask: np.ndarray
     R: np.ndarray
     eye: np.ndarray | None
-    supersample: int
     wrap_x: bool
 
 
@@ -88,7 +87,7 @@ def make_view(tmap: TextureMap, size: int, projection: str = "orthographic",
         straddle = (x.max(axis=1) - x.min(axis=1)) > tmap.width / 2
         corners[..., 0] = np.where(straddle[:, None] & (x < tmap.width / 2), x + tmap.width, x)
     tex = np.einsum("hwk,hwkc->hwc", bary, corners[safe])
-    return View(tex.astype(np.float32), r.mask, R, eye, supersample, tmap.wrap_x)
+    return View(tex.astype(np.float32), r.mask, R, eye, tmap.wrap_x)
 
 
 def sample(image, tex, mask, wrap_x: bool, supersample: int = 1, background=0.0):
