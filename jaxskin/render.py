@@ -24,7 +24,7 @@ from . import texture
 from .raster import interpolate
 from .scene import SceneConfig
 from .shading import blinn, lafortune
-from .view import View, make_view, sample
+from .view import View, downsample, make_view, sample
 
 __all__ = ["Prepared", "prepare", "render", "render_prepared"]
 
@@ -68,8 +68,8 @@ def _render(config: SceneConfig, params: dict, arrays: dict):
     p = prepare(config)  # host-side, cached: only static facts (rotation, eye) are used
     mask, view_mask, k = arrays["mask"], arrays["view_mask"], config.supersample
 
-    def to_view(texture_image):  # bilinear samples at every (super)sample, not averaged
-        return sample(texture_image, arrays["tex"], view_mask, p.view.wrap_x, 1)
+    def to_view(texture_image):  # bilinear samples at every (super)sample
+        return sample(texture_image, arrays["tex"], view_mask, p.view.wrap_x)
 
     if config.needs_furrows:
         maps = texture.bumped(arrays["normals"], mask, arrays["h0"], arrays["noise"], params)
@@ -101,7 +101,4 @@ def _render(config: SceneConfig, params: dict, arrays: dict):
         else:
             colour = lafortune.shade(params["material.lafortune"], N, L, V, ambient, light)
         colour = jnp.where(view_mask[..., None], colour, 0.0)
-    if k > 1:
-        H, W, C = colour.shape
-        colour = colour.reshape(H // k, k, W // k, k, C).mean(axis=(1, 3))
-    return colour
+    return downsample(colour, k)

@@ -22,7 +22,7 @@ import numpy as np
 from .projection import TextureMap
 from .raster import rasterize
 
-__all__ = ["View", "make_view", "rotation", "sample"]
+__all__ = ["View", "downsample", "make_view", "rotation", "sample"]
 
 MARGIN = 0.05
 
@@ -90,10 +90,10 @@ def make_view(tmap: TextureMap, size: int, projection: str = "orthographic",
     return View(tex.astype(np.float32), r.mask, R, eye, tmap.wrap_x)
 
 
-def sample(image, tex, mask, wrap_x: bool, supersample: int = 1, background=0.0):
+def sample(image, tex, mask, wrap_x: bool, background=0.0):
     """Bilinear samples of a texture-space `image (Ht, Wt, C)` at the texture coordinates
-    `tex (H, W, 2)` of a view (`View.tex`, `View.mask`), averaged over `supersample`² samples
-    per pixel: `(H / k, W / k, C)`. Differentiable in `image`."""
+    `tex (H, W, 2)` of a view (`View.tex`, `View.mask`): `(H, W, C)`, `background` where the
+    view sees no mesh. Differentiable in `image`."""
     image = jnp.asarray(image)
     Ht, Wt = image.shape[:2]
     x = jnp.asarray(tex)[..., 0] - 0.5
@@ -107,9 +107,12 @@ def sample(image, tex, mask, wrap_x: bool, supersample: int = 1, background=0.0)
 
     out = ((1 - fx) * (1 - fy) * at(x0, y0) + fx * (1 - fy) * at(x0 + 1, y0)
            + (1 - fx) * fy * at(x0, y0 + 1) + fx * fy * at(x0 + 1, y0 + 1))
-    out = jnp.where(jnp.asarray(mask)[..., None], out, background)
-    k = supersample
-    if k > 1:
-        H, W, C = out.shape
-        out = out.reshape(H // k, k, W // k, k, C).mean(axis=(1, 3))
-    return out
+    return jnp.where(jnp.asarray(mask)[..., None], out, background)
+
+
+def downsample(image, k: int):
+    """The mean of each k × k block: supersamples `(k H, k W, C)` → pixels `(H, W, C)`."""
+    if k == 1:
+        return image
+    H, W, C = image.shape
+    return image.reshape(H // k, k, W // k, k, C).mean(axis=(1, 3))
