@@ -68,7 +68,7 @@ def machine() -> str:
 def write_section(name: str, body: str) -> None:
     """Replace (or append) the section `name` of RESULTS.md between its markers."""
     start, end = f"<!-- {name}:start -->", f"<!-- {name}:end -->"
-    text = RESULTS.read_text() if RESULTS.exists() else "# Benchmark results\n"  # + notes
+    text = RESULTS.read_text() if RESULTS.exists() else "# Benchmark results\n"
     block = f"{start}\n{body.rstrip()}\n{end}"
     if start in text:
         text = re.sub(re.escape(start) + ".*?" + re.escape(end), lambda _: block, text, flags=re.S)
