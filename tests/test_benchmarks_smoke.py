@@ -44,3 +44,11 @@ def test_bench_brdf_baseline_model_matches_ours():
 
     ours = np.asarray(lafortune.brdf(_unpack(jnp.asarray(theta), 3), wi, wo))[:, 0]
     np.testing.assert_allclose(bench_brdf.numpy_model(theta, wi, wo), ours, rtol=1e-5)
+
+
+def test_the_runner_knows_every_benchmark_and_rejects_others(capsys):
+    import run
+
+    for module in run.BENCHMARKS.values():
+        assert (Path(run.__file__).parent / f"{module}.py").is_file()
+    assert run.main(["nope"]) == 2 and "unknown benchmark" in capsys.readouterr().err
