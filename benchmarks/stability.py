@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxskin import bump, km
-from jaxskin.shading import blinn, lafortune
+from jaxskin.shading import blinn, kelemen, lafortune
 
 
 def _grid(*axes):
@@ -73,6 +73,11 @@ def cases():
         out.append((f"lafortune.shade (grazing, exponents × {scale:g})",
                     lambda n, l_, v, sc=scale: lafortune_shade(n, l_, v, sc),
                     [N, L, _unit(V + [0.01, 0, 0])]))
+    V_opposite = -L  # includes L = −V: no half vector
+    for m in (0.05, 0.3, 1.0):
+        out.append((f"kelemen.specular (grazing, L = −V, roughness {m:g})",
+                    lambda n, l_, v, mm=m: kelemen.specular(n, l_, v, mm, 0.18),
+                    [N, L, np.where(np.arange(len(L))[:, None] % 3 == 0, V_opposite, V)]))
     rng = np.random.default_rng(0)
     nmap = _unit(np.concatenate([np.tile([0.0, 0.0, 1.0], (4, 8, 1)),
                                  np.tile([1.0, 0.0, 1e-7], (4, 8, 1))], 0)
@@ -123,6 +128,7 @@ Command: `python benchmarks/stability.py`. Machine: {machine()}.
 
 Every differentiable stage that exists so far, on grids of stiff and extreme inputs, in
 float32 and float64. Gradients are of the sum of the outputs with respect to every input.
+(Kelemen's specular is the first piece of issue 6's cosmetics stages to exist.)
 `tests/test_stability.py` runs the same sweep and fails on any non-finite value or
 gradient. (Not yet covered: the cosmetics stages of issue 6, which do not exist yet.)
 

@@ -1,0 +1,147 @@
+"""Cosmetic layers (Huang et al. 2013 §3.1): measured materials and thickness maps.
+
+- A material is a calibrated JSON (`jaxskin calibrate` output, or a shipped example by
+  name): S(λ) and K(λ) per mm, resampled onto a `spectral.Grid` linearly in log S, log K.
+  Outside the measured range the end values are held (and `Material.extrapolated` says
+  which bands).
+- A thickness map (mm per texel, texture space) comes from named regions drawn on the
+  mesh's UVs — ellipses and polygons, with a feathered edge — or from a greyscale image
+  (value × a thickness scale). UVs follow the OBJ convention: u right, v up.
+- `layers` composes a stack per texel and band with the KM core: `km.Slab (H, W, n)`;
+  zero thickness everywhere gives exactly R = 0, T = 1 (no makeup, no change).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+
+from . import km
+from .io import InputError, data_dir
+from .spectral import Grid
+
+__all__ = ["Material", "ellipse_map", "image_map", "layers", "load_material", "polygon_map"]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Material:
+    """`S`, `K (n,)` per mm on `grid`; `extrapolated (n,)`: bands outside the measurement."""
+
+    name: str
+    grid: Grid
+    S: np.ndarray
+    K: np.ndarray
+    extrapolated: np.ndarray
+
+
+def load_material(name_or_path, grid: Grid) -> Material:
+    """A calibrated material by file or by the name of a shipped example."""
+    key = str(name_or_path)
+    path = Path(key)
+    if not path.suffix and (data_dir() / "materials" / f"{key}.json").is_file():
+        path = data_dir() / "materials" / f"{key}.json"
+    try:
+        doc = json.loads(path.read_text())
+    except FileNotFoundError:
+        shipped = sorted(p.stem for p in (data_dir() / "materials").glob("*.json"))
+        raise InputError(f"no such material file (shipped: {', '.join(shipped)})", path) from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise InputError(f"not a JSON file ({e.__class__.__name__})", path,
+                         getattr(e, "lineno", None)) from None
+    arrays = {}
+    for k in ("wavelength_nm", "S_per_mm", "K_per_mm"):
+        v = doc.get(k) if isinstance(doc, dict) else None
+        ok = isinstance(v, list) and len(v) >= 2 and all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+            for x in v)
+        if not ok:
+            raise InputError("expected a list of at least two finite numbers (a material "
+                             "written by jaxskin calibrate)", path, key=k)
+        arrays[k] = np.asarray(v, np.float64)
+    wl, S, K = arrays["wavelength_nm"], arrays["S_per_mm"], arrays["K_per_mm"]
+    if not (len(wl) == len(S) == len(K)):
+        raise InputError(f"wavelength_nm, S_per_mm and K_per_mm have lengths {len(wl)}, "
+                         f"{len(S)}, {len(K)}; expected equal", path, key="S_per_mm")
+    if np.any(np.diff(wl) <= 0):
+        raise InputError("wavelengths must increase", path, key="wavelength_nm")
+    for k, v in (("S_per_mm", S), ("K_per_mm", K)):
+        if np.any(v <= 0):
+            raise InputError("must be > 0 at every band", path, key=k)
+    g = grid.wavelengths
+    return Material(str(doc.get("name", path.stem)), grid,
+                    np.exp(np.interp(g, wl, np.log(S))), np.exp(np.interp(g, wl, np.log(K))),
+                    (g < wl[0]) | (g > wl[-1]))
+
+
+def _uv_grid(height: int, width: int):
+    """Texel centres in (u, v), v up: row 0 is v = 1."""
+    u = (np.arange(width) + 0.5) / width
+    v = 1.0 - (np.arange(height) + 0.5) / height
+    return np.meshgrid(u, v)
+
+
+def _feather(inside_distance, feather):
+    """1 inside, 0 outside, a linear ramp of width `feather` (uv units) across the edge."""
+    if feather <= 0:
+        return (inside_distance >= 0).astype(np.float64)
+    return np.clip(0.5 + inside_distance / feather, 0.0, 1.0)
+
+
+def ellipse_map(height, width, center, radii, thickness_mm, angle_deg=0.0, feather=0.0):
+    """Thickness (mm) of an ellipse in UV space: `center (u, v)`, `radii (a, b)`, turned by
+    `angle_deg`; `feather`: width of the soft edge in uv units."""
+    u, v = _uv_grid(height, width)
+    t = math.radians(angle_deg)
+    du, dv = u - center[0], v - center[1]
+    x = (math.cos(t) * du + math.sin(t) * dv) / radii[0]
+    y = (-math.sin(t) * du + math.cos(t) * dv) / radii[1]
+    rho = np.hypot(x, y)
+    inside = (1.0 - rho) * min(radii)  # ≈ distance to the edge, in uv units
+    return thickness_mm * _feather(inside, feather)
+
+
+def polygon_map(height, width, points, thickness_mm, feather=0.0):
+    """Thickness (mm) of a polygon `points [(u, v), ...]` in UV space, soft edge `feather`."""
+    from matplotlib.path import Path as MplPath
+
+    pts = np.asarray(points, np.float64)
+    u, v = _uv_grid(height, width)
+    q = np.stack([u.ravel(), v.ravel()], 1)
+    inside = MplPath(pts).contains_points(q).reshape(u.shape)
+    # Distance to the polygon's edges, signed: + inside.
+    a, b = pts, np.roll(pts, -1, axis=0)
+    ab = b - a
+    t = np.clip(((q[:, None] - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-300), 0, 1)
+    d = np.linalg.norm(q[:, None] - (a + t[..., None] * ab), axis=-1).min(axis=1)
+    signed = np.where(inside.ravel(), d, -d).reshape(u.shape)
+    return thickness_mm * _feather(signed, feather)
+
+
+def image_map(path, height, width, scale_mm):
+    """Thickness (mm) from a greyscale image: value (0–1 of its range) × `scale_mm`,
+    resampled (nearest texel) to the texture size; row 0 is the image's top (v = 1)."""
+    import imageio.v3 as iio
+
+    try:
+        img = np.asarray(iio.imread(path), np.float64)
+    except Exception as e:  # noqa: BLE001  (imageio raises many kinds; all mean unreadable)
+        raise InputError(f"cannot read as an image ({e.__class__.__name__})", path) from None
+    if img.ndim == 3:
+        img = img[..., :3].mean(axis=-1)
+    top = 65535.0 if img.max() > 255 else 255.0
+    rows = (np.arange(height) + 0.5) * img.shape[0] / height
+    cols = (np.arange(width) + 0.5) * img.shape[1] / width
+    return scale_mm * img[rows.astype(int)][:, cols.astype(int)] / top
+
+
+def layers(S, K, thickness):
+    """The stack's `km.Slab`, per texel and band: `S, K (L, n)` (top layer first),
+    `thickness (L, H, W)` mm. Differentiable in all three."""
+    S, K, X = (jnp.asarray(a) for a in (S, K, thickness))
+    R, T = km.layer(S[:, None, None, :], K[:, None, None, :], X[..., None])
+    return km.stack(R, T)
