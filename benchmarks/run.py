@@ -1,6 +1,6 @@
 """Run every benchmark in one process and rewrite benchmarks/RESULTS.md.
 
-    python benchmarks/run.py                 # about 8 minutes on 2 cores
+    python benchmarks/run.py                 # about 3 minutes on 2 cores
     python benchmarks/run.py km wrinkles     # only some
 
 Each benchmark prints its tables and replaces its own section of RESULTS.md (with the
@@ -22,6 +22,7 @@ BENCHMARKS = {
     "brdf": "bench_brdf",  # the Lafortune fit against SciPy
     "wrinkles": "bench_wrinkles",  # the furrow program against NumPy
     "render": "bench_render",  # shading and views, gradient, sweeps
+    "sss": "bench_sss",  # the skin profile blur: error against time
 }
 
 
