@@ -48,11 +48,7 @@ def glb_bytes(setup, albedo, normals) -> bytes:
     colour = np.broadcast_to(np.clip(np.asarray(albedo, np.float64), 0, 1), (H, W, 3))
     colour_img = np.round(colour * 255).astype(np.uint8)
 
-    corners = tmap.xy[mesh.faces].copy()  # (F, 3, 2), unwrapped at a seam
-    if tmap.wrap_x:
-        x = corners[..., 0]
-        straddle = (x.max(axis=1) - x.min(axis=1)) > W / 2
-        corners[..., 0] = np.where(straddle[:, None] & (x < W / 2), x + W, x)
+    corners = tmap.face_corners()  # (F, 3, 2), unwrapped at a seam
     uv = np.stack([corners[..., 0] / W, corners[..., 1] / H], axis=-1).reshape(-1, 2)
     vertices = mesh.vertices[mesh.faces].reshape(-1, 3)
     faces = np.arange(len(vertices)).reshape(-1, 3)

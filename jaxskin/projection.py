@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from .mesh import Mesh
-from .raster import Raster, rasterize
+from .raster import Raster, rasterize, unwrap_seam
 
 __all__ = ["KINDS", "TextureMap", "cylinder_to_xyz", "project"]
 
@@ -59,14 +59,15 @@ class TextureMap:
                 d, axis=1, keepdims=True)
         return v
 
-    def centroids(self) -> np.ndarray:
-        """Triangle centroids `(F, 2)` in pixels (wrapped for a cylinder)."""
+    def face_corners(self) -> np.ndarray:
+        """Triangle corners `(F, 3, 2)` in pixels, unwrapped across a cylinder's seam (x may
+        exceed the width there; texture lookups wrap)."""
         corners = self.xy[self.mesh.faces]
-        if self.wrap_x:
-            x = corners[..., 0]
-            straddle = (x.max(axis=1) - x.min(axis=1)) > self.width / 2
-            corners[..., 0] = np.where(straddle[:, None] & (x < self.width / 2), x + self.width, x)
-        c = corners.mean(axis=1)
+        return unwrap_seam(corners, self.width) if self.wrap_x else corners
+
+    def centroids(self) -> np.ndarray:
+        """Triangle centroids `(F, 2)` in pixels (wrapped back into a cylinder's texture)."""
+        c = self.face_corners().mean(axis=1)
         if self.wrap_x:
             c[:, 0] %= self.width
         return c

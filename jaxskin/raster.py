@@ -17,7 +17,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["Raster", "interpolate", "rasterize"]
+__all__ = ["Raster", "interpolate", "rasterize", "unwrap_seam"]
 
 
 class Raster(NamedTuple):
@@ -50,10 +50,7 @@ def rasterize(xy, faces, height: int, width: int, depth=None, wrap_x: bool = Fal
     faces = np.asarray(faces, np.int64)
     corners = xy[faces]  # (F, 3, 2)
     if wrap_x and len(faces):
-        span = corners[..., 0].max(axis=1) - corners[..., 0].min(axis=1)
-        straddle = span > width / 2
-        low = straddle[:, None] & (corners[..., 0] < width / 2)
-        corners[..., 0] = np.where(low, corners[..., 0] + width, corners[..., 0])
+        corners = unwrap_seam(corners, width)
     x0 = np.ceil(corners[..., 0].min(axis=1) - 0.5).astype(np.int64)
     x1 = np.floor(corners[..., 0].max(axis=1) - 0.5).astype(np.int64)
     y0 = np.maximum(np.ceil(corners[..., 1].min(axis=1) - 0.5).astype(np.int64), 0)
@@ -95,6 +92,18 @@ def rasterize(xy, faces, height: int, width: int, depth=None, wrap_x: bool = Fal
     tri.reshape(-1)[pixel[first]] = f[first]
     bary.reshape(-1, 3)[pixel[first]] = w[first]
     return Raster(tri, bary)
+
+
+def unwrap_seam(corners, width: int) -> np.ndarray:
+    """Triangle corners `(F, 3, 2)` in pixels whose x is periodic with period `width` (a
+    cylinder cut open): a triangle spanning more than half the width straddles the cut, and
+    its corners left of the middle move right by `width`. The one rule the rasterizer, the
+    centroids, the camera view and the glTF UVs all use."""
+    corners = np.array(corners, np.float64)
+    x = corners[..., 0]
+    straddle = (x.max(axis=1) - x.min(axis=1)) > width / 2
+    corners[..., 0] = np.where(straddle[:, None] & (x < width / 2), x + width, x)
+    return corners
 
 
 def interpolate(attributes, faces, raster: Raster, empty=0.0):

@@ -81,11 +81,7 @@ def make_view(tmap: TextureMap, size: int, projection: str = "orthographic",
     if w is not None:  # perspective-correct: weights b_i / w_i, renormalised
         bary = bary / w[mesh.faces[safe]]
         bary /= np.maximum(bary.sum(axis=-1, keepdims=True), 1e-300)
-    corners = tmap.xy[mesh.faces]  # (F, 3, 2) texture coordinates, unwrapped at the seam
-    if tmap.wrap_x:
-        x = corners[..., 0]
-        straddle = (x.max(axis=1) - x.min(axis=1)) > tmap.width / 2
-        corners[..., 0] = np.where(straddle[:, None] & (x < tmap.width / 2), x + tmap.width, x)
+    corners = tmap.face_corners()  # (F, 3, 2) texture coordinates, unwrapped at the seam
     tex = np.einsum("hwk,hwkc->hwc", bary, corners[safe])
     return View(tex.astype(np.float32), r.mask, R, eye, tmap.wrap_x)
 
