@@ -209,10 +209,14 @@ def _render(args) -> int:
     if len(set(names)) != len(names):
         raise InputError(f"two scenes are both named {max(names, key=names.count)!r}; their "
                          "outputs would collide (set 'name' in the scene file)")
-    sweeps = [[_parse_sweep(text, sc.params) for text in args.sweep] for sc in scenes]
-    for sc in scenes:  # every scene's static setup (mesh, projection, fields) before output
+    if len(args.sweep) > 1:
+        raise InputError(f"one --sweep at a time for now (got {len(args.sweep)})")
+    # Everything checked before any output: static setup (mesh, projection, fields), the
+    # parameters (a Lafortune file is loaded here) and the sweep's key against them.
+    sweeps = []
+    for sc in scenes:
         texture.setup(sc.config.texture)
-        _ = sc.params  # loads a Lafortune file: a bad one fails here, before any output
+        sweeps.append([_parse_sweep(text, sc.params) for text in args.sweep])
     out = Path(args.output)
     rows = []
     for sc, sweep in tqdm(list(zip(scenes, sweeps, strict=True)), desc="render", unit="scene",
@@ -220,9 +224,7 @@ def _render(args) -> int:
         t0 = time.perf_counter()
         config, params = sc.config, sc.params
         if sweep:
-            key, values = sweep[0]
-            for extra_key, _ in sweep[1:]:
-                raise InputError(f"one --sweep at a time for now (got {key} and {extra_key})")
+            (key, values), = sweep
             batch = jax.jit(jax.vmap(lambda v, a, key=key, params=params, config=config:
                                      render.render_prepared(config, {**params, key: v}, a),
                                      in_axes=(0, None)))
@@ -277,10 +279,10 @@ def _fit_brdf(args) -> int:
     t0 = time.perf_counter()
     result = brdf.fit(samples, lobes=args.lobes, starts=args.starts, seed=args.seed)
     seconds = time.perf_counter() - t0
-    lafortune.save(result.params, out, fit={"source": Path(args.file).name, **result.stats()})
+    stats = result.stats()
+    lafortune.save(result.params, out, fit={"source": Path(args.file).name, **stats})
     if not args.no_report:
         brdf.write_report(samples, result, report)
-    stats = result.stats()
     print(f"{'channel':<8} {'rel. RMS error':>14} {'failed starts':>13} {'steps':>6}")
     for k, name in enumerate("RGB"):
         print(f"{name:<8} {result.rel_rms[k]:>14.2%} {stats['failed_starts'][k]:>13} "

@@ -210,3 +210,13 @@ def test_height_mode_shows_the_height_field():
     on = image.sum(-1) > 0
     np.testing.assert_allclose(image[..., 0], image[..., 1])
     assert image[on, 0].min() < 0.9 and image[on, 0].max() <= 1.0 + 1e-6
+
+
+def test_two_sweeps_are_refused_before_anything_is_written(tmp_path):
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "jaxskin.cli", "render", "foot", "arm", "-o",
+                           str(out), "-D", "texture.size=32", "-D", "camera.size=16",
+                           "--sweep", "material.melanin=0:1:2", "--sweep",
+                           "material.blood=0:1:2"], capture_output=True, text=True)
+    assert proc.returncode == 2 and "one --sweep at a time" in proc.stderr
+    assert not out.exists()
