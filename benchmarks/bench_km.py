@@ -80,15 +80,19 @@ def over_skin(S, K, X, Rg):
     return km.over(s.R, s.T, Rg, s.R_back)
 
 
-def naive_over_skin(S, K, X, Rg, xp=jnp):
-    """A straightforward transcription of Huang et al. eq. 1–2 and Kubelka's rule (corrected
-    eq. 3–4): a = 1 + K/S, b = sqrt(a² − 1), sinh/cosh. Overflows for bSX > 89 (float32)."""
-    S, K = S[:, None, None, :], K[:, None, None, :]
+def naive_layer(S, K, X, xp=jnp):
+    """Huang et al. eq. 1–2 as printed: a = 1 + K/S, b = sqrt(a² − 1), sinh/cosh."""
     a = 1 + K / S
     b = xp.sqrt(a * a - 1)
     sh, ch = xp.sinh(b * S * X), xp.cosh(b * S * X)
     d = a * sh + b * ch
-    R, T = sh / d, b / d
+    return sh / d, b / d
+
+
+def naive_over_skin(S, K, X, Rg, xp=jnp):
+    """A straightforward transcription of Huang et al. eq. 1–2 and Kubelka's rule (corrected
+    eq. 3–4): a = 1 + K/S, b = sqrt(a² − 1), sinh/cosh. Overflows for bSX > 89 (float32)."""
+    R, T = naive_layer(S[:, None, None, :], K[:, None, None, :], X, xp)
     acc_R, acc_T, acc_Rb = Rg, xp.zeros_like(Rg), Rg
     for i in (2, 1, 0):
         inv = 1 / (1 - R[i] * acc_R)
@@ -164,10 +168,7 @@ def extreme_baseline_check():
     X = jnp.asarray([1.0, 40.0, 1.0], jnp.float32)  # bSX = 128 > 89 overflows cosh
     out = []
     for s, k, x in zip(S[0], K[0], X, strict=True):
-        a = 1 + k / s
-        b = jnp.sqrt(a * a - 1)
-        d = a * jnp.sinh(b * s * x) + b * jnp.cosh(b * s * x)
-        naive = (float(jnp.sinh(b * s * x) / d), float(b / d))
+        naive = tuple(float(v) for v in naive_layer(s, k, x))
         ours = tuple(float(v) for v in km.layer(s, k, x))
         out.append((f"S={float(s):g}, K={float(k):g}, X={float(x):g}", naive, ours))
     return out
