@@ -25,7 +25,8 @@ from . import km
 from .io import InputError, data_dir
 from .spectral import Grid
 
-__all__ = ["Material", "ellipse_map", "image_map", "layers", "load_material", "polygon_map"]
+__all__ = ["Material", "coverage", "ellipse_map", "image_map", "layers", "load_material",
+           "polygon_map"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -145,3 +146,26 @@ def layers(S, K, thickness):
     S, K, X = (jnp.asarray(a) for a in (S, K, thickness))
     R, T = km.layer(S[:, None, None, :], K[:, None, None, :], X[..., None])
     return km.stack(R, T)
+
+
+def coverage(spec, vertex_uv: np.ndarray, height: int, width: int) -> np.ndarray:
+    """A layer's map `(H, W)` in [0, 1] from its `scene.LayerSpec`: its image, or the union
+    (maximum) of its ellipses and polygons, or 1 everywhere when it has neither. Regions
+    are in texture coordinates (u right, v up; the mesh's UVs for the uv projection);
+    polygons given by mesh vertices use `vertex_uv (V, 2)`, those vertices' coordinates."""
+    if spec.image is not None:
+        return np.clip(image_map(spec.image, height, width, 1.0), 0.0, 1.0)
+    if not spec.ellipses and not spec.polygons:
+        return np.ones((height, width))
+    out = np.zeros((height, width))
+    for center, radii, angle, feather in spec.ellipses:
+        out = np.maximum(out, ellipse_map(height, width, center, radii, 1.0, angle, feather))
+    for i, (points, vertices, feather) in enumerate(spec.polygons):
+        if vertices is not None:
+            if max(vertices) >= len(vertex_uv):
+                raise InputError(f"vertex {max(vertices)} does not exist; the mesh has "
+                                 f"{len(vertex_uv)} vertices",
+                                 key=f"layer.{spec.name}.polygon[{i}].vertices")
+            points = vertex_uv[list(vertices)]
+        out = np.maximum(out, polygon_map(height, width, points, 1.0, feather))
+    return out

@@ -65,6 +65,17 @@ class TextureMap:
         corners = self.xy[self.mesh.faces]
         return unwrap_seam(corners, self.width) if self.wrap_x else corners
 
+    def texel_size(self) -> float:
+        """The mean size of a texel on the surface, in mesh units: sqrt(surface area /
+        texture area), both summed over the triangles (so weighted by area)."""
+        f = self.mesh.faces
+        e = self.mesh.vertices[f[:, 1:]] - self.mesh.vertices[f[:, :1]]
+        surface = 0.5 * np.linalg.norm(np.cross(e[:, 0], e[:, 1]), axis=1).sum()
+        c = self.face_corners()
+        d = c[:, 1:] - c[:, :1]
+        texels = 0.5 * np.abs(d[:, 0, 0] * d[:, 1, 1] - d[:, 0, 1] * d[:, 1, 0]).sum()
+        return math.sqrt(surface / max(texels, 1e-300))
+
     def centroids(self) -> np.ndarray:
         """Triangle centroids `(F, 2)` in pixels (wrapped back into a cylinder's texture)."""
         c = self.face_corners().mean(axis=1)

@@ -9,6 +9,11 @@ the view (bilinear) and shades there (§4.2): the paper lights every texel of th
 we light the texels the camera sees, which is the same map read at the same places.
 Stages a scene does not use are not traced: no furrows without wrinkles
 or in the overview mode, no Lafortune code in a Blinn scene and the reverse.
+
+The cosmetics model (`material.model = "spectral"`, Huang et al. 2013) shades in texture
+space instead, as the paper's SSS needs: irradiance, the Kubelka–Munk layers, the skin
+profile's blur over the texture, the highlights (`shading.layered`), then the finished
+colour is sampled into the view. No layers: no KM; `sss.enabled = false`: no blur.
 """
 
 from __future__ import annotations
@@ -20,13 +25,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import texture
+from . import cosmetics, skin, sss, texture
 from .raster import interpolate
 from .scene import SceneConfig
-from .shading import blinn, lafortune
+from .shading import blinn, lafortune, layered
 from .view import View, downsample, make_view, sample
 
-__all__ = ["Prepared", "prepare", "render", "render_prepared"]
+__all__ = ["Prepared", "encode_srgb", "prepare", "render", "render_prepared"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -34,6 +39,7 @@ class Prepared:
     setup: texture.TextureSetup
     view: View
     arrays: dict  # what `render` takes as arguments (not as compile-time constants)
+    texel_mm: float = 0.0  # the cosmetics model's texel size on the skin (SSS), mm
 
 
 @functools.lru_cache(maxsize=8)
@@ -49,7 +55,21 @@ def prepare(config: SceneConfig) -> Prepared:
     if view.eye is not None:  # perspective: the view direction varies per texel
         arrays["positions"] = interpolate(s.mesh.vertices.astype(np.float32), s.mesh.faces,
                                           s.tmap.raster)
-    return Prepared(s, view, arrays)
+    sp, texel_mm = config.spectral, 0.0
+    if sp is not None:
+        grid = sp.grid
+        arrays["skin"] = jnp.asarray(skin.nist_reflectance(sp.subject, grid), jnp.float32)
+        texel_mm = sp.texel_mm or sp.unit_mm * s.tmap.texel_size()
+        if sp.layers:
+            materials = [cosmetics.load_material(layer.material, grid) for layer in sp.layers]
+            arrays["S"] = jnp.asarray(np.stack([m.S for m in materials]), jnp.float32)
+            arrays["K"] = jnp.asarray(np.stack([m.K for m in materials]), jnp.float32)
+            t = s.tmap
+            vertex_uv = np.stack([t.xy[:, 0] / t.width, 1.0 - t.xy[:, 1] / t.height], axis=1)
+            cover = [cosmetics.coverage(layer, vertex_uv, t.height, t.width)
+                     for layer in sp.layers]
+            arrays["cover"] = jnp.asarray(np.stack(cover) * np.asarray(s.mask), jnp.float32)
+    return Prepared(s, view, arrays, texel_mm)
 
 
 def render(config: SceneConfig, params: dict):
@@ -78,6 +98,9 @@ def _render(config: SceneConfig, params: dict, arrays: dict):
         height, normals = jnp.ones(mask.shape, jnp.float32), arrays["normals"]
     if config.mode == "height":
         colour = jnp.repeat(to_view(height[..., None]), 3, axis=-1)
+    elif config.spectral is not None:
+        colour = to_view(_cosmetics_texture(config, p, params, arrays, normals))
+        return encode_srgb(downsample(colour, k))  # averaged in linear light, then encoded
     else:
         # Shade where the camera looks: the bumped normal map sampled into the view (fewer
         # samples than texels), in the object's frame (L and V turned by Rᵀ instead of
@@ -102,3 +125,43 @@ def _render(config: SceneConfig, params: dict, arrays: dict):
             colour = lafortune.shade(params["material.lafortune"], N, L, V, ambient, light)
         colour = jnp.where(view_mask[..., None], colour, 0.0)
     return downsample(colour, k)
+
+
+def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: dict, normals):
+    """The cosmetics model's colour in texture space, `(H, W, 3)` (Huang et al. 2013)."""
+    sp = config.spectral
+    mask = arrays["mask"]
+    R = jnp.asarray(p.view.R, normals.dtype)
+    d = params["light.direction"]
+    L = (d / jnp.linalg.norm(d)) @ R  # object frame, as the normals
+    if p.view.eye is None:
+        V = jnp.asarray([0.0, 0.0, 1.0], normals.dtype) @ R
+    else:  # texture-space positions: a view direction per texel
+        to_eye = jnp.asarray(p.view.eye, normals.dtype) - arrays["positions"] @ R.T
+        V = (to_eye / jnp.linalg.norm(to_eye, axis=-1, keepdims=True)) @ R
+    blur = None
+    if sp.sss is not None:
+        blur = functools.partial(sss.blur, texel_mm=p.texel_mm, mask=mask, method=sp.sss)
+    skin_R = skin.reflectance(arrays["skin"], params["skin.melanin"], sp.grid)
+    layers = {}
+    if sp.layers:
+        def per_layer(key):
+            return jnp.stack([params[f"layer.{layer.name}.{key}"] for layer in sp.layers])
+
+        layers = {"S": arrays["S"] * per_layer("s_scale")[:, None],
+                  "K": arrays["K"] * per_layer("k_scale")[:, None],
+                  "X": arrays["cover"] * per_layer("thickness_mm")[:, None, None],
+                  "roughness": per_layer("roughness"), "rho": per_layer("specular")}
+    colour = layered.radiance(sp.grid, normals, L, V, params["light.ambient"],
+                              params["light.intensity"], skin_R, params["skin.roughness"],
+                              params["skin.specular"], blur=blur, **layers)
+    return colour * mask[..., None]
+
+
+def encode_srgb(linear):
+    """The sRGB transfer function (IEC 61966-2-1): linear light → display values. Linear
+    below 0.0031308 (negative values included), so value and gradient are finite at 0."""
+    x = jnp.asarray(linear)
+    curved = x > 0.0031308
+    power = 1.055 * jnp.where(curved, x, 1.0) ** (1 / 2.4) - 0.055
+    return jnp.where(curved, power, 12.92 * x)

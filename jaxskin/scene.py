@@ -39,6 +39,42 @@ d2 = [-0.8, 0.5, 0.0]
 weight = 1.0                       # λ, 0–10
 ```
 
+The cosmetics model (Huang et al. 2013, `material.model = "spectral"`) adds:
+
+```toml
+[mesh]
+unit_mm = 10.0                     # millimetres per mesh unit (the face is in cm)
+[skin]
+subject = 1                        # NIST skin spectrum, subjects 1–100
+melanin = 0.0                      # added melanin, optical depth at 500 nm (0–3)
+roughness = 0.3                    # Kelemen m and rho_s of the skin's own highlight
+specular = 0.18
+[spectral]
+step = 10                          # nm: 1 | 5 | 10 | 20
+illuminant = "D65"                 # D65 | D55 | D50 | A
+[sss]
+enabled = true
+method = "fft"                     # fft (exact) | separable (3-sigma passes)
+texel_mm = 0.0                     # 0: from the mesh's scale and UV area
+[[layer]]                          # any number, bottom (applied first) to top
+name = "blush"                     # names the layer's keys: -D layer.blush.thickness_mm=0.02
+material = "blush_rose"            # a shipped material, or a jaxskin calibrate JSON
+thickness_mm = 0.01                # thickness where the map is 1
+roughness = 0.3                    # its highlight (Kelemen m, rho_s)
+specular = 0.1
+s_scale = 1.0                      # multiply the material's S(λ), K(λ)
+k_scale = 1.0
+image = "blush.png"                # a greyscale map (0–1 × thickness_mm), or regions:
+[[layer.ellipse]]                  #   ellipses and polygons on the mesh's UVs (u right,
+center = [0.28, 0.47]              #   v up), feathered; the map is their union; none of
+radii = [0.08, 0.05]               #   image, ellipse, polygon: everywhere
+angle = 0.0                        # degrees
+feather = 0.03                     # soft edge width, uv units
+[[layer.polygon]]
+vertices = [61, 146, 91]           # mesh vertices (their UVs), or points = [[u, v], ...]
+feather = 0.01
+```
+
 Every key has a type and a range; an unknown key is an error that suggests the nearest
 valid one, an out-of-range value one that gives the range. `-D key=value` (like Mitsuba's)
 overrides any value with the same checks. `Scene.config` (hashable: the jit cache key,
@@ -80,13 +116,14 @@ SCHEMA: dict[str, _Key] = {
     "name": _Key(str, None),
     "mesh.file": _Key(str, "hand"),
     "mesh.projection": _Key(str, "planar", choices=KINDS),
+    "mesh.unit_mm": _Key(float, 1.0, 1e-6, 1e6),
     "texture.size": _Key(int, 512, 16, 8192),
     "wrinkles.enabled": _Key(bool, True),
     "wrinkles.k_scale": _Key(float, 1.0, 0.5, 2.0),
     "wrinkles.k_noise": _Key(float, 0.0, 0.0, 1.0, param=True),
     "wrinkles.k_bump": _Key(float, 0.5, 0.0, 1.0, param=True),
     "wrinkles.seed": _Key(int, 0, 0, 2**31 - 1),
-    "material.model": _Key(str, "blinn", choices=("blinn", "lafortune")),
+    "material.model": _Key(str, "blinn", choices=("blinn", "lafortune", "spectral")),
     "material.melanin": _Key(float, 0.2, 0.0, 1.0, param=True),
     "material.blood": _Key(float, 0.5, 0.0, 1.0, param=True),
     "material.specular": _Key(float, 0.2, 0.0, 1.0, param=True),
@@ -101,10 +138,31 @@ SCHEMA: dict[str, _Key] = {
     "camera.fov": _Key(float, 30.0, 1.0, 120.0),
     "camera.rotate": _Key("vec3", (0.0, 0.0, 0.0)),
     "view.mode": _Key(str, "wrinkles", choices=("wrinkles", "overview", "height")),
+    "skin.subject": _Key(int, 1, 1, 100),
+    "skin.melanin": _Key(float, 0.0, 0.0, 3.0, param=True),
+    "skin.roughness": _Key(float, 0.3, 0.01, 1.0, param=True),
+    "skin.specular": _Key(float, 0.18, 0.0, 1.0, param=True),
+    "spectral.step": _Key(int, 10, choices=(1, 5, 10, 20)),
+    "spectral.illuminant": _Key(str, "D65", choices=("D65", "D55", "D50", "A")),
+    "sss.enabled": _Key(bool, True),
+    "sss.method": _Key(str, "fft", choices=("fft", "separable")),
+    "sss.texel_mm": _Key(float, 0.0, 0.0, 100.0),
 }
+# Per cosmetic layer, as `layer.<name>.<key>` (in the file: inside its [[layer]] table).
+LAYER_SCHEMA: dict[str, _Key] = {
+    "thickness_mm": _Key(float, 0.01, 0.0, 10.0, param=True),
+    "roughness": _Key(float, 0.3, 0.01, 1.0, param=True),
+    "specular": _Key(float, 0.1, 0.0, 1.0, param=True),
+    "s_scale": _Key(float, 1.0, 0.0, 100.0, param=True),
+    "k_scale": _Key(float, 1.0, 0.0, 100.0, param=True),
+}
+LAYER_KEYS = {"name", "material", "image", "ellipse", "polygon", *LAYER_SCHEMA}
+ELLIPSE_KEYS = {"center", "radii", "angle", "feather"}
+POLYGON_KEYS = {"points", "vertices", "feather"}
 # Parameters that only one material model uses: the other model's are left out.
 _MODEL_PARAMS = {"blinn": {"material.melanin", "material.blood", "material.specular",
-                           "material.shininess"}, "lafortune": set()}
+                           "material.shininess"}, "lafortune": set(),
+                 "spectral": {"skin.melanin", "skin.roughness", "skin.specular"}}
 EDIT_KEYS = {"at", "vertex", "d1", "d2", "weight"}
 
 
@@ -133,11 +191,43 @@ class TextureConfig:
 
 
 @dataclasses.dataclass(frozen=True)
+class LayerSpec:
+    """A cosmetic layer's static part: its material and where it lies. `ellipses`:
+    `(center, radii, angle, feather)`; `polygons`: `(points, vertices, feather)` with one of
+    points (uv) or vertices (mesh indices) set."""
+
+    name: str
+    material: str  # a shipped material's name, or an absolute path
+    image: str | None
+    ellipses: tuple = ()
+    polygons: tuple = ()
+
+
+@dataclasses.dataclass(frozen=True)
+class SpectralConfig:
+    """The static part of the cosmetics model (`material.model = "spectral"`)."""
+
+    subject: int
+    step: int
+    illuminant: str
+    unit_mm: float
+    sss: str | None  # the blur method, or None: no subsurface scattering
+    texel_mm: float  # 0: from the mesh
+    layers: tuple[LayerSpec, ...]
+
+    @property
+    def grid(self):
+        from .spectral import Grid
+
+        return Grid(self.step, illuminant=self.illuminant)
+
+
+@dataclasses.dataclass(frozen=True)
 class SceneConfig:
     """The static part of a scene (hashable; the jit cache key)."""
 
     texture: TextureConfig
-    material: str  # blinn | lafortune
+    material: str  # blinn | lafortune | spectral
     brdf: str  # the Lafortune preset or file
     camera: str  # orthographic | perspective
     image: int
@@ -145,6 +235,7 @@ class SceneConfig:
     fov: float
     rotate: tuple[float, float, float]
     mode: str  # wrinkles | overview | height
+    spectral: SpectralConfig | None = None  # the cosmetics model's, when it is the material
 
     @property
     def needs_furrows(self) -> bool:
@@ -157,6 +248,7 @@ class Scene:
     source: str
     values: dict
     edits: tuple[EditSpec, ...]
+    layers: tuple[LayerSpec, ...] = ()
 
     @functools.cached_property
     def config(self) -> SceneConfig:
@@ -164,9 +256,15 @@ class Scene:
         tex = TextureConfig(v["mesh.file"], v["mesh.projection"], v["texture.size"],
                             v["wrinkles.enabled"], v["wrinkles.k_scale"], v["wrinkles.seed"],
                             self.edits)
+        spectral = None
+        if v["material.model"] == "spectral":
+            spectral = SpectralConfig(v["skin.subject"], v["spectral.step"],
+                                      v["spectral.illuminant"], v["mesh.unit_mm"],
+                                      v["sss.method"] if v["sss.enabled"] else None,
+                                      v["sss.texel_mm"], self.layers)
         return SceneConfig(tex, v["material.model"], v["material.brdf"], v["camera.projection"],
                            v["camera.size"], v["camera.supersample"], v["camera.fov"],
-                           tuple(v["camera.rotate"]), v["view.mode"])
+                           tuple(v["camera.rotate"]), v["view.mode"], spectral)
 
     @functools.cached_property
     def params(self) -> dict:
@@ -176,6 +274,10 @@ class Scene:
         unused = set().union(*(p for m, p in _MODEL_PARAMS.items() if m != model))
         out = {k: jnp.asarray(self.values[k], jnp.float32) for k, spec in SCHEMA.items()
                if spec.param and k not in unused}
+        for layer in self.layers:
+            for k in LAYER_SCHEMA:
+                key = f"layer.{layer.name}.{k}"
+                out[key] = jnp.asarray(self.values[key], jnp.float32)
         if model == "lafortune":
             from .shading import lafortune
 
@@ -185,7 +287,7 @@ class Scene:
         return out
 
 
-BUILTIN_SCENES = ("hand", "foot", "arm")
+BUILTIN_SCENES = ("hand", "foot", "arm", "face", "makeup")
 
 
 def builtin_scenes() -> dict[str, Path]:
@@ -207,15 +309,28 @@ def load_scene(name_or_path, overrides=()) -> Scene:
         raise InputError(f"not valid TOML: {e}", path) from None
     edits_raw = doc.get("fields", {}).pop("edit", []) if isinstance(doc.get("fields"), dict) \
         else []
-    flat = _flatten(doc, path)
+    layers_raw = doc.pop("layer", [])
+    if not isinstance(layers_raw, list):
+        raise InputError("expected [[layer]] tables (an array of tables)", path, key="layer")
     values = {k: spec.default for k, spec in SCHEMA.items()}
+    layers = tuple(_layer(i, e, path, values) for i, e in enumerate(layers_raw))
+    names = [layer.name for layer in layers]
+    for name in names:
+        if names.count(name) > 1:
+            raise InputError(f"two layers are named {name!r}; names must differ", path,
+                             key="layer.name")
+    flat = _flatten(doc, path)
     for k, v in flat.items():
         values[k] = _check(k, v, path)
     from_command_line = set()
     for item in overrides:
         k, v = _parse_override(item)
-        values[k] = _check(k, v, f"-D {item}")
+        values[k] = _check(k, v, f"-D {item}", names)
         from_command_line.add(k)
+    if layers and values["material.model"] != "spectral":
+        raise InputError("cosmetic layers need material.model = \"spectral\" (the Huang et "
+                         f"al. model); this scene's is {values['material.model']!r}", path,
+                         key="layer")
 
     def base(key):  # a path in the file is relative to it; one given with -D, to the cwd
         return Path.cwd() if key in from_command_line else path.parent
@@ -235,7 +350,7 @@ def load_scene(name_or_path, overrides=()) -> Scene:
                              key="material.brdf")
         values["material.brdf"] = str(brdf_path)
     edits = tuple(_edit(i, e, path) for i, e in enumerate(edits_raw))
-    return Scene(values["name"], str(path), values, edits)
+    return Scene(values["name"], str(path), values, edits, layers)
 
 
 def _flatten(doc, path, prefix="") -> dict:
@@ -251,10 +366,20 @@ def _flatten(doc, path, prefix="") -> dict:
     return out
 
 
-def _check(key: str, value, where):
+def _check(key: str, value, where, layers=()):
     spec = SCHEMA.get(key)
+    parts = key.split(".")
+    if spec is None and len(parts) == 3 and parts[0] == "layer":
+        if parts[1] not in layers:
+            raise InputError(f"no layer named {parts[1]!r} (this scene's layers: "
+                             f"{', '.join(layers) or 'none'})", where, key=key)
+        spec = LAYER_SCHEMA.get(parts[2])
+        if spec is None:
+            raise InputError(f"a layer's value to set must be one of {', '.join(LAYER_SCHEMA)}",
+                             where, key=key)
     if spec is None:
-        near = difflib.get_close_matches(key, [*SCHEMA, "fields.edit"], n=1, cutoff=0.5)
+        near = difflib.get_close_matches(key, [*SCHEMA, "fields.edit", "layer"], n=1,
+                                         cutoff=0.5)
         hint = f"; did you mean '{near[0]}'?" if near else f"; valid keys: {', '.join(SCHEMA)}"
         raise InputError(f"unknown key{hint}", where, key=key)
     kind = spec.kind
@@ -270,7 +395,8 @@ def _check(key: str, value, where):
         raise InputError(f"expected {'a finite number' if kind is float else kind.__name__}, "
                          f"got {value!r}", where, key=key)
     if spec.choices is not None and value not in spec.choices:
-        raise InputError(f"must be one of {', '.join(spec.choices)}; got {value!r}", where,
+        raise InputError(f"must be one of {', '.join(map(str, spec.choices))}; got {value!r}",
+                         where,
                          key=key)
     if spec.lo is not None and not (spec.lo <= value <= spec.hi):
         raise InputError(f"must be in [{spec.lo:g}, {spec.hi:g}], got {value!r}", where, key=key)
@@ -304,11 +430,7 @@ def _edit(i, e, path) -> EditSpec:
     where = f"fields.edit[{i}]"
     if not isinstance(e, dict):
         raise InputError("expected a table with at (or vertex), d1, d2, weight", path, key=where)
-    for k in e:
-        if k not in EDIT_KEYS:
-            near = difflib.get_close_matches(k, sorted(EDIT_KEYS), n=1, cutoff=0.5)
-            hint = f"; did you mean '{near[0]}'?" if near else ""
-            raise InputError(f"unknown key{hint}", path, key=f"{where}.{k}")
+    _known(e, EDIT_KEYS, path, where)
     if ("at" in e) == ("vertex" in e):
         raise InputError("give exactly one of 'at' (a point) or 'vertex' (an index)", path,
                          key=where)
@@ -327,3 +449,104 @@ def _edit(i, e, path) -> EditSpec:
     at = _vector(e["at"], f"{where}.at", path) if "at" in e else None
     return EditSpec(at, vertex, _vector(e["d1"], f"{where}.d1", path, 2.0),
                     _vector(e["d2"], f"{where}.d2", path, 2.0), float(weight))
+
+
+def _layer(i, e, path, values) -> LayerSpec:
+    """One [[layer]] table: its static spec; its parameters go into `values`."""
+    where = f"layer[{i}]"
+    if not isinstance(e, dict):
+        raise InputError("expected a table with name, material, thickness_mm, ...", path,
+                         key=where)
+    _known(e, LAYER_KEYS, path, where)
+    name = e.get("name")
+    if not isinstance(name, str) or not name.isidentifier():
+        raise InputError(f"expected a name (letters, digits, _), got {name!r}", path,
+                         key=f"{where}.name")
+    where = f"layer.{name}"
+    for k, spec in LAYER_SCHEMA.items():
+        values[f"{where}.{k}"] = _check(f"{where}.{k}", e.get(k, spec.default), path, (name,))
+    material = e.get("material")
+    if not isinstance(material, str):
+        raise InputError("expected a material: a shipped one's name or a JSON file written "
+                         "by jaxskin calibrate", path, key=f"{where}.material")
+    shipped = data_dir() / "materials" / f"{material}.json"
+    if not (Path(material).suffix == "" and shipped.is_file()):
+        file = (path.parent / material).resolve()
+        if not file.is_file():
+            names = ", ".join(sorted(p.stem for p in (data_dir() / "materials").glob("*.json")))
+            raise InputError(f"no material file {file} (shipped materials: {names})", path,
+                             key=f"{where}.material")
+        material = str(file)
+    image = e.get("image")
+    if image is not None:
+        if not isinstance(image, str) or not (path.parent / image).is_file():
+            raise InputError(f"expected a greyscale image file, got {image!r}", path,
+                             key=f"{where}.image")
+        image = str((path.parent / image).resolve())
+    ellipses, polygons = [], []
+    for j, r in enumerate(_tables(e.get("ellipse", []), path, f"{where}.ellipse")):
+        w = f"{where}.ellipse[{j}]"
+        _known(r, ELLIPSE_KEYS, path, w)
+        center = _numbers(r.get("center"), 2, path, f"{w}.center")
+        radii = _numbers(r.get("radii"), 2, path, f"{w}.radii", positive=True)
+        ellipses.append((center, radii, _number(r.get("angle", 0.0), path, f"{w}.angle"),
+                         _number(r.get("feather", 0.0), path, f"{w}.feather", lo=0.0)))
+    for j, r in enumerate(_tables(e.get("polygon", []), path, f"{where}.polygon")):
+        w = f"{where}.polygon[{j}]"
+        _known(r, POLYGON_KEYS, path, w)
+        if ("points" in r) == ("vertices" in r):
+            raise InputError("give exactly one of 'points' ([[u, v], ...]) or 'vertices' "
+                             "(mesh vertex indices)", path, key=w)
+        points = vertices = None
+        if "points" in r:
+            pts = r["points"]
+            if not isinstance(pts, list) or len(pts) < 3:
+                raise InputError("expected at least three [u, v] points", path,
+                                 key=f"{w}.points")
+            points = tuple(_numbers(q, 2, path, f"{w}.points") for q in pts)
+        else:
+            vs = r["vertices"]
+            if not (isinstance(vs, list) and len(vs) >= 3 and all(
+                    isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in vs)):
+                raise InputError("expected at least three vertex indices >= 0", path,
+                                 key=f"{w}.vertices")
+            vertices = tuple(vs)
+        polygons.append((points, vertices,
+                         _number(r.get("feather", 0.0), path, f"{w}.feather", lo=0.0)))
+    if image is not None and (ellipses or polygons):
+        raise InputError("give an image or regions (ellipse, polygon), not both", path,
+                         key=where)
+    return LayerSpec(name, material, image, tuple(ellipses), tuple(polygons))
+
+
+def _known(table, keys, path, where):
+    for k in table:
+        if k not in keys:
+            near = difflib.get_close_matches(k, sorted(keys), n=1, cutoff=0.5)
+            hint = (f"; did you mean '{near[0]}'?" if near else
+                    f"; expected {', '.join(sorted(keys))}")
+            raise InputError(f"unknown key{hint}", path, key=f"{where}.{k}")
+
+
+def _tables(value, path, where):
+    if not isinstance(value, list) or not all(isinstance(t, dict) for t in value):
+        raise InputError(f"expected [[{where.split('.', 2)[-1]}]] tables", path, key=where)
+    return value
+
+
+def _number(value, path, where, lo=None):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(
+            value) or (lo is not None and value < lo):
+        bound = f" >= {lo:g}" if lo is not None else ""
+        raise InputError(f"expected a finite number{bound}, got {value!r}", path, key=where)
+    return float(value)
+
+
+def _numbers(value, n, path, where, positive=False):
+    ok = isinstance(value, list) and len(value) == n and all(
+        isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c)
+        and (c > 0 or not positive) for c in value)
+    if not ok:
+        raise InputError(f"expected {n} finite{' positive' if positive else ''} numbers, got "
+                         f"{value!r}", path, key=where)
+    return tuple(float(c) for c in value)

@@ -72,6 +72,11 @@ class Grid:
         """Weights `(n, 3)`: linear sRGB = reflectance @ M (white under the illuminant → 1)."""
         return _rgb_matrix(self.start, self.stop, self.step, self.illuminant)
 
+    @property
+    def xyz_to_rgb(self) -> np.ndarray:
+        """`(3, 3)`: linear sRGB = XYZ @ A, so that `rgb_matrix = xyz_matrix @ A`."""
+        return _xyz_to_rgb(self.start, self.stop, self.step, self.illuminant)
+
 
 @functools.cache
 def _xyz_matrix(start: int, stop: int, step: int, illuminant: str) -> np.ndarray:
@@ -91,15 +96,21 @@ def _xyz_matrix(start: int, stop: int, step: int, illuminant: str) -> np.ndarray
 
 
 @functools.cache
-def _rgb_matrix(start: int, stop: int, step: int, illuminant: str) -> np.ndarray:
+def _xyz_to_rgb(start: int, stop: int, step: int, illuminant: str) -> np.ndarray:
     import colour
 
-    W = _xyz_matrix(start, stop, step, illuminant)
+    white = _xyz_matrix(start, stop, step, illuminant).sum(axis=0)  # a perfect reflector
     srgb = colour.RGB_COLOURSPACES["sRGB"]
-    white = W.sum(axis=0)  # XYZ of a perfect reflector under this illuminant
     d65 = colour.xy_to_XYZ(srgb.whitepoint)
     adapt = colour.adaptation.matrix_chromatic_adaptation_VonKries(white, d65, transform="CAT02")
-    M = W @ adapt.T @ np.asarray(srgb.matrix_XYZ_to_RGB).T
+    A = adapt.T @ np.asarray(srgb.matrix_XYZ_to_RGB).T
+    A.setflags(write=False)
+    return A
+
+
+@functools.cache
+def _rgb_matrix(start: int, stop: int, step: int, illuminant: str) -> np.ndarray:
+    M = _xyz_matrix(start, stop, step, illuminant) @ _xyz_to_rgb(start, stop, step, illuminant)
     M.setflags(write=False)
     return M
 
