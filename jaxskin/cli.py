@@ -251,10 +251,11 @@ def _render(args) -> int:
             maps.write_normals(result["normals"], s.mask, out / f"{sc.name}_normal.png")
             maps.write_field_plot(s, out / f"{sc.name}_field.png")
             written += 3
-        rows.append((sc.name, config.image, written, time.perf_counter() - t0))
-    print(f"{'scene':<16} {'image':>7} {'files':>6} {'time s':>7}")
+        size = f"{config.image}x{config.image_height or config.image}"
+        rows.append((sc.name, size, written, time.perf_counter() - t0))
+    print(f"{'scene':<16} {'image':>9} {'files':>6} {'time s':>7}")
     for name, size, n, dt in rows:
-        print(f"{name:<16} {size:>7} {n:>6} {dt:>7.2f}")
+        print(f"{name:<16} {size:>9} {n:>6} {dt:>7.2f}")
     print(f"wrote {sum(r[2] for r in rows)} file(s) to {out}/")
     return 0
 

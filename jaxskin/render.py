@@ -46,7 +46,7 @@ class Prepared:
 def prepare(config: SceneConfig) -> Prepared:
     s = texture.setup(config.texture)
     view = make_view(s.tmap, config.image, config.camera, config.supersample, config.fov,
-                     config.rotate)
+                     config.rotate, config.image_height)
     arrays = {"normals": s.normals, "mask": s.mask, "tex": jnp.asarray(view.tex),
               "view_mask": jnp.asarray(view.mask)}
     if config.needs_furrows:
@@ -60,6 +60,9 @@ def prepare(config: SceneConfig) -> Prepared:
         grid = sp.grid
         arrays["skin"] = jnp.asarray(skin.nist_reflectance(sp.subject, grid), jnp.float32)
         texel_mm = sp.texel_mm or sp.unit_mm * s.tmap.texel_size()
+        # The model shades the texels on the mesh only, as a list (the rest stay black).
+        texels = np.flatnonzero(np.asarray(s.mask))
+        arrays["texels"] = jnp.asarray(texels, jnp.int32)
         if sp.layers:
             materials = [cosmetics.load_material(layer.material, grid) for layer in sp.layers]
             arrays["S"] = jnp.asarray(np.stack([m.S for m in materials]), jnp.float32)
@@ -68,7 +71,8 @@ def prepare(config: SceneConfig) -> Prepared:
             vertex_uv = np.stack([t.xy[:, 0] / t.width, 1.0 - t.xy[:, 1] / t.height], axis=1)
             cover = [cosmetics.coverage(layer, vertex_uv, t.height, t.width)
                      for layer in sp.layers]
-            arrays["cover"] = jnp.asarray(np.stack(cover) * np.asarray(s.mask), jnp.float32)
+            arrays["cover"] = jnp.asarray(np.stack(cover).reshape(len(cover), -1)[:, texels],
+                                          jnp.float32)
     return Prepared(s, view, arrays, texel_mm)
 
 
@@ -128,20 +132,32 @@ def _render(config: SceneConfig, params: dict, arrays: dict):
 
 
 def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: dict, normals):
-    """The cosmetics model's colour in texture space, `(H, W, 3)` (Huang et al. 2013)."""
+    """The cosmetics model's colour in texture space, `(H, W, 3)` (Huang et al. 2013),
+    computed on the list of texels on the mesh, `arrays["texels"]` (flat indices)."""
     sp = config.spectral
-    mask = arrays["mask"]
+    mask, texels = arrays["mask"], arrays["texels"]
+    shape = mask.shape
+
+    def to_list(image):  # (H, W, C) → (P, C)
+        return image.reshape(-1, image.shape[-1])[texels]
+
+    def to_image(values):  # (P, C) → (H, W, C), 0 off the mesh
+        out = jnp.zeros((shape[0] * shape[1], values.shape[-1]), values.dtype)
+        return out.at[texels].set(values, unique_indices=True).reshape(*shape, -1)
+
+    normals = to_list(normals)
     R = jnp.asarray(p.view.R, normals.dtype)
     d = params["light.direction"]
     L = (d / jnp.linalg.norm(d)) @ R  # object frame, as the normals
     if p.view.eye is None:
         V = jnp.asarray([0.0, 0.0, 1.0], normals.dtype) @ R
     else:  # texture-space positions: a view direction per texel
-        to_eye = jnp.asarray(p.view.eye, normals.dtype) - arrays["positions"] @ R.T
+        to_eye = jnp.asarray(p.view.eye, normals.dtype) - to_list(arrays["positions"]) @ R.T
         V = (to_eye / jnp.linalg.norm(to_eye, axis=-1, keepdims=True)) @ R
     blur = None
     if sp.sss is not None:
-        blur = functools.partial(sss.blur, texel_mm=p.texel_mm, mask=mask, method=sp.sss)
+        def blur(colour):
+            return to_list(sss.blur(to_image(colour), p.texel_mm, mask, sp.sss))
     skin_R = skin.reflectance(arrays["skin"], params["skin.melanin"], sp.grid)
     layers = {}
     if sp.layers:
@@ -150,12 +166,12 @@ def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: d
 
         layers = {"S": arrays["S"] * per_layer("s_scale")[:, None],
                   "K": arrays["K"] * per_layer("k_scale")[:, None],
-                  "X": arrays["cover"] * per_layer("thickness_mm")[:, None, None],
+                  "X": arrays["cover"] * per_layer("thickness_mm")[:, None],
                   "roughness": per_layer("roughness"), "rho": per_layer("specular")}
     colour = layered.radiance(sp.grid, normals, L, V, params["light.ambient"],
                               params["light.intensity"], skin_R, params["skin.roughness"],
                               params["skin.specular"], blur=blur, **layers)
-    return colour * mask[..., None]
+    return to_image(colour)
 
 
 def encode_srgb(linear):

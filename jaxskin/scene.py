@@ -27,6 +27,7 @@ intensity = 0.7                    # I_light
 [camera]
 projection = "orthographic"        # orthographic | perspective
 size = 512                         # image pixels across
+height = 0                         # image pixels high; 0: square
 supersample = 1                    # 1–4 samples per pixel per axis
 fov = 30.0                         # perspective only, degrees
 rotate = [0.0, 0.0, 0.0]           # degrees about x, y, z: turns the mesh
@@ -134,6 +135,7 @@ SCHEMA: dict[str, _Key] = {
     "light.intensity": _Key(float, 0.7, 0.0, 10.0, param=True),
     "camera.projection": _Key(str, "orthographic", choices=("orthographic", "perspective")),
     "camera.size": _Key(int, 512, 16, 8192),
+    "camera.height": _Key(int, 0, 0, 8192),
     "camera.supersample": _Key(int, 1, 1, 4),
     "camera.fov": _Key(float, 30.0, 1.0, 120.0),
     "camera.rotate": _Key("vec3", (0.0, 0.0, 0.0)),
@@ -236,6 +238,7 @@ class SceneConfig:
     rotate: tuple[float, float, float]
     mode: str  # wrinkles | overview | height
     spectral: SpectralConfig | None = None  # the cosmetics model's, when it is the material
+    image_height: int = 0  # 0: square
 
     @property
     def needs_furrows(self) -> bool:
@@ -264,7 +267,8 @@ class Scene:
                                       v["sss.texel_mm"], self.layers)
         return SceneConfig(tex, v["material.model"], v["material.brdf"], v["camera.projection"],
                            v["camera.size"], v["camera.supersample"], v["camera.fov"],
-                           tuple(v["camera.rotate"]), v["view.mode"], spectral)
+                           tuple(v["camera.rotate"]), v["view.mode"], spectral,
+                           v["camera.height"])
 
     @functools.cached_property
     def params(self) -> dict:

@@ -50,32 +50,39 @@ class View:
 
 
 def make_view(tmap: TextureMap, size: int, projection: str = "orthographic",
-              supersample: int = 1, fov: float = 30.0, rotate=(0.0, 0.0, 0.0)) -> View:
+              supersample: int = 1, fov: float = 30.0, rotate=(0.0, 0.0, 0.0),
+              height: int = 0) -> View:
+    """The view of `tmap`'s mesh in an image `size` pixels wide and `height` high (0:
+    square); the mesh's bounding box fills the image's shorter side, less a margin."""
     mesh = tmap.mesh
     n = size * supersample
+    m = (height or size) * supersample
     R = rotation(rotate)
     v = mesh.vertices @ R.T
     lo, hi = v.min(axis=0), v.max(axis=0)
     centre = (lo + hi) / 2
     if projection == "orthographic":
-        scale = n * (1 - 2 * MARGIN) / max(float(np.max(hi[:2] - lo[:2])), 1e-300)
+        extent = hi[:2] - lo[:2]
+        scale = (1 - 2 * MARGIN) * min(n / max(extent[0], 1e-300), m / max(extent[1], 1e-300))
         xy = np.stack([(v[:, 0] - centre[0]) * scale + n / 2,
-                       n / 2 - (v[:, 1] - centre[1]) * scale], axis=1)
+                       m / 2 - (v[:, 1] - centre[1]) * scale], axis=1)
         depth, eye, w = -v[:, 2], None, None
     elif projection == "perspective":
-        # A pinhole at the distance where the bounding box fills the view at its centre.
-        half = 0.5 * float(np.max(hi[:2] - lo[:2])) / (1 - 2 * MARGIN)
+        # A pinhole at the distance where the bounding box fills the view at its centre;
+        # `fov` spans the image's width, pixels are square.
+        extent = hi[:2] - lo[:2]
+        half = 0.5 * max(extent[0], extent[1] * n / m) / (1 - 2 * MARGIN)
         focal = 1.0 / math.tan(math.radians(fov) / 2)
         eye = centre + np.array([0.0, 0.0, half * focal])
         c = v - eye  # camera space, looking down -z
         w = -c[:, 2]
-        xy = np.stack([n / 2 * (1 + focal * c[:, 0] / w), n / 2 * (1 - focal * c[:, 1] / w)],
+        xy = np.stack([n / 2 * (1 + focal * c[:, 0] / w), m / 2 - n / 2 * focal * c[:, 1] / w],
                       axis=1)
         depth = w
     else:
         raise ValueError(f"camera projection must be orthographic or perspective, got "
                          f"{projection!r}")
-    r = rasterize(xy, mesh.faces, n, n, depth=depth)
+    r = rasterize(xy, mesh.faces, m, n, depth=depth)
     bary = r.bary.astype(np.float64)
     safe = np.where(r.tri >= 0, r.tri, 0)
     if w is not None:  # perspective-correct: weights b_i / w_i, renormalised
