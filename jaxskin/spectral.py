@@ -7,7 +7,7 @@ jit, so converting a spectral image is `spectra @ grid.rgb_matrix`, one matmul.
 The XYZ weights are exactly colour-science's ASTM E308 tristimulus weighting for that grid
 (`colour.sd_to_XYZ` is linear in the reflectance, so its weights are its values on unit
 spectra), scaled so that a perfect reflector has Y = 1. RGB is linear sRGB (D65 white); a
-non-D65 illuminant is first adapted to D65 with CAT02, so a perfect white stays white.
+non-D65 illuminant is first adapted to D65 with CAT02, and a perfect white is exactly white.
 """
 
 from __future__ import annotations
@@ -104,6 +104,10 @@ def _xyz_to_rgb(start: int, stop: int, step: int, illuminant: str) -> np.ndarray
     d65 = colour.xy_to_XYZ(srgb.whitepoint)
     adapt = colour.adaptation.matrix_chromatic_adaptation_VonKries(white, d65, transform="CAT02")
     A = adapt.T @ np.asarray(srgb.matrix_XYZ_to_RGB).T
+    # sRGB's published matrix is rounded, and its white point is the CIE xy of D65, not the
+    # tabulated spectrum's: white would come out 1.6e-4 off. Scale each channel so that a
+    # perfect reflector is exactly (1, 1, 1): a white highlight stays white.
+    A = A / (white @ A)
     A.setflags(write=False)
     return A
 

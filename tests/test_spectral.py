@@ -36,7 +36,7 @@ def test_perfect_white_is_rgb_white(illuminant):
     grid = spectral.Grid(step=10, illuminant=illuminant)
     rgb = spectral.to_rgb(jnp.ones(len(grid)), grid)
     assert rgb.dtype == jnp.float32
-    np.testing.assert_allclose(rgb, 1.0, atol=2e-3)  # sRGB's rounded matrix vs CIE D65
+    np.testing.assert_allclose(rgb, 1.0, rtol=1e-6)
 
 
 def test_dark_skin_srgb_matches_colour(x64):

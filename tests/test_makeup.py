@@ -1,0 +1,301 @@
+"""Cosmetics in the render (issue 6): the spectral skin model, KM layers, SSS and per-layer
+highlights, against independent forms; exactly no makeup at zero thickness; what a scene
+leaves out; gradients (float64) of a whole makeup render; scene errors."""
+
+import subprocess
+import sys
+
+import imageio.v3 as iio
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from conftest import check_grads_scaled
+
+from jaxskin import cosmetics, km, render, skin, spectral, sss
+from jaxskin.io import InputError
+from jaxskin.mesh import Mesh
+from jaxskin.projection import project
+from jaxskin.scene import load_scene
+from jaxskin.shading import kelemen, layered
+
+SMALL = ["texture.size=64", "camera.size=40"]
+
+
+def unit(v):
+    v = np.asarray(v, np.float64)
+    return v / np.linalg.norm(v)
+
+
+@pytest.fixture(scope="module")
+def stack():
+    grid = spectral.Grid(step=20)
+    ms = [cosmetics.load_material(n, grid) for n in ("foundation_beige", "blush_rose",
+                                                     "lipstick_red")]
+    return grid, np.stack([m.S for m in ms]), np.stack([m.K for m in ms])
+
+
+def _flat(shape, X_values):
+    N = np.zeros((*shape, 3))
+    N[..., 2] = 1.0
+    X = np.broadcast_to(np.asarray(X_values, np.float64).reshape(-1, *[1] * len(shape)),
+                        (len(X_values), *shape)).copy()
+    return N, X
+
+
+def test_no_blur_is_the_exact_spectral_over_plus_highlights(x64, stack):
+    """Without SSS and highlights (ρ_s = 0) a texel's colour is E · to_rgb(over(stack,
+    skin)), with the stack composed here by km.compose bottom up (an independent order)."""
+    grid, S, K = stack
+    N, X = _flat((2, 3), [0.01, 0.03, 0.02])
+    X[1, 0, 0] = 0.0
+    skin_R = skin.nist_reflectance(12, grid)
+    L, V = unit([0.3, 0.2, 1.0]), unit([0.0, 0.0, 1.0])
+    out = layered.radiance(grid, jnp.asarray(N), L, V, 0.25, 0.9, skin_R, 0.3, 0.0, S, K,
+                           jnp.asarray(X), np.full(3, 0.3), np.zeros(3))
+    E = 0.25 + 0.9 * L[2]
+    for i, j in np.ndindex(2, 3):
+        R, T = km.layer(S, K, X[:, i, j, None])
+        below = km.Slab(R[0], T[0], R[0])  # the bottom layer, then each one on top of it
+        for layer in (1, 2):
+            below = km.compose((R[layer], T[layer]), below)
+        expected = E * np.asarray(spectral.to_rgb(km.over(below.R, below.T, skin_R,
+                                                          below.R_back), grid))
+        np.testing.assert_allclose(out[i, j], expected, rtol=1e-12, atol=1e-14)
+
+
+def test_uniform_light_and_layers_make_the_blur_a_no_op(x64, stack):
+    """On a uniform patch the blur leaves the light alone, so the exit factor t (applied
+    per XYZ channel after the blur) must give back the exact spectral result."""
+    grid, S, K = stack
+    N, X = _flat((24, 24), [0.01, 0.02, 0.03])
+    args = (grid, jnp.asarray(N), unit([0.2, 0.1, 1.0]), unit([0, 0, 1.0]), 0.3, 0.8,
+            skin.nist_reflectance(40, grid), 0.3, 0.18, S, K, jnp.asarray(X),
+            np.full(3, 0.3), np.full(3, 0.1))
+    exact = layered.radiance(*args)
+    blurred = layered.radiance(*args, blur=lambda c: sss.blur(c, 0.5))
+    np.testing.assert_allclose(blurred, exact, rtol=1e-10)
+
+
+def test_highlights_bottom_to_top(x64, stack):
+    """Bare skin: the skin's Kelemen highlight, white. One opaque-ish layer on top: its own
+    highlight plus the skin's dimmed by the colour of T², by hand."""
+    grid, S, K = stack
+    N = np.array([[0.0, 0.0, 1.0]])
+    L, V = unit([0.3, 0.0, 1.0]), unit([-0.3, 0.0, 1.0])  # mirror: the peak
+    skin_R = np.zeros(len(grid)) + 1e-9  # (almost) no diffuse light: highlights only
+    h_skin = float(kelemen.specular(N, L, V, 0.3, 0.18)[0])
+    bare = layered.radiance(grid, jnp.asarray(N), L, V, 0.0, 1.0, skin_R, 0.3, 0.18)
+    np.testing.assert_allclose(bare[0], h_skin + 0 * bare[0], atol=1e-8)
+    X = np.array([[0.05]])
+    out = layered.radiance(grid, jnp.asarray(N), L, V, 0.0, 1.0, skin_R, 0.3, 0.18, S[2:],
+                           K[2:], jnp.asarray(X), np.array([0.2]), np.array([0.3]))
+    R, T = km.layer(S[2], K[2], 0.05)
+    h_layer = float(kelemen.specular(N, L, V, 0.2, 0.3)[0])
+    cover = 1 - np.exp(-0.05 / layered.COVER_MM)
+    expected = (h_skin * np.asarray(spectral.to_rgb(T * T, grid)) + cover * h_layer
+                + np.asarray(spectral.to_rgb(R, grid)) * float(N[0] @ L))
+    np.testing.assert_allclose(out[0], expected, rtol=1e-6, atol=1e-9)
+
+
+@pytest.mark.parametrize("sss_on", ["true", "false"])
+def test_zero_thickness_gives_exactly_the_no_makeup_image(sss_on):
+    zero = [f"layer.{n}.thickness_mm=0" for n in ("foundation", "blush", "lipstick")]
+    common = [*SMALL, f"sss.enabled={sss_on}"]
+    made_up = load_scene("makeup", common + zero)
+    bare = load_scene("face", common)
+    a = np.asarray(render.render(made_up.config, made_up.params))
+    b = np.asarray(render.render(bare.config, bare.params))
+    assert np.array_equal(a, b)
+    with_makeup = load_scene("makeup", common)
+    assert np.abs(np.asarray(render.render(with_makeup.config, with_makeup.params)) - b).max() \
+        > 0.05
+
+
+def test_what_a_scene_does_not_need_is_not_traced(monkeypatch):
+    """No layers: no KM; sss.enabled = false: no blur; the face runs no furrows."""
+    calls = {"km": 0, "blur": 0}
+    layer, blur = km.layer, sss.blur
+
+    def counting(name, f):
+        def g(*a, **k):
+            calls[name] += 1
+            return f(*a, **k)
+        return g
+
+    monkeypatch.setattr(km, "layer", counting("km", layer))
+    monkeypatch.setattr(sss, "blur", counting("blur", blur))
+    for name, overrides, expected in [
+            ("face", [], {"km": 0, "blur": 1}),
+            ("face", ["sss.enabled=false"], {"km": 0, "blur": 0}),
+            ("makeup", ["sss.enabled=false"], {"km": 1, "blur": 0}),
+            ("makeup", [], {"km": 3, "blur": 1})]:  # three colours computed apart
+        calls.update(km=0, blur=0)
+        sc = load_scene(name, [*SMALL, "camera.size=41", *overrides])  # a fresh trace
+        jax.make_jaxpr(lambda p, sc=sc: render._render(sc.config, p, render.prepare(
+            sc.config).arrays))(sc.params)
+        assert calls == expected, (name, overrides, calls)
+        assert not sc.config.needs_furrows
+
+
+def _float64(tree):
+    return jax.tree.map(lambda a: jnp.asarray(a, jnp.float64)
+                        if jnp.issubdtype(jnp.asarray(a).dtype, jnp.floating) else a, tree)
+
+
+@pytest.mark.parametrize("case", ["ordinary", "extreme"])
+def test_makeup_render_gradients(x64, case):
+    """check_grads (float64, fwd and rev) of a whole makeup render with SSS, with respect to
+    each layer's thickness, S and K scales and the skin's melanin; 'extreme': a layer at
+    thickness 0, one at 5 mm (opaque), S → 0 and K → 0 scales."""
+    sc = load_scene("makeup", ["texture.size=32", "camera.size=16"])
+    arrays = _float64(render.prepare(sc.config).arrays)
+    params = _float64(sc.params)
+    if case == "ordinary":
+        keys = {"layer.foundation.thickness_mm": 0.01, "layer.blush.thickness_mm": 0.02,
+                "layer.lipstick.s_scale": 1.3, "layer.blush.k_scale": 0.7,
+                "skin.melanin": 0.4}
+    else:
+        keys = {"layer.foundation.thickness_mm": 0.0, "layer.lipstick.thickness_mm": 5.0,
+                "layer.blush.s_scale": 1e-9, "layer.foundation.k_scale": 1e-9,
+                "skin.melanin": 0.0}
+    names = list(keys)
+
+    def f(*values):
+        p = {**params, **dict(zip(names, values, strict=True))}
+        return render.render_prepared(sc.config, p, arrays)
+
+    values = [jnp.asarray(v, jnp.float64) for v in keys.values()]
+    image = f(*values)
+    assert bool(jnp.all(jnp.isfinite(image)))
+    grads = jax.jacrev(lambda *v: jnp.sum(f(*v)), argnums=tuple(range(len(v := values))))(*v)
+    assert all(bool(jnp.isfinite(g)) for g in grads)
+    scales = [max(abs(float(x)), 1e-3) * 0.1 for x in keys.values()]
+    check_grads_scaled(f, values, scales, order=1, eps=1e-4, atol=1e-5, rtol=1e-4)
+
+
+def test_gradient_with_respect_to_a_whole_thickness_map():
+    sc = load_scene("makeup", ["texture.size=32", "camera.size=16"])
+    arrays = render.prepare(sc.config).arrays
+
+    def loss(cover):
+        return jnp.sum(render.render_prepared(sc.config, sc.params, {**arrays, "cover": cover}))
+
+    g = jax.grad(loss)(arrays["cover"])
+    assert g.shape == arrays["cover"].shape and bool(jnp.all(jnp.isfinite(g)))
+    assert float(jnp.abs(g).max()) > 0
+
+
+def test_texel_size_from_the_mesh_scale_and_uv_area():
+    """A 10 × 10 square mapped onto the whole UV square at 100 texels: 0.1 units a texel;
+    stretch v by 2 (a half-height UV rectangle): the mean texel is sqrt(2) × larger."""
+    v = np.array([[0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 0.0]])
+    f = np.array([[0, 1, 2], [0, 2, 3]])
+    n = np.tile([0.0, 0, 1], (4, 1))
+    for uv, expected in [(v[:, :2] / 10, 0.1), (v[:, :2] / [10, 20], 0.1 * np.sqrt(2))]:
+        tmap = project("uv", Mesh("square", v, f, n, uv), 100)
+        assert tmap.texel_size() == pytest.approx(expected, rel=1e-12)
+
+
+def test_melanin_darkens_most_in_the_blue():
+    grid = spectral.Grid(10)
+    base = skin.nist_reflectance(12, grid)
+    assert np.array_equal(np.asarray(skin.reflectance(base.astype(np.float32), 0.0, grid)),
+                          base.astype(np.float32))
+    ratio = np.asarray(skin.reflectance(base, 1.0, grid)) / base
+    assert np.all(np.diff(ratio) > 0) and ratio[0] < 0.2 and ratio[-1] > 0.6
+    i500 = int(np.argmin(np.abs(grid.wavelengths - 500)))
+    assert ratio[i500] == pytest.approx(np.exp(-1.0), rel=1e-6)  # float32
+
+
+def test_nist_spectrum_is_the_subjects_mean():
+    """Subject 1's mean at 400 nm, read from the CSV by hand (the 'Average' column)."""
+    grid = spectral.Grid(10)
+    with open(skin.data_dir() / "spectra" / skin.NIST_FILE, encoding="latin-1") as fh:
+        row = next(line for line in fh if line.startswith("400,"))
+    cells = row.split(",")
+    assert skin.nist_reflectance(1, grid)[2] == pytest.approx(float(cells[4]))
+    assert skin.nist_reflectance(100, grid)[2] == pytest.approx(float(cells[400]))
+
+
+def test_makeup_scene_renders_the_paper_figure(tmp_path):
+    """The built-in makeup scene: lips red, cheeks pinker than the bare face."""
+    face, makeup = (load_scene(n, ["camera.size=128", "sss.enabled=false"])
+                    for n in ("face", "makeup"))
+    a = np.asarray(render.render(face.config, face.params))
+    b = np.asarray(render.render(makeup.config, makeup.params))
+    lips = (slice(84, 92), slice(56, 72))  # below the nose, at the lips' centre
+    red_gain = b[lips][..., 0].mean() - a[lips][..., 0].mean()
+    green_gain = b[lips][..., 1].mean() - a[lips][..., 1].mean()
+    assert red_gain - green_gain > 0.05, (red_gain, green_gain)
+
+
+@pytest.mark.parametrize("overrides,key,words", [
+    (["layer.nope.thickness_mm=0.1"], "layer.nope.thickness_mm", "no layer named 'nope'"),
+    (["layer.blush.colour=1"], "layer.blush.colour", "must be one of"),
+    (["layer.blush.thickness_mm=-1"], "layer.blush.thickness_mm", "must be in"),
+    (["material.model=blinn"], "layer", "need material.model"),
+])
+def test_bad_layer_overrides_name_the_key(overrides, key, words):
+    with pytest.raises(InputError) as e:
+        load_scene("makeup", overrides)
+    assert e.value.key == key and words in str(e.value)
+
+
+@pytest.mark.parametrize("text,key,words", [
+    ('[[layer]]\nname = "a"\nmaterial = "no_such"\n', "layer.a.material", "shipped"),
+    ('[[layer]]\nname = "a b"\nmaterial = "blush_rose"\n', "layer[0].name", "letters"),
+    ('[[layer]]\nname = "a"\nmaterial = "blush_rose"\nthikness_mm = 1\n', "layer[0].thikness_mm",
+     "did you mean 'thickness_mm'"),
+    ('[[layer]]\nname = "a"\nmaterial = "blush_rose"\n[[layer.ellipse]]\ncenter = [0.5]\n',
+     "layer.a.ellipse[0].center", "2 finite numbers"),
+    ('[[layer]]\nname = "a"\nmaterial = "blush_rose"\n[[layer.polygon]]\nfeather = 0.1\n',
+     "layer.a.polygon[0]", "exactly one of"),
+    ('[[layer]]\nname = "a"\nmaterial = "blush_rose"\n[[layer]]\nname = "a"\n'
+     'material = "blush_rose"\n', "layer.name", "two layers"),
+])
+def test_bad_layer_tables_name_the_key(tmp_path, text, key, words):
+    path = tmp_path / "s.toml"
+    path.write_text('[material]\nmodel = "spectral"\n' + text)
+    with pytest.raises(InputError) as e:
+        load_scene(path)
+    assert e.value.key == key and words in str(e.value), str(e.value)
+
+
+def test_region_from_an_image_and_from_vertices(tmp_path):
+    img = np.zeros((8, 8), np.uint8)
+    img[:4] = 255  # the top half: v > 0.5
+    iio.imwrite(tmp_path / "map.png", img)
+    (tmp_path / "s.toml").write_text(
+        '[mesh]\nfile = "face"\nprojection = "uv"\n[texture]\nsize = 32\n[material]\n'
+        'model = "spectral"\n[wrinkles]\nenabled = false\n'
+        '[[layer]]\nname = "top"\nmaterial = "blush_rose"\nimage = "map.png"\n'
+        '[[layer]]\nname = "tri"\nmaterial = "blush_rose"\n[[layer.polygon]]\n'
+        'vertices = [61, 291, 1]\n')
+    sc = load_scene(tmp_path / "s.toml")
+    p = render.prepare(sc.config)
+    cover = np.zeros((2, 32 * 32))
+    cover[:, np.asarray(p.arrays["texels"])] = np.asarray(p.arrays["cover"])
+    top, tri = cover.reshape(2, 32, 32)
+    mask = np.asarray(p.setup.mask)
+    assert np.all(top[:16][mask[:16]] == 1) and np.all(top[16:] == 0)
+    uv = p.setup.tmap.mesh.uv[[61, 291, 1]]  # the mouth corners and the nose tip
+    row = int((1 - uv[:, 1].mean()) * 32)
+    col = int(uv[:, 0].mean() * 32)
+    assert tri[row, col] == 1 and tri[2, 2] == 0
+
+
+def test_render_command_sweeps_a_layer(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "jaxskin.cli", "render", "makeup", "-o",
+                        str(tmp_path), "-D", "texture.size=64", "-D", "camera.size=32",
+                        "--sweep", "layer.lipstick.thickness_mm=0:0.05:3"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    names = sorted(p.name for p in tmp_path.glob("*.png"))
+    assert names == sorted(f"makeup_layer.lipstick.thickness_mm={v}.png" for v in
+                           ("0", "0.025", "0.05"))
+    r = subprocess.run([sys.executable, "-m", "jaxskin.cli", "render", "makeup", "-o",
+                        str(tmp_path / "x"), "-D", "layer.lips.thickness_mm=1"],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and "no layer named 'lips'" in r.stderr
+    assert "Traceback" not in r.stderr and not (tmp_path / "x").exists()
