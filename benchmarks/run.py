@@ -23,6 +23,7 @@ BENCHMARKS = {
     "wrinkles": "bench_wrinkles",  # the furrow program against NumPy
     "render": "bench_render",  # shading and views, gradient, sweeps
     "sss": "bench_sss",  # the skin profile blur: error against time
+    "makeup": "bench_makeup",  # cosmetics: frame, gradient, grids, the RGB shortcut
 }
 
 

@@ -52,3 +52,14 @@ def test_the_runner_knows_every_benchmark_and_rejects_others(capsys):
     for module in run.BENCHMARKS.values():
         assert (Path(run.__file__).parent / f"{module}.py").is_file()
     assert run.main(["nope"]) == 2 and "unknown benchmark" in capsys.readouterr().err
+
+
+def test_bench_makeup_colour_difference():
+    import bench_makeup
+
+    a = np.random.default_rng(0).uniform(0, 1, (4, 5, 3))
+    mask = np.ones((4, 5), bool)
+    assert np.all(bench_makeup.delta_e(a, a, mask) == 0)
+    b = a.copy()
+    b[0, 0] = [1.0, 0.0, 0.0] if a[0, 0, 1] > 0.5 else [0.0, 1.0, 0.0]
+    assert bench_makeup.delta_e(a, b, mask).max() > 10 and callable(bench_makeup.main)

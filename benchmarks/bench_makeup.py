@@ -1,0 +1,230 @@
+"""Cosmetics on the face (issue 6): frame time, gradient, and error against run time.
+
+    python benchmarks/bench_makeup.py         # about two minutes on 2 cores
+
+1. The built-in `makeup` scene (foundation, blush, lipstick; 10 nm; SSS) at 1280×720:
+   cold and warm frame times, with texture 512² (the default) and 1024², beside the bare
+   face and SSS off; the gradient with respect to every thickness map (all three maps,
+   every texel) against the forward pass. The paper: 170–175 fps on a GTX 260 (2009).
+2. Error against run time, ΔE2000 of the rendered image against a reference, with the
+   defaults marked: spectral grids 5/10/20 nm against 1 nm; the paper's RGB shortcut
+   (each layer's R0 and T converted to RGB first, then layered in RGB) against the
+   spectral layering. Writes the `makeup` section of RESULTS.md and makeup_error.png.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import colour
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import HERE, machine, table, timeit, write_section  # noqa: E402
+
+from jaxskin import km, render, spectral  # noqa: E402
+from jaxskin.scene import load_scene  # noqa: E402
+
+HD = ["camera.size=1280", "camera.height=720"]
+
+
+def lab(display):
+    """CIELAB of display sRGB values (the renderer's output)."""
+    srgb = colour.RGB_COLOURSPACES["sRGB"]
+    xyz = colour.RGB_to_XYZ(np.clip(display, 0, 1), srgb, apply_cctf_decoding=True)
+    return colour.XYZ_to_Lab(xyz, srgb.whitepoint)
+
+
+def delta_e(a, b, mask):
+    return np.asarray(colour.delta_E(lab(a[mask]), lab(b[mask]), method="CIE 2000"))
+
+
+def frame(name, overrides):
+    sc = load_scene(name, overrides)
+    config, params = sc.config, sc.params
+    t0 = time.perf_counter()
+    arrays = render.prepare(config).arrays
+    prep = time.perf_counter() - t0
+    f = jax.jit(lambda p, a: render.render_prepared(config, p, a))
+    t0 = time.perf_counter()
+    image = jax.block_until_ready(f(params, arrays))
+    cold = time.perf_counter() - t0
+    warm = timeit(f, params, arrays, repeat=5)
+    return sc, arrays, np.asarray(image), prep, cold, warm
+
+
+def frame_times():
+    rows, grad_rows = [], []
+    for label, name, extra in [
+            ("makeup, texture 512² (default)", "makeup", []),
+            ("makeup, texture 1024²", "makeup", ["texture.size=1024"]),
+            ("makeup, SSS off", "makeup", ["sss.enabled=false"]),
+            ("bare face (no layers: no KM)", "face", []),
+            ("bare face, SSS off", "face", ["sss.enabled=false"])]:
+        sc, arrays, _, prep, cold, warm = frame(name, HD + extra)
+        rows.append((label, f"{prep:.2f}", f"{cold:.2f}", f"{warm * 1e3:.0f}",
+                     f"{1 / warm:.1f}"))
+        print(rows[-1], flush=True)
+        if name == "makeup" and not extra:  # the default (1024²: 7.7 s and 10 GB by hand)
+            config, params = sc.config, sc.params
+
+            def loss(cover, p, a, config=config):
+                return jnp.sum(render.render_prepared(config, p, {**a, "cover": cover}))
+
+            g = jax.jit(jax.grad(loss))
+            tg = timeit(g, arrays["cover"], params, arrays, repeat=3)
+            grad_rows.append((label, f"{warm * 1e3:.0f}", f"{tg * 1e3:.0f}",
+                              f"{tg / warm:.1f}×", f"{arrays['cover'].size:,}"))
+            print(grad_rows[-1], flush=True)
+    return rows, grad_rows
+
+
+def grid_study():
+    """Spectral grids against 1 nm, on the makeup scene at 512² (SSS on)."""
+    results = {}
+    for step in (1, 5, 10, 20):
+        sc, arrays, image, _, _, warm = frame("makeup", ["camera.size=512",
+                                                         f"spectral.step={step}"])
+        results[step] = (image, warm)
+        print(f"grid {step} nm: {warm * 1e3:.0f} ms", flush=True)
+    mask = np.asarray(render.prepare(sc.config).view.mask)
+    ref = results[1][0]
+    rows = []
+    for step, (image, warm) in results.items():
+        d = delta_e(image, ref, mask) if step != 1 else np.zeros(1)
+        rows.append((f"{step} nm" + (" (default)" if step == 10 else "")
+                     + (" (reference)" if step == 1 else ""), f"{warm * 1e3:.0f}",
+                     f"{d.mean():.4f}", f"{np.percentile(d, 99):.4f}", f"{d.max():.4f}"))
+    return rows, {s: (w, float(np.percentile(delta_e(i, ref, mask), 99)) if s != 1 else 0.0)
+                  for s, (i, w) in results.items()}
+
+
+def shortcut_study():
+    """Spectral layering against the paper's RGB shortcut, per texel of the makeup texture
+    (512², 10 nm): the diffuse colour E · R_total, no SSS, no highlight."""
+    sc = load_scene("makeup")
+    p = render.prepare(sc.config)
+    grid = sc.config.spectral.grid
+    S, K = p.arrays["S"], p.arrays["K"]
+    X = p.arrays["cover"] * jnp.asarray([0.01, 0.02, 0.03])[:, None]
+    skin_R = p.arrays["skin"]
+    M = jnp.asarray(grid.rgb_matrix, jnp.float32)
+
+    @jax.jit
+    def spectral_way(S, K, X, skin_R):
+        R, T = km.layer(S[:, None, :], K[:, None, :], X[..., None])
+        top = km.stack(R[::-1], T[::-1])
+        return km.over(top.R, top.T, skin_R, top.R_back) @ M
+
+    @jax.jit
+    def rgb_shortcut(S, K, X, skin_R):
+        R, T = km.layer(S[:, None, :], K[:, None, :], X[..., None])
+        top = km.stack((R @ M)[::-1], (T @ M)[::-1])  # RGB first, then layered
+        return km.over(top.R, top.T, skin_R @ M, top.R_back)
+
+    args = (S, K, X, skin_R)
+    exact, short = (np.asarray(f(*args), np.float64) for f in (spectral_way, rgb_shortcut))
+    t_exact, t_short = timeit(spectral_way, *args), timeit(rgb_shortcut, *args)
+    enc = np.asarray(render.encode_srgb(jnp.asarray(np.clip(exact, 0, 1))))
+    enc_s = np.asarray(render.encode_srgb(jnp.asarray(np.clip(short, 0, 1))))
+    ok = np.ones(len(exact), bool)
+    d = delta_e(enc_s, enc, ok)
+    covered = np.asarray(p.arrays["cover"][1:].max(axis=0)) > 0.5  # blush or lipstick
+    return [("spectral layering, 10 nm (default)", f"{t_exact * 1e3:.1f}", "0", "0", "0"),
+            ("RGB shortcut (paper: R0, T → RGB, then layer)", f"{t_short * 1e3:.1f}",
+             f"{d.mean():.3f}", f"{np.percentile(d, 99):.3f}",
+             f"{d[covered].max():.3f}")], (t_exact, t_short, float(np.percentile(d, 99)))
+
+
+def plot(grids, shortcut, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for step, (t, e) in grids.items():
+        if step == 1:
+            continue
+        ax.scatter(t * 1e3, e, color="C0", marker="*" if step == 10 else "o", s=90)
+        ax.annotate(f"{step} nm" + (" (default)" if step == 10 else ""), (t * 1e3, e),
+                    textcoords="offset points", xytext=(6, 4))
+    ax.scatter(shortcut[1] * 1e3, shortcut[2], color="C3", s=60)
+    ax.annotate("RGB shortcut (KM only)", (shortcut[1] * 1e3, shortcut[2]),
+                textcoords="offset points", xytext=(6, -12))
+    ax.scatter(shortcut[0] * 1e3, 1e-3, color="C2", marker="*", s=90)
+    ax.annotate("spectral KM only (default)", (shortcut[0] * 1e3, 1e-3),
+                textcoords="offset points", xytext=(6, 4))
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("warm time, ms (frame 512² for grids; KM stage for the shortcut)")
+    ax.set_ylabel("ΔE2000, 99th percentile")
+    ax.set_title("Cosmetics: error against run time (2 CPU cores)")
+    fig.tight_layout()
+    tmp = path.with_suffix(".tmp.png")
+    fig.savefig(tmp, dpi=110)
+    tmp.replace(path)
+    plt.close(fig)
+
+
+def main():
+    print(machine())
+    rows, grad_rows = frame_times()
+    grid_rows, grids = grid_study()
+    short_rows, shortcut = shortcut_study()
+    plot(grids, shortcut, HERE / "makeup_error.png")
+    t1 = table(["scene at 1280×720", "prepare s", "cold s", "warm ms", "fps"], rows)
+    t2 = table(["scene", "forward ms", "gradient ms", "ratio", "map texels"], grad_rows)
+    t3 = table(["spectral grid", "warm ms (512² frame)", "mean ΔE2000", "p99 ΔE2000",
+                "max ΔE2000"], grid_rows)
+    t4 = table(["layering", "warm ms (KM stage)", "mean ΔE2000", "p99 ΔE2000",
+                "max ΔE2000 on blush/lips"], short_rows)
+    for t in (t1, t2, t3, t4):
+        print(t)
+    write_section("makeup", f"""## Cosmetics on the face (issue 6)
+
+Command: `python benchmarks/bench_makeup.py`. Machine: {machine()}.
+
+The `makeup` scene (foundation everywhere, blush on both cheeks, lipstick; 10 nm; SSS by
+FFT) and the bare `face`, perspective, 1280×720. "prepare" is the host work (mesh, UVs,
+rasterizing the texture and the view, coverage maps); "cold" the first call (trace and
+compile); warm the best of 5. The paper: 170–175 fps on a GTX 260 (2009).
+
+{t1}
+
+Gradient of the image's sum with respect to all three thickness maps (every texel on the
+mesh), against the forward pass:
+
+{t2}
+
+Spectral grids against 1 nm (the makeup scene rendered at 512², SSS on; ΔE2000 over the
+pixels on the face):
+
+{t3}
+
+Spectral layering against the paper's shortcut (each layer's R0 and T converted to RGB,
+then layered in RGB), per texel of the makeup texture, diffuse only:
+
+{t4}
+
+![error against run time](makeup_error.png)
+
+Reading: 10 nm is the default: its error against 1 nm is about a hundredth of a
+just-noticeable difference (ΔE2000 ≈ 1), 5 nm costs 1.6× more for nothing visible, and
+20 nm saves little once the rest of the frame is counted. The paper's RGB shortcut is off
+by up to 1.4 ΔE2000 where blush and lipstick lie (visible side by side) and is not faster:
+the per-layer spectra are computed either way, and converting each layer's R0 and T
+separately makes XLA:CPU materialise the shared work (see `layered._separately`).
+Where the aims stand: the frame is under the 100 ms aim at the default 512² texture
+(1024² takes 4×); the gradient with respect to every thickness map is about 20× the
+forward pass, far from the ≤ 3× aim (see the README's status).
+""")
+    print(f"wrote {HERE / 'RESULTS.md'}")
+
+
+if __name__ == "__main__":
+    main()
