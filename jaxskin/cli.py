@@ -240,10 +240,8 @@ def _render(args) -> int:
             result = texture.texture_maps(config, params)
         if args.glb:
             from .export import write_glb
-            from .shading import blinn
 
-            albedo = (blinn.skin_colour(params["material.melanin"], params["material.blood"])
-                      if config.material == "blinn" else params["material.lafortune"].diffuse)
+            albedo = render.albedo(config, params)
             write_glb(s, np.asarray(albedo), result["normals"], out / f"{sc.name}.glb")
             written += 1
         if args.maps:

@@ -31,7 +31,7 @@ from .scene import SceneConfig
 from .shading import blinn, lafortune, layered
 from .view import View, downsample, make_view, sample
 
-__all__ = ["Prepared", "encode_srgb", "prepare", "render", "render_prepared"]
+__all__ = ["Prepared", "albedo", "encode_srgb", "prepare", "render", "render_prepared"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -181,3 +181,20 @@ def encode_srgb(linear):
     curved = x > 0.0031308
     power = 1.055 * jnp.where(curved, x, 1.0) ** (1 / 2.4) - 0.055
     return jnp.where(curved, power, 12.92 * x)
+
+
+def albedo(config: SceneConfig, params: dict):
+    """The diffuse colour a glTF export carries: `(3,)` for Blinn (r_diffuse) and Lafortune
+    (ρd); for the cosmetics model the texture `(H, W, 3)` of the layers over the skin
+    (spectral, no SSS, no highlight), sRGB-encoded."""
+    if config.material == "blinn":
+        return blinn.skin_colour(params["material.melanin"], params["material.blood"])
+    if config.material == "lafortune":
+        return params["material.lafortune"].diffuse
+    p = prepare(config)
+    arrays = p.arrays
+    flat = {**params, "light.ambient": jnp.float32(1.0), "light.intensity": jnp.float32(0.0)}
+    flat_config = dataclasses.replace(
+        config, spectral=dataclasses.replace(config.spectral, sss=None))
+    up = jnp.broadcast_to(jnp.asarray([0.0, 0.0, 1.0], jnp.float32), arrays["normals"].shape)
+    return encode_srgb(_cosmetics_texture(flat_config, p, flat, arrays, up))

@@ -299,3 +299,20 @@ def test_render_command_sweeps_a_layer(tmp_path):
                        capture_output=True, text=True)
     assert r.returncode == 2 and "no layer named 'lips'" in r.stderr
     assert "Traceback" not in r.stderr and not (tmp_path / "x").exists()
+
+
+def test_glb_albedo_of_the_makeup_is_the_layers_over_the_skin(tmp_path):
+    """The export's base colour: red on the lips, the bare skin's colour where no layer
+    lies (a face scene gives the same texels), and an ordinary .glb from the CLI."""
+    made_up, bare = (load_scene(n, ["texture.size=64", "camera.size=16"]) for n in
+                     ("makeup", "face"))
+    a = np.asarray(render.albedo(made_up.config, made_up.params))
+    b = np.asarray(render.albedo(bare.config, bare.params))
+    uv = render.prepare(made_up.config).setup.tmap.mesh.uv[[0, 17]].mean(axis=0)  # the lips
+    r, c = int((1 - uv[1]) * 64), int(uv[0] * 64)
+    assert a[r, c, 0] - a[r, c, 1] > b[r, c, 0] - b[r, c, 1] + 0.1
+    r = subprocess.run([sys.executable, "-m", "jaxskin.cli", "render", "makeup", "-o",
+                        str(tmp_path), "-D", "texture.size=64", "-D", "camera.size=16", "--glb"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "makeup.glb").stat().st_size > 1000
