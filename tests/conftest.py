@@ -6,6 +6,7 @@ rendering is never changed globally.
 """
 
 import jax
+import numpy as np
 import pytest
 
 
@@ -13,6 +14,17 @@ import pytest
 def x64():
     with jax.enable_x64(True):
         yield
+
+
+@pytest.fixture(scope="module")
+def three_materials():
+    """The shipped foundation, blush and lipstick on a 20 nm grid: `(grid, S, K)`, `(3, n)`."""
+    from jaxskin import cosmetics, spectral
+
+    grid = spectral.Grid(step=20)
+    ms = [cosmetics.load_material(n, grid) for n in ("foundation_beige", "blush_rose",
+                                                     "lipstick_red")]
+    return grid, np.stack([m.S for m in ms]), np.stack([m.K for m in ms])
 
 
 def check_grads_scaled(f, args, scales, order=2, eps=1e-5, **kw):

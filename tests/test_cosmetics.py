@@ -145,13 +145,6 @@ def test_region_and_image_maps(tmp_path):
 # ------------------------------------------------------------------ layering
 
 
-@pytest.fixture(scope="module")
-def three_materials():
-    grid = spectral.Grid(step=20)
-    ms = [cosmetics.load_material(n, grid) for n in ("foundation_beige", "blush_rose",
-                                                     "lipstick_red")]
-    return grid, np.stack([m.S for m in ms]), np.stack([m.K for m in ms])
-
 
 def test_zero_thickness_is_exactly_no_makeup_and_energy_holds(three_materials):
     _, S, K = three_materials

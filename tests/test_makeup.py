@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from conftest import check_grads_scaled
 
-from jaxskin import cosmetics, km, render, skin, spectral, sss
+from jaxskin import km, render, skin, spectral, sss
 from jaxskin.io import InputError
 from jaxskin.mesh import Mesh
 from jaxskin.projection import project
@@ -27,14 +27,6 @@ def unit(v):
     return v / np.linalg.norm(v)
 
 
-@pytest.fixture(scope="module")
-def stack():
-    grid = spectral.Grid(step=20)
-    ms = [cosmetics.load_material(n, grid) for n in ("foundation_beige", "blush_rose",
-                                                     "lipstick_red")]
-    return grid, np.stack([m.S for m in ms]), np.stack([m.K for m in ms])
-
-
 def _flat(shape, X_values):
     N = np.zeros((*shape, 3))
     N[..., 2] = 1.0
@@ -43,10 +35,10 @@ def _flat(shape, X_values):
     return N, X
 
 
-def test_no_blur_is_the_exact_spectral_over_plus_highlights(x64, stack):
+def test_no_blur_is_the_exact_spectral_over_plus_highlights(x64, three_materials):
     """Without SSS and highlights (ρ_s = 0) a texel's colour is E · to_rgb(over(stack,
     skin)), with the stack composed here by km.compose bottom up (an independent order)."""
-    grid, S, K = stack
+    grid, S, K = three_materials
     N, X = _flat((2, 3), [0.01, 0.03, 0.02])
     X[1, 0, 0] = 0.0
     skin_R = skin.nist_reflectance(12, grid)
@@ -64,10 +56,10 @@ def test_no_blur_is_the_exact_spectral_over_plus_highlights(x64, stack):
         np.testing.assert_allclose(out[i, j], expected, rtol=1e-12, atol=1e-14)
 
 
-def test_uniform_light_and_layers_make_the_blur_a_no_op(x64, stack):
+def test_uniform_light_and_layers_make_the_blur_a_no_op(x64, three_materials):
     """On a uniform patch the blur leaves the light alone, so the exit factor t (applied
     per XYZ channel after the blur) must give back the exact spectral result."""
-    grid, S, K = stack
+    grid, S, K = three_materials
     N, X = _flat((24, 24), [0.01, 0.02, 0.03])
     args = (grid, jnp.asarray(N), unit([0.2, 0.1, 1.0]), unit([0, 0, 1.0]), 0.3, 0.8,
             skin.nist_reflectance(40, grid), 0.3, 0.18, S, K, jnp.asarray(X),
@@ -77,10 +69,10 @@ def test_uniform_light_and_layers_make_the_blur_a_no_op(x64, stack):
     np.testing.assert_allclose(blurred, exact, rtol=1e-10)
 
 
-def test_highlights_bottom_to_top(x64, stack):
+def test_highlights_bottom_to_top(x64, three_materials):
     """Bare skin: the skin's Kelemen highlight, white. One opaque-ish layer on top: its own
     highlight plus the skin's dimmed by the colour of T², by hand."""
-    grid, S, K = stack
+    grid, S, K = three_materials
     N = np.array([[0.0, 0.0, 1.0]])
     L, V = unit([0.3, 0.0, 1.0]), unit([-0.3, 0.0, 1.0])  # mirror: the peak
     skin_R = np.zeros(len(grid)) + 1e-9  # (almost) no diffuse light: highlights only
