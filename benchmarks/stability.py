@@ -86,6 +86,66 @@ def cases():
     for k in (0.5, 1e3):
         out.append((f"bump.bump_normals (n_z → 0, k_bump {k:g})",
                     lambda n, hh, kk=k: bump.bump_normals(n, hh, kk), [nmap, h]))
+    out += cosmetics_cases(N, L)
+    return out
+
+
+def cosmetics_cases(N, L):
+    """Issue 6's stages: the layered model per texel (thickness 0 to 10 mm, S → 0, K → 0,
+    K/S 1e6, grazing light, n_z → 0), the skin blur (a point of light at a mesh edge, 64²
+    and 512²), melanin, the sRGB encoding at 0 and below, and a whole makeup render with
+    empty cosmetic maps."""
+    from jaxskin import cosmetics, render, skin, spectral, sss
+    from jaxskin.scene import load_scene
+    from jaxskin.shading import layered
+
+    grid = spectral.Grid(step=20)
+    mats = [cosmetics.load_material(n, grid) for n in ("foundation_beige", "blush_rose",
+                                                       "lipstick_red")]
+    S0, K0 = np.stack([m.S for m in mats]), np.stack([m.K for m in mats])
+    skin_R = skin.nist_reflectance(12, grid)
+    thick = np.array([0.0, 1e-6, 0.01, 10.0])
+    X = np.stack([np.repeat(thick, len(N) // len(thick) + 1)[:len(N)]] * 3)
+    X[1] = X[1][::-1]
+    out = []
+    for label, s_scale, k_scale in [("ordinary", 1.0, 1.0), ("S → 0", 1e-9, 1.0),
+                                    ("K → 0", 1.0, 1e-9), ("K/S 1e6", 1e-3, 1e3)]:
+        def shade(n, l_, x, ss=s_scale, kk=k_scale):
+            dt = n.dtype  # a light direction per texel, grazing ones included
+            return layered.radiance(grid, n, l_, jnp.asarray([0.0, 0.0, 1.0], dt), 0.25,
+                                    0.9, jnp.asarray(skin_R, dt), 0.3, 0.18,
+                                    jnp.asarray(S0 * ss, dt), jnp.asarray(K0 * kk, dt), x,
+                                    jnp.asarray([0.45, 0.35, 0.2], dt),
+                                    jnp.asarray([0.05, 0.05, 0.3], dt))
+        out.append((f"layered.radiance ({label}; thickness 0–10 mm, grazing, n_z → 0)",
+                    shade, [N, L, X]))
+    for n in (64, 512):
+        E = np.zeros((n, n, 3))
+        E[n // 2, n // 2] = 1.0  # a point of light
+        E[:, : n // 4] = 0.7
+        mask = np.ones((n, n), bool)
+        mask[:, n // 8: n // 4] = False  # an edge of the mesh
+        out.append((f"sss.blur (a point of light, a mesh edge, {n}²)",
+                    lambda e, m=mask: sss.blur(e, 0.2, m), [E]))
+    out.append(("skin.reflectance (melanin 0–3)",
+                lambda m: skin.reflectance(jnp.asarray(skin_R, m.dtype), m[:, None], grid),
+                [np.array([0.0, 1e-6, 1.0, 3.0])]))
+    out.append(("render.encode_srgb (−1 to 2, 0 and 0.0031308)", render.encode_srgb,
+                [np.array([-1.0, -1e-9, 0.0, 1e-9, 0.0031308, 0.5, 1.0, 2.0])]))
+
+    scene = load_scene("makeup", ["texture.size=32", "camera.size=16"])
+    arrays = render.prepare(scene.config).arrays
+
+    def empty_maps(t):
+        a = jax.tree.map(lambda v: v.astype(t.dtype) if jnp.issubdtype(v.dtype, jnp.floating)
+                         else v, arrays)
+        a = {**a, "cover": jnp.zeros_like(a["cover"])}
+        p = {k: jnp.asarray(v, t.dtype) for k, v in scene.params.items()}
+        return jax.vmap(lambda x: render.render_prepared(
+            scene.config, {**p, "layer.foundation.thickness_mm": x}, a))(t)
+
+    out.append(("makeup render (empty cosmetic maps, thickness 0–10 mm)", empty_maps,
+                [thick]))
     return out
 
 
@@ -126,11 +186,10 @@ def main():
 
 Command: `python benchmarks/stability.py`. Machine: {machine()}.
 
-Every differentiable stage that exists so far, on grids of stiff and extreme inputs, in
-float32 and float64. Gradients are of the sum of the outputs with respect to every input.
-(Kelemen's specular is the first piece of issue 6's cosmetics stages to exist.)
+Every differentiable stage, on grids of stiff and extreme inputs, in float32 and float64.
+Gradients are of the sum of the outputs with respect to every input.
 `tests/test_stability.py` runs the same sweep and fails on any non-finite value or
-gradient. (Not yet covered: the cosmetics stages of issue 6, which do not exist yet.)
+gradient, or a float32 error above 1e-5 (outputs are reflectances, colours, unit vectors).
 
 {t}
 """)
