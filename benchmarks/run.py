@@ -24,6 +24,7 @@ BENCHMARKS = {
     "render": "bench_render",  # shading and views, gradient, sweeps
     "sss": "bench_sss",  # the skin profile blur: error against time
     "makeup": "bench_makeup",  # cosmetics: frame, gradient, grids, the RGB shortcut
+    "limits": "limits",  # each hot stage against a memory pass and peak arithmetic
 }
 
 
