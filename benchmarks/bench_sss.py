@@ -1,4 +1,4 @@
-"""Skin profile blur: error against run time (issue 6's question, measured ahead of it).
+"""Skin profile blur: error against run time (issue 6).
 
     python benchmarks/bench_sss.py            # about a minute on 2 cores
 
@@ -73,7 +73,7 @@ def main():
     t = table(["variant", "warm ms", "warm ms with a mask", "mean ΔE2000", "max ΔE2000"],
               rows)
     print(t)
-    write_section("sss", f"""## Skin profile blur: error against run time (ahead of issue 6)
+    write_section("sss", f"""## Skin profile blur: error against run time (issue 6)
 
 Command: `python benchmarks/bench_sss.py`. Machine: {machine()}.
 
