@@ -63,6 +63,9 @@ def prepare(config: SceneConfig) -> Prepared:
         # The model shades the texels on the mesh only, as a list (the rest stay black).
         texels = np.flatnonzero(np.asarray(s.mask))
         arrays["texels"] = jnp.asarray(texels, jnp.int32)
+        if sp.sss == "fft":  # the blur's edge normalisation: the mask is fixed
+            arrays["sss_norm"] = jax.jit(sss.mask_norm, static_argnums=1)(
+                s.mask.astype(jnp.float32), texel_mm)
         if sp.layers:
             materials = [cosmetics.load_material(layer.material, grid) for layer in sp.layers]
             arrays["S"] = jnp.asarray(np.stack([m.S for m in materials]), jnp.float32)
@@ -157,7 +160,8 @@ def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: d
     blur = None
     if sp.sss is not None:
         def blur(colour):
-            return to_list(sss.blur(to_image(colour), p.texel_mm, mask, sp.sss))
+            return to_list(sss.blur(to_image(colour), p.texel_mm, mask, sp.sss,
+                                    norm=arrays.get("sss_norm")))
     skin_R = skin.reflectance(arrays["skin"], params["skin.melanin"], sp.grid)
     layers = {}
     if sp.layers:

@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["VARIANCES_MM2", "WEIGHTS_RGB", "blur", "blur_fft", "kernel_radius"]
+__all__ = ["VARIANCES_MM2", "WEIGHTS_RGB", "blur", "blur_fft", "kernel_radius", "mask_norm"]
 
 VARIANCES_MM2 = (0.0064, 0.0484, 0.187, 0.567, 1.99, 7.41)
 WEIGHTS_RGB = (
@@ -82,7 +82,8 @@ def _fft_convolve(images, kernels):
     return jnp.fft.irfft2(f, shape)[:, r:r + H, r:r + W]
 
 
-def blur(irradiance, texel_mm: float, mask=None, method: str = "fft", cut: float = 3.0):
+def blur(irradiance, texel_mm: float, mask=None, method: str = "fft", cut: float = 3.0,
+         norm=None):
     """The skin profile applied to `irradiance (H, W, 3)` (linear RGB) in texture space.
 
     **Arguments:**
@@ -96,6 +97,9 @@ def blur(irradiance, texel_mm: float, mask=None, method: str = "fft", cut: float
       CPU cores at 512², 0.2 mm texels (benchmarks/bench_sss.py): the FFT is exact and
       several times faster than the separable passes at any cut worth using.
 
+    - `norm`: `mask_norm(mask, texel_mm)`, computed once for a fixed mask (FFT only;
+      default: computed here). A renderer passes it to save three FFTs a frame.
+
     **Returns:** the light leaving the skin per texel, `(H, W, 3)`. Differentiable in
     `irradiance`.
     """
@@ -105,7 +109,7 @@ def blur(irradiance, texel_mm: float, mask=None, method: str = "fft", cut: float
     if method == "fft":
         kernels = jnp.asarray(_profile_kernels(texel_mm), E.dtype)
         num = _fft_convolve(jnp.moveaxis(Em, -1, 0), kernels)
-        den = _fft_convolve(jnp.broadcast_to(m, (3, *m.shape)), kernels)
+        den = mask_norm(m, texel_mm) if norm is None else jnp.asarray(norm, E.dtype)
         ok = den > 1e-6
         out = jnp.moveaxis(jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0), 0, -1)
         return out * m[..., None]
@@ -119,6 +123,15 @@ def blur(irradiance, texel_mm: float, mask=None, method: str = "fft", cut: float
         ok = den > 1e-6
         out = out + jnp.asarray(w, E.dtype) * jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)
     return out * m[..., None]
+
+
+def mask_norm(mask, texel_mm: float):
+    """The mask blurred by each channel's profile, `(3, H, W)`: what `blur` (FFT) divides
+    by so that the mesh's edges do not darken."""
+    m = jnp.asarray(mask)
+    m = m.astype(m.dtype if jnp.issubdtype(m.dtype, jnp.floating) else jnp.float32)
+    kernels = jnp.asarray(_profile_kernels(texel_mm), m.dtype)
+    return _fft_convolve(jnp.broadcast_to(m, (3, *m.shape)), kernels)
 
 
 def blur_fft(irradiance, texel_mm: float):

@@ -182,3 +182,12 @@ def test_layer_gradients_wrt_thickness_and_materials(x64, three_materials):
     X[0, 0, 0] = 0.0  # an edge of a cosmetic map
     check_grads_scaled(lambda s, k, x: cosmetics.layers(s, k, x).R, [S, K, X],
                        [S, K, 0.05], order=1)
+
+
+def test_a_precomputed_mask_norm_gives_the_same_blur():
+    rng = np.random.default_rng(5)
+    E = jnp.asarray(rng.uniform(0, 1, (40, 30, 3)), jnp.float32)
+    mask = jnp.asarray(rng.uniform(size=(40, 30)) > 0.3)
+    norm = sss.mask_norm(mask.astype(jnp.float32), 0.3)
+    assert norm.shape == (3, 40, 30)
+    np.testing.assert_array_equal(sss.blur(E, 0.3, mask, norm=norm), sss.blur(E, 0.3, mask))
