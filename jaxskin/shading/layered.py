@@ -31,6 +31,8 @@ layers. Differentiable in every input (check_grads in tests/test_makeup.py).
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -79,36 +81,18 @@ def radiance(grid: Grid, N, L, V, ambient, light, skin_R, skin_roughness, skin_r
         skin = E * skin_rgb
         return (skin if blur is None else blur(skin)) + h
 
-    n = S.shape[-1]
-    per_band = (S.shape[0], *([1] * (X.ndim - 1)), n)
-
-    def spectra():
-        """(surface, da, dta) per texel and band: light reflected by the stack plus the
-        highlights' change from the bare skin's, a − R_s, and T a − a (all exactly 0 for
-        zero thickness)."""
-        R_l, T_l = km.layer(S.reshape(per_band), K.reshape(per_band), X[..., None])
-        top = km.stack(R_l[::-1], T_l[::-1])  # km.stack wants the top layer first
-        g = 1.0 / (1.0 - top.R_back * skin_R)
-        da = skin_R * ((top.T - 1.0) + top.R_back * skin_R) * g
-        dta = (top.T - 1.0) * (skin_R + da)
-        # The highlights bottom to top, as a spectrum (white light): each is dimmed by T²
-        # of the layers above. dD is the change from the skin's own highlight h.
-        dD = jnp.zeros_like(top.R)
-        for i in range(X.shape[0]):
-            h_i = light * kelemen.specular(N, L, V, roughness[i], rho[i])[..., None]
-            cover = -jnp.expm1(-X[i] / COVER_MM)[..., None]
-            T2 = T_l[i] * T_l[i]
-            dD = dD * T2 + h * (T2 - 1.0) + cover * h_i
-        return E * top.R + dD, da, dta
-
+    # The highlights of the layers (white light), per layer and texel.
+    h_l = jnp.stack([light * kelemen.specular(N, L, V, roughness[i], rho[i])
+                     for i in range(X.shape[0])])
+    shape = N.shape[:-1]
+    flat = (X.reshape(X.shape[0], -1), E.reshape(-1, 1), h.reshape(-1, 1),
+            h_l.reshape(X.shape[0], -1, 1), S, K, skin_R)
+    colours = _colours(grid, blur is not None, *flat).reshape(*shape, -1)
     if blur is None:
-        surface, da, dta = spectra()
-        return (E * skin_rgb + h) + (surface + E * (da + dta)) @ to_rgb
+        return (E * skin_rgb + h) + colours
+    rgb_surface, xyz_da, xyz_dta = colours[..., :3], colours[..., 3:6], colours[..., 6:]
     to_xyz = jnp.asarray(grid.xyz_matrix, dtype)
     xyz_to_rgb = jnp.asarray(grid.xyz_to_rgb, dtype)
-    rgb_surface, xyz_da, xyz_dta = _separately(
-        [lambda: spectra()[0] @ to_rgb, lambda: spectra()[1] @ to_xyz,
-         lambda: spectra()[2] @ to_xyz])
     skin = E * (skin_rgb + xyz_da @ xyz_to_rgb)  # the colour of E a
     xyz_a = skin_R @ to_xyz + xyz_da
     ok = xyz_a > 1e-12
@@ -116,6 +100,97 @@ def radiance(grid: Grid, N, L, V, ambient, light, skin_R, skin_roughness, skin_r
     out = blur(skin)
     rgb_to_xyz = jnp.asarray(np.linalg.inv(grid.xyz_to_rgb), dtype)
     return (rgb_surface + (out + (t1 * (out @ rgb_to_xyz)) @ xyz_to_rgb)) + h
+
+
+def _spectra(X, E, h, h_l, S, K, skin_R):
+    """Per texel and band, for texels `(P,)`: the light reflected by the stack plus the
+    highlights' change from the bare skin's (surface), a − R_s (da) and T a − a (dta),
+    each `(P, n)` and exactly 0 for zero thickness. `X (L, P)`, `E, h (P, 1)`,
+    `h_l (L, P, 1)`, `S, K (L, n)`, `skin_R (n,)`."""
+    R_l, T_l = km.layer(S[:, None, :], K[:, None, :], X[..., None])
+    top = km.stack(R_l[::-1], T_l[::-1])  # km.stack wants the top layer first
+    g = 1.0 / (1.0 - top.R_back * skin_R)
+    da = skin_R * ((top.T - 1.0) + top.R_back * skin_R) * g
+    dta = (top.T - 1.0) * (skin_R + da)
+    # The highlights bottom to top, as a spectrum: each is dimmed by T² of the layers
+    # above. dD is the change from the skin's own highlight h.
+    dD = jnp.zeros_like(top.R)
+    for i in range(X.shape[0]):
+        cover = -jnp.expm1(-X[i] / COVER_MM)[..., None]
+        T2 = T_l[i] * T_l[i]
+        dD = dD * T2 + h * (T2 - 1.0) + cover * h_l[i]
+    return E * top.R + dD, da, dta
+
+
+def _joint(grid, blurred, *args):
+    """The colours `_colours` returns, computed in one program (for small chunks)."""
+    surface, da, dta = _spectra(*args)
+    to_rgb = jnp.asarray(grid.rgb_matrix, surface.dtype)
+    if not blurred:
+        return (surface + args[1] * (da + dta)) @ to_rgb
+    to_xyz = jnp.asarray(grid.xyz_matrix, surface.dtype)
+    return jnp.concatenate([surface @ to_rgb, da @ to_xyz, dta @ to_xyz], axis=-1)
+
+
+CHUNK = 1024  # texels per step of the derivative's loop
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
+def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
+    """The spectral work's colours per texel: without blur `(P, 3)`, the light reflected
+    plus the light through the stack from the skin, as linear sRGB; with blur `(P, 9)`:
+    rgb(surface), xyz(da), xyz(dta).
+
+    Performance (XLA on CPU). Forward: without blur one spectral product; with it three,
+    each computed apart (`_separately`). Derivatives: by the rule below, a loop over
+    chunks of `CHUNK` texels, each chunk's tangent recomputed from its inputs
+    (checkpointed), so that the many intermediates that XLA materialises for a derivative
+    stay in the cache; reverse mode transposes that loop. Measured at 170k texels, 41
+    bands: the gradient 7× the forward product instead of 34×.
+    """
+    if not blurred:
+        return _joint(grid, False, X, E, h, h_l, S, K, skin_R)
+    args = (X, E, h, h_l, S, K, skin_R)
+    to_rgb = jnp.asarray(grid.rgb_matrix, X.dtype)
+    to_xyz = jnp.asarray(grid.xyz_matrix, X.dtype)
+    rgb_surface, xyz_da, xyz_dta = _separately(
+        [lambda: _spectra(*args)[0] @ to_rgb, lambda: _spectra(*args)[1] @ to_xyz,
+         lambda: _spectra(*args)[2] @ to_xyz])
+    return jnp.concatenate([rgb_surface, xyz_da, xyz_dta], axis=-1)
+
+
+@_colours.defjvp
+def _colours_jvp(grid, blurred, primals, tangents):
+    X = primals[0]
+    P = X.shape[1]
+    chunks = -(-P // CHUNK)
+    pad = chunks * CHUNK - P
+    # Tie every tangent to X's (adding 0 × one of its entries): inputs whose tangent is a
+    # known zero otherwise make JAX's linearisation hoist their share of the work out of
+    # the loop as full-size residuals (measured: 4× slower).
+    tie = 0.0 * tangents[0][0, 0]
+    tangents = [t + tie for t in tangents]
+
+    def per_texel(a, axis):  # (..., P, ...) → (chunks, ..., CHUNK, ...)
+        widths = [(0, 0)] * a.ndim
+        widths[axis] = (0, pad)
+        a = jnp.pad(a, widths)
+        a = a.reshape(*a.shape[:axis], chunks, CHUNK, *a.shape[axis + 1:])
+        return jnp.moveaxis(a, axis, 0)
+
+    texel_axes = (1, 0, 0, 1)  # X, E, h, h_l; S, K, skin_R are per band
+
+    @jax.checkpoint
+    def one_chunk(local, local_dot):
+        return jax.jvp(lambda *a: _joint(grid, blurred, *a), (*local, *primals[4:]),
+                       (*local_dot, *tangents[4:]))[1]
+
+    local = tuple(per_texel(a, ax) for a, ax in zip(primals[:4], texel_axes, strict=True))
+    local_dot = tuple(per_texel(a, ax) for a, ax in zip(tangents[:4], texel_axes,
+                                                        strict=True))
+    out_dot = jax.lax.map(lambda c: one_chunk(*c), (local, local_dot))
+    out_dot = out_dot.reshape(-1, out_dot.shape[-1])[:P]
+    return _colours(grid, blurred, *primals), out_dot
 
 
 def _separately(fns):
