@@ -173,6 +173,7 @@ def shortcut_study():
 
 def plot(grids, shortcut, path, textures=None):
     import matplotlib
+    import matplotlib.ticker
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -195,6 +196,7 @@ def plot(grids, shortcut, path, textures=None):
                 textcoords="offset points", xytext=(6, 4))
     ax.set_xscale("log")
     ax.set_yscale("log")
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set_xlabel("warm time, ms (frame 512² for grids; KM stage for the shortcut)")
     ax.set_ylabel("ΔE2000, 99th percentile")
     ax.set_title("Cosmetics: error against run time (2 CPU cores)")
@@ -206,6 +208,7 @@ def plot(grids, shortcut, path, textures=None):
                          textcoords="offset points", xytext=(6, 4))
         ax2.set_xscale("log")
         ax2.set_yscale("log")
+        ax2.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax2.set_xlabel("warm frame time, ms (1280×720, SSS)")
         ax2.set_ylabel("ΔE2000 p99 against a 2048² texture")
         ax2.set_title("Texture size")
