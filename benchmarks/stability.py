@@ -37,8 +37,10 @@ def _directions(thetas_deg):
     return np.stack([np.sin(t), np.zeros_like(t), np.cos(t)], -1)
 
 
-def cases():
-    """(stage, function of float arrays -> array, inputs as float64 arrays)."""
+def cases(large: bool = False):
+    """(stage, function of float arrays -> array, inputs as float64 arrays). `large` adds
+    the 4096² bump map and the 2048² blur (about 10 GB and a minute and a half: the
+    benchmark runs them, the test suite does not)."""
     out = []
     S, ratio, SX = _grid([1e-3, 1.0, 1e3], [0.0, 1e-9, 1e-3, 1.0, 1e3, 1e6],
                          [0.0, 1e-6, 1e-3, 1.0, 1e2, 1e4])
@@ -86,14 +88,21 @@ def cases():
     for k in (0.5, 1e3):
         out.append((f"bump.bump_normals (n_z → 0, k_bump {k:g})",
                     lambda n, hh, kk=k: bump.bump_normals(n, hh, kk), [nmap, h]))
-    out += cosmetics_cases(N, L)
+    # Texture sizes: a furrowed height field over a sphere-like normal map.
+    for n in (64, 4096) if large else (64,):
+        y, x = (np.mgrid[0:n, 0:n] + 0.5) / n * 2 - 1
+        big = _unit(np.stack([x, y, np.sqrt(np.clip(1 - x * x - y * y, 0, None)) + 1e-7], -1))
+        furrows = 1 - 0.25 * (np.sin(40 * np.pi * (x + 0.3 * y)) > 0.9)
+        out.append((f"bump.bump_normals ({n}² texture, furrows, rim n_z → 0)",
+                    lambda nn, hh: bump.bump_normals(nn, hh, 0.5), [big, furrows]))
+    out += cosmetics_cases(N, L, large)
     return out
 
 
-def cosmetics_cases(N, L):
+def cosmetics_cases(N, L, large=False):
     """Issue 6's stages: the layered model per texel (thickness 0 to 10 mm, S → 0, K → 0,
     K/S 1e6, grazing light, n_z → 0), the skin blur (a point of light at a mesh edge, 64²
-    and 512²), melanin, the sRGB encoding at 0 and below, and a whole makeup render with
+    to 2048²), melanin, the sRGB encoding at 0 and below, and a whole makeup render with
     empty cosmetic maps."""
     from jaxskin import cosmetics, render, skin, spectral, sss
     from jaxskin.scene import load_scene
@@ -119,7 +128,7 @@ def cosmetics_cases(N, L):
                                     jnp.asarray([0.05, 0.05, 0.3], dt))
         out.append((f"layered.radiance ({label}; thickness 0–10 mm, grazing, n_z → 0)",
                     shade, [N, L, X]))
-    for n in (64, 512):
+    for n in (64, 512, 2048) if large else (64, 512):
         E = np.zeros((n, n, 3))
         E[n // 2, n // 2] = 1.0  # a point of light
         E[:, : n // 4] = 0.7
@@ -168,7 +177,7 @@ def run(stage, fn, inputs):
 
 
 def sweep():
-    return [run(*c) for c in cases()]
+    return [run(*c) for c in cases(large=True)]
 
 
 def main():
@@ -188,8 +197,9 @@ Command: `python benchmarks/stability.py`. Machine: {machine()}.
 
 Every differentiable stage, on grids of stiff and extreme inputs, in float32 and float64.
 Gradients are of the sum of the outputs with respect to every input.
-`tests/test_stability.py` runs the same sweep and fails on any non-finite value or
-gradient, or a float32 error above 1e-5 (outputs are reflectances, colours, unit vectors).
+`tests/test_stability.py` runs the same sweep, less the 4096² and 2048² cases (10 GB),
+and fails on any non-finite value or gradient, or a float32 error above 1e-5 (outputs are
+reflectances, colours, unit vectors).
 
 {t}
 """)
