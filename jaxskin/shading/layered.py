@@ -147,7 +147,7 @@ def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
     (checkpointed), so that the many intermediates that XLA materialises for a derivative
     stay in the cache; reverse mode transposes that loop. Measured on the makeup face at
     1280×720 (benchmarks/bench_makeup.py): the gradient with respect to every thickness
-    map takes 4.4–4.7× the forward pass, against 20–23× with plain autodiff.
+    map takes 4.3–4.7× the forward pass, against 20–23× with plain autodiff.
     """
     if not blurred:
         return _joint(grid, False, X, E, h, h_l, S, K, skin_R)
