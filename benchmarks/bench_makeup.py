@@ -281,7 +281,7 @@ The texture's default, 512², is the largest under the 100 ms aim; its p99 error
 2048² is half a just-noticeable difference, where 256² is visibly off (ΔE2000 ≈ 2) and
 1024² costs 4×. float32 is indistinguishable from float64 (max ΔE2000 5e-5) at half the
 time. Where the aims stand: the frame is at the 100 ms aim at the default 512² texture,
-85–102 ms over this session's runs (1024² takes 4×); the gradient with respect to every
+84–102 ms over this session's runs (1024² takes 4×); the gradient with respect to every
 thickness map takes 4.3–4.7× the forward pass (20–23× before the chunked derivative
 rule of `layered._colours`), above the ≤ 3× aim.
 """)

@@ -111,12 +111,12 @@ GFLOP": XLA's count for the compiled program (transcendentals as one each).
 
 {t}
 
-Reading (this run): the KM texture is the stage nearest its limits, about 8× a memory
-pass of its 185 MB and 7× its arithmetic at peak; what is left is XLA's materialised
-intermediates. The renders sit far above both lines (tens of × a pass of their bytes,
-which fit in this CPU's cache, so the pass itself is fast; 11–90× peak): small per-pixel
-work, gathers (bilinear view sampling, texel lists) that XLA does not count as
-arithmetic, and for the makeup face the three spectral colours computed apart
+Reading: the KM texture is the stage nearest its limits, 7–8× a memory pass of its
+185 MB and 7–8× its arithmetic at peak (over this session's runs); what is left is XLA's
+materialised intermediates. The renders sit far above both lines (tens of × a pass of
+their bytes, which fit in this CPU's cache, so the pass itself is fast; 10–90× peak):
+small per-pixel work, gathers (bilinear view sampling, texel lists) that XLA does not
+count as arithmetic, and for the makeup face the three spectral colours computed apart
 (`layered._separately`). The FFT blur is 3× its arithmetic ideal. The gaps are where a
 custom kernel could gain; no XLA flag closes them.
 """)

@@ -1,6 +1,6 @@
 """Run every benchmark in one process and rewrite benchmarks/RESULTS.md.
 
-    python benchmarks/run.py                 # about 4 minutes on 2 cores
+    python benchmarks/run.py                 # about 5 minutes on 2 cores
     python benchmarks/run.py km wrinkles     # only some
 
 Each benchmark prints its tables and replaces its own section of RESULTS.md (with the
