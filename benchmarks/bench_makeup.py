@@ -171,9 +171,25 @@ def shortcut_study():
              f"{d[covered].max():.3f}")], (t_exact, t_short, float(np.percentile(d, 99)))
 
 
+def _points(ax, points, default, colour, label):
+    """`points {key: (seconds, error)}` as dots, the default as a star, labelled."""
+    for key, (t, e) in points.items():
+        ax.scatter(t * 1e3, e, color=colour, marker="*" if key == default else "o", s=90)
+        ax.annotate(label.format(key) + (" (default)" if key == default else ""),
+                    (t * 1e3, e), textcoords="offset points", xytext=(6, 4))
+
+
+def _log_axes(ax, xlabel, ylabel, title):
+    import matplotlib.ticker
+
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax.set(xlabel=xlabel, ylabel=ylabel, title=title)
+
+
 def plot(grids, shortcut, path, textures=None):
     import matplotlib
-    import matplotlib.ticker
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -181,12 +197,7 @@ def plot(grids, shortcut, path, textures=None):
     fig, axes = plt.subplots(1, 2 if textures else 1, figsize=(11 if textures else 6, 4),
                              squeeze=False)
     ax = axes[0, 0]
-    for step, (t, e) in grids.items():
-        if step == 1:
-            continue
-        ax.scatter(t * 1e3, e, color="C0", marker="*" if step == 10 else "o", s=90)
-        ax.annotate(f"{step} nm" + (" (default)" if step == 10 else ""), (t * 1e3, e),
-                    textcoords="offset points", xytext=(6, 4))
+    _points(ax, {s: v for s, v in grids.items() if s != 1}, 10, "C0", "{} nm")
     ax.scatter(shortcut[1] * 1e3, shortcut[2], color="C3", s=60)
     ax.annotate("RGB shortcut (KM only)", (shortcut[1] * 1e3, shortcut[2]),
                 textcoords="offset points", xytext=(6, -12))
@@ -194,24 +205,12 @@ def plot(grids, shortcut, path, textures=None):
     ax.annotate("spectral KM only (default; the reference,\nerror 0, drawn at 1e-3)",
                 (shortcut[0] * 1e3, 1e-3),
                 textcoords="offset points", xytext=(6, 4))
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-    ax.set_xlabel("warm time, ms (frame 512² for grids; KM stage for the shortcut)")
-    ax.set_ylabel("ΔE2000, 99th percentile")
-    ax.set_title("Cosmetics: error against run time (2 CPU cores)")
+    _log_axes(ax, "warm time, ms (frame 512² for grids; KM stage for the shortcut)",
+              "ΔE2000, 99th percentile", "Cosmetics: error against run time (2 CPU cores)")
     if textures:
-        ax2 = axes[0, 1]
-        for size, (t, e) in textures.items():
-            ax2.scatter(t * 1e3, e, color="C1", marker="*" if size == 512 else "o", s=90)
-            ax2.annotate(f"{size}²" + (" (default)" if size == 512 else ""), (t * 1e3, e),
-                         textcoords="offset points", xytext=(6, 4))
-        ax2.set_xscale("log")
-        ax2.set_yscale("log")
-        ax2.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-        ax2.set_xlabel("warm frame time, ms (1280×720, SSS)")
-        ax2.set_ylabel("ΔE2000 p99 against a 2048² texture")
-        ax2.set_title("Texture size")
+        _points(axes[0, 1], textures, 512, "C1", "{}²")
+        _log_axes(axes[0, 1], "warm frame time, ms (1280×720, SSS)",
+                  "ΔE2000 p99 against a 2048² texture", "Texture size")
     fig.tight_layout()
     tmp = path.with_suffix(".tmp.png")
     fig.savefig(tmp, dpi=110)
