@@ -1,10 +1,11 @@
 """Numerical stability of every differentiable stage on stiff and extreme inputs.
 
-    python benchmarks/stability.py           # seconds; writes the `stability` section
+    python benchmarks/stability.py           # 1.5 minutes, 10 GB; the `stability` section
 
 For each stage, a grid of extreme inputs (K/S from 0 to 1e6, S·X from 0 to 1e4, thickness 0,
-grazing light and view, n_z → 0, shininess and lobe exponents to 1e4, steep bumps) is run in
-float32 and float64: the count of non-finite values and of non-finite gradients (both must
+grazing light and view, n_z → 0, shininess and lobe exponents to 1e4, steep bumps, furrows
+at |d| = 0 and 2, the cosmetics stages, texture sizes 64² to 4096²) is run in float32 and
+float64: the count of non-finite values and of non-finite gradients (both must
 be 0; tests/test_stability.py fails otherwise) and the largest float32 error against float64
 (absolute, on outputs that live in [0, 1] or are unit vectors).
 """
@@ -19,7 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxskin import bump, km
+from jaxskin import bump, km, wrinkles
 from jaxskin.shading import blinn, kelemen, lafortune
 
 
@@ -95,8 +96,27 @@ def cases(large: bool = False):
         furrows = 1 - 0.25 * (np.sin(40 * np.pi * (x + 0.3 * y)) > 0.9)
         out.append((f"bump.bump_normals ({n}² texture, furrows, rim n_z → 0)",
                     lambda nn, hh: bump.bump_normals(nn, hh, 0.5), [big, furrows]))
+    for d in (0.0, 2.0):  # the furrow field (not differentiable) at |d| = 0 and 2, bumped
+        h_d = furrows_at(d)
+        out.append((f"wrinkles |d| = {d:g}: noise + bump normals (k_noise, k_bump, h)",
+                    lambda kn, kb, hh: bump.bump_normals(
+                        jnp.broadcast_to(jnp.asarray([0.0, 0.0, 1.0], hh.dtype), (*hh.shape, 3)),
+                        wrinkles.add_noise(hh, jnp.ones(hh.shape, bool), kn[0],
+                                           jnp.full(hh.shape, 0.5, hh.dtype)), kb[0]),
+                    [np.array([0.3]), np.array([0.5]), h_d]))
     out += cosmetics_cases(N, L, large)
     return out
+
+
+def furrows_at(d: float, n: int = 64) -> np.ndarray:
+    """The furrow height field of constant fields of magnitude `d` on an n² square."""
+    mask = jnp.ones((n, n), bool)
+    f1 = jnp.broadcast_to(jnp.asarray([d, 0.0], jnp.float32), (n, n, 2))
+    f2 = jnp.broadcast_to(jnp.asarray([0.0, d], jnp.float32), (n, n, 2))
+    seeds = jnp.asarray((np.mgrid[4:n:8, 4:n:8].reshape(2, -1).T + 0.5), jnp.float32)
+    h, _ = wrinkles.height_field(mask, f1, f2, seeds, 1.0, jax.random.key(0),
+                                 radius=wrinkles.window_radius(1.0))
+    return np.asarray(h, np.float64)
 
 
 def cosmetics_cases(N, L, large=False):
