@@ -26,7 +26,7 @@ from .io import InputError, data_dir
 from .spectral import Grid
 
 __all__ = ["Material", "coverage", "ellipse_map", "image_map", "layers", "load_material",
-           "polygon_map"]
+           "material_path", "polygon_map", "shipped_materials"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -40,17 +40,29 @@ class Material:
     extrapolated: np.ndarray
 
 
+def shipped_materials() -> list[str]:
+    """The names of the example materials in data/materials."""
+    return sorted(p.stem for p in (data_dir() / "materials").glob("*.json"))
+
+
+def material_path(name_or_path, base=None) -> Path:
+    """A material's file: a shipped example's, by name (no suffix); else the path, taken
+    relative to `base` (default: the working directory)."""
+    key = str(name_or_path)
+    shipped = data_dir() / "materials" / f"{key}.json"
+    if not Path(key).suffix and shipped.is_file():
+        return shipped
+    return Path(key) if base is None else (Path(base) / key).resolve()
+
+
 def load_material(name_or_path, grid: Grid) -> Material:
     """A calibrated material by file or by the name of a shipped example."""
-    key = str(name_or_path)
-    path = Path(key)
-    if not path.suffix and (data_dir() / "materials" / f"{key}.json").is_file():
-        path = data_dir() / "materials" / f"{key}.json"
+    path = material_path(name_or_path)
     try:
         doc = json.loads(path.read_text())
     except FileNotFoundError:
-        shipped = sorted(p.stem for p in (data_dir() / "materials").glob("*.json"))
-        raise InputError(f"no such material file (shipped: {', '.join(shipped)})", path) from None
+        raise InputError(f"no such material file (shipped: {', '.join(shipped_materials())})",
+                         path) from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
         raise InputError(f"not a JSON file ({e.__class__.__name__})", path,
                          getattr(e, "lineno", None)) from None

@@ -95,9 +95,11 @@ from typing import Any
 
 import jax.numpy as jnp
 
+from . import cosmetics
 from .io import InputError, data_dir
 from .mesh import BUILTIN as BUILTIN_MESHES
 from .projection import KINDS
+from .spectral import ILLUMINANTS, STEPS, Grid
 
 __all__ = ["BUILTIN_SCENES", "Scene", "SceneConfig", "TextureConfig", "builtin_scenes",
            "load_scene"]
@@ -144,8 +146,8 @@ SCHEMA: dict[str, _Key] = {
     "skin.melanin": _Key(float, 0.0, 0.0, 3.0, param=True),
     "skin.roughness": _Key(float, 0.3, 0.01, 1.0, param=True),
     "skin.specular": _Key(float, 0.18, 0.0, 1.0, param=True),
-    "spectral.step": _Key(int, 10, choices=(1, 5, 10, 20)),
-    "spectral.illuminant": _Key(str, "D65", choices=("D65", "D55", "D50", "A")),
+    "spectral.step": _Key(int, 10, choices=STEPS),
+    "spectral.illuminant": _Key(str, "D65", choices=ILLUMINANTS),
     "sss.enabled": _Key(bool, True),
     "sss.method": _Key(str, "fft", choices=("fft", "separable")),
     "sss.texel_mm": _Key(float, 0.0, 0.0, 100.0),
@@ -199,7 +201,7 @@ class LayerSpec:
     points (uv) or vertices (mesh indices) set."""
 
     name: str
-    material: str  # a shipped material's name, or an absolute path
+    material: str  # the material file's absolute path
     image: str | None
     ellipses: tuple = ()
     polygons: tuple = ()
@@ -218,9 +220,7 @@ class SpectralConfig:
     layers: tuple[LayerSpec, ...]
 
     @property
-    def grid(self):
-        from .spectral import Grid
-
+    def grid(self) -> Grid:
         return Grid(self.step, illuminant=self.illuminant)
 
 
@@ -418,11 +418,15 @@ def _parse_override(item: str):
     return key, value
 
 
-def _vector(value, key, path, limit=None):
-    ok = isinstance(value, list) and len(value) == 3 and all(
+def _finite_list(value, n: int, positive: bool = False) -> bool:
+    """Whether `value` is a list of `n` finite numbers (all > 0 if `positive`)."""
+    return isinstance(value, list) and len(value) == n and all(
         isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c)
-        for c in value)
-    if not ok:
+        and (c > 0 or not positive) for c in value)
+
+
+def _vector(value, key, path, limit=None):
+    if not _finite_list(value, 3):
         raise InputError(f"expected three finite numbers, got {value!r}", path, key=key)
     if limit is not None and math.hypot(*value) > limit + 1e-9:
         raise InputError(f"magnitude must be in [0, {limit:g}] (the paper's range), got "
@@ -473,14 +477,12 @@ def _layer(i, e, path, values) -> LayerSpec:
     if not isinstance(material, str):
         raise InputError("expected a material: a shipped one's name or a JSON file written "
                          "by jaxskin calibrate", path, key=f"{where}.material")
-    shipped = data_dir() / "materials" / f"{material}.json"
-    if not (Path(material).suffix == "" and shipped.is_file()):
-        file = (path.parent / material).resolve()
-        if not file.is_file():
-            names = ", ".join(sorted(p.stem for p in (data_dir() / "materials").glob("*.json")))
-            raise InputError(f"no material file {file} (shipped materials: {names})", path,
-                             key=f"{where}.material")
-        material = str(file)
+    file = cosmetics.material_path(material, path.parent)
+    if not file.is_file():
+        names = ", ".join(cosmetics.shipped_materials())
+        raise InputError(f"no material file {file} (shipped materials: {names})", path,
+                         key=f"{where}.material")
+    material = str(file)
     image = e.get("image")
     if image is not None:
         if not isinstance(image, str) or not (path.parent / image).is_file():
@@ -547,10 +549,7 @@ def _number(value, path, where, lo=None):
 
 
 def _numbers(value, n, path, where, positive=False):
-    ok = isinstance(value, list) and len(value) == n and all(
-        isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c)
-        and (c > 0 or not positive) for c in value)
-    if not ok:
+    if not _finite_list(value, n, positive):
         raise InputError(f"expected {n} finite{' positive' if positive else ''} numbers, got "
                          f"{value!r}", path, key=where)
     return tuple(float(c) for c in value)
