@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import HERE, machine, table, timeit, write_section  # noqa: E402
+from common import HERE, machine, srgb_lab, table, timeit, write_section  # noqa: E402
 
 from jaxskin import km, render  # noqa: E402
 from jaxskin.scene import load_scene  # noqa: E402
@@ -32,15 +32,10 @@ from jaxskin.scene import load_scene  # noqa: E402
 HD = ["camera.size=1280", "camera.height=720"]
 
 
-def lab(display):
-    """CIELAB of display sRGB values (the renderer's output)."""
-    srgb = colour.RGB_COLOURSPACES["sRGB"]
-    xyz = colour.RGB_to_XYZ(np.clip(display, 0, 1), srgb, apply_cctf_decoding=True)
-    return colour.XYZ_to_Lab(xyz, srgb.whitepoint)
-
-
 def delta_e(a, b, mask):
-    return np.asarray(colour.delta_E(lab(a[mask]), lab(b[mask]), method="CIE 2000"))
+    """ΔE2000 between two display-value images where `mask` is set."""
+    return np.asarray(colour.delta_E(srgb_lab(a[mask], encoded=True),
+                                     srgb_lab(b[mask], encoded=True), method="CIE 2000"))
 
 
 def frame(name, overrides):

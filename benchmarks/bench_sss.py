@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import HERE, machine, table, timeit, write_section  # noqa: E402
+from common import HERE, machine, srgb_lab, table, timeit, write_section  # noqa: E402
 
 from jaxskin import sss  # noqa: E402
 
@@ -38,12 +38,6 @@ def irradiance(n: int) -> np.ndarray:
     return np.repeat((base * shadow * speckle)[..., None], 3, axis=-1) * [1.0, 0.8, 0.7]
 
 
-def lab(rgb):
-    srgb = colour.RGB_COLOURSPACES["sRGB"]
-    xyz = colour.RGB_to_XYZ(np.clip(rgb, 0, None), srgb, apply_cctf_decoding=False)
-    return colour.XYZ_to_Lab(xyz, srgb.whitepoint)
-
-
 def main():
     print(machine())
     E = irradiance(N)
@@ -52,7 +46,7 @@ def main():
     t_fft = time.perf_counter() - t0
     border = sss.kernel_radius(sss.VARIANCES_MM2[-1], TEXEL, 4.0)
     inner = (slice(border, N - border), slice(border, N - border))
-    ref_lab = lab(reference[inner])
+    ref_lab = srgb_lab(reference[inner])
     rows = [("reference: FFT in NumPy, float64", f"{t_fft * 1e3:.0f}", "", "0", "0")]
     points = []
     mask = np.ones((N, N), bool)
@@ -64,7 +58,7 @@ def main():
         f = jax.jit(lambda e, kw=kwargs: sss.blur(e, TEXEL, **kw))
         x = jnp.asarray(E, jnp.float32)
         t = timeit(f, x, repeat=3)
-        dE = np.asarray(colour.delta_E(lab(np.asarray(f(x), np.float64)[inner]), ref_lab,
+        dE = np.asarray(colour.delta_E(srgb_lab(np.asarray(f(x), np.float64)[inner]), ref_lab,
                                        method="CIE 2000"))
         fm = jax.jit(lambda e, kw=kwargs: sss.blur(e, TEXEL, mask, **kw))
         tm = timeit(fm, x, repeat=3)

@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import jax
+import numpy as np
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "RESULTS.md"
@@ -43,6 +44,17 @@ def median_time(fn, repeat: int = 5) -> float:
         fn()
         times.append(time.perf_counter() - t0)
     return statistics.median(times)
+
+
+def srgb_lab(rgb, encoded: bool = False):
+    """CIELAB (D65) of sRGB values: linear light (clipped at 0), or display values
+    (`encoded`, clipped to [0, 1] and decoded), as the renderer writes them."""
+    import colour
+
+    srgb = colour.RGB_COLOURSPACES["sRGB"]
+    rgb = np.clip(rgb, 0, 1) if encoded else np.clip(rgb, 0, None)
+    xyz = colour.RGB_to_XYZ(rgb, srgb, apply_cctf_decoding=encoded)
+    return colour.XYZ_to_Lab(xyz, srgb.whitepoint)
 
 
 def machine() -> str:
