@@ -27,7 +27,7 @@ from common import HERE, cold_and_warm, machine, median_time, table, timeit, wri
 
 from fitting import km as fit_km  # noqa: E402
 from fitting.measurements import read_measurement  # noqa: E402
-from jaxskin import km, spectral  # noqa: E402
+from jaxskin import km, skin, spectral  # noqa: E402
 from jaxskin.io import data_dir  # noqa: E402
 
 ROOT = HERE.parent
@@ -50,14 +50,7 @@ def load_materials(wavelengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def skin_reflectance(wavelengths: np.ndarray) -> np.ndarray:
     """NIST subject 1's mean forearm reflectance, interpolated onto `wavelengths`."""
-    path = data_dir() / "spectra" / "nist_skin_reflectance_M38597.csv"
-    rows = []
-    for line in path.read_text(encoding="latin-1").splitlines():
-        cells = line.split(",")
-        if cells and cells[0].strip().isdigit():
-            rows.append((float(cells[0]), float(cells[4])))  # wavelength, subject 1 average
-    wl, R = np.array(rows).T
-    return np.interp(wavelengths, wl, R)
+    return np.interp(wavelengths, *skin.nist_spectrum(1))
 
 
 def thickness_maps(n: int, seed: int = 0) -> np.ndarray:

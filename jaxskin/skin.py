@@ -27,7 +27,7 @@ import numpy as np
 from .io import InputError, data_dir
 from .spectral import Grid
 
-__all__ = ["NIST_FILE", "SUBJECTS", "nist_reflectance", "reflectance"]
+__all__ = ["NIST_FILE", "SUBJECTS", "nist_reflectance", "nist_spectrum", "reflectance"]
 
 NIST_FILE = "nist_skin_reflectance_M38597.csv"
 SUBJECTS = 100
@@ -48,13 +48,18 @@ def _nist_table() -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(wl), np.asarray(means).T
 
 
-def nist_reflectance(subject: int, grid: Grid) -> np.ndarray:
-    """Subject `subject` (1–100)'s mean reflectance on `grid` (host array, float64)."""
+def nist_spectrum(subject: int) -> tuple[np.ndarray, np.ndarray]:
+    """Subject `subject` (1–100)'s mean reflectance as measured: `(wavelengths nm, R)`."""
     if not 1 <= subject <= SUBJECTS:
         raise InputError(f"NIST skin subject must be 1–{SUBJECTS}, got {subject}",
                          key="skin.subject")
     wl, means = _nist_table()
-    return np.interp(grid.wavelengths, wl, means[subject - 1])
+    return wl, means[subject - 1]
+
+
+def nist_reflectance(subject: int, grid: Grid) -> np.ndarray:
+    """Subject `subject` (1–100)'s mean reflectance on `grid` (host array, float64)."""
+    return np.interp(grid.wavelengths, *nist_spectrum(subject))
 
 
 def reflectance(base, melanin, grid: Grid):
