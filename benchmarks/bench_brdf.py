@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "data"))
 import make_brdf_samples  # noqa: E402
 from common import HERE, machine, median_time, table, write_section  # noqa: E402
 
-from fitting import brdf  # noqa: E402
+from jaxskin.fitting import brdf  # noqa: E402
 from jaxskin.io import data_dir  # noqa: E402
 from jaxskin.shading import lafortune  # noqa: E402
 

@@ -124,8 +124,8 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _calibrate(args) -> int:
-    from fitting import km as fit_km
-    from fitting.measurements import read_measurement
+    from jaxskin.fitting import km as fit_km
+    from jaxskin.fitting.measurements import read_measurement
 
     noise = fit_km.DEFAULT_NOISE if args.noise is None else args.noise
     if not noise >= 0:
@@ -153,7 +153,7 @@ def _calibrate(args) -> int:
 
     from tqdm import tqdm
 
-    from fitting.report import write_report
+    from jaxskin.fitting.report import write_report
 
     rows = []
     for m in tqdm(measurements, desc="calibrate", unit="file", disable=None):
@@ -259,7 +259,7 @@ def _render(args) -> int:
 
 
 def _fit_brdf(args) -> int:
-    from fitting import brdf
+    from jaxskin.fitting import brdf
     from jaxskin.shading import lafortune
 
     if args.lobes < 1:

@@ -8,6 +8,7 @@ writes goes through `atomic_write`, so no half-written file is ever left behind.
 from __future__ import annotations
 
 import contextlib
+import importlib.resources
 import os
 import tempfile
 from pathlib import Path
@@ -72,14 +73,14 @@ def _umask() -> int:
 
 
 def data_dir() -> Path:
-    """The shipped `data/` folder (meshes, spectra, example measurements and materials)."""
-    here = Path(__file__).resolve().parent.parent / "data"
-    env = os.environ.get("JAXSKIN_DATA")
-    path = Path(env) if env else here
-    if not path.is_dir():
-        raise InputError(
-            "the shipped data folder is missing; install from a checkout with "
-            "`pip install -e .` or set JAXSKIN_DATA",
-            path,
-        )
+    """The shipped data folder, `jaxskin.data`: meshes, scenes, spectra, materials, examples.
+
+    Read through `importlib.resources`, so it is found the same way in a regular install
+    (inside the wheel), an editable install (the repository's `data/`) and a checkout.
+    """
+    root = importlib.resources.files("jaxskin.data")
+    path = Path(str(root))
+    if not path.is_dir():  # a zipped install: jaxskin needs real files for trimesh and numpy
+        raise InputError("jaxskin's data is not a folder on disk; install jaxskin unzipped "
+                         "(pip does)", path)
     return path

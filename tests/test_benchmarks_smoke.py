@@ -40,7 +40,7 @@ def test_bench_brdf_baseline_model_matches_ours():
     wo = np.abs(rng.normal(size=(5, 3)))
     wi /= np.linalg.norm(wi, axis=1, keepdims=True)
     wo /= np.linalg.norm(wo, axis=1, keepdims=True)
-    from fitting.brdf import _unpack
+    from jaxskin.fitting.brdf import _unpack
 
     ours = np.asarray(lafortune.brdf(_unpack(jnp.asarray(theta), 3), wi, wo))[:, 0]
     np.testing.assert_allclose(bench_brdf.numpy_model(theta, wi, wo), ours, rtol=1e-5)

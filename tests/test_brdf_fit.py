@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import check_grads_scaled
 
-from fitting import brdf
+from jaxskin.fitting import brdf
 from jaxskin.io import InputError
 from jaxskin.shading import lafortune
 

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fitting import km as fkm
-from fitting.measurements import Measurement, read_measurement
+from jaxskin.fitting import km as fkm
+from jaxskin.fitting.measurements import Measurement, read_measurement
 from jaxskin import km
 from jaxskin.cli import main
 from jaxskin.io import InputError

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from fitting.measurements import read_measurement
+from jaxskin.fitting.measurements import read_measurement
 from jaxskin.io import InputError
 
 GOOD = """# name: test_foundation
