@@ -25,9 +25,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import HERE, cold_and_warm, machine, median_time, table, timeit, write_section  # noqa: E402
 
+from jaxskin import km, skin, spectral  # noqa: E402
 from jaxskin.fitting import km as fit_km  # noqa: E402
 from jaxskin.fitting.measurements import read_measurement  # noqa: E402
-from jaxskin import km, skin, spectral  # noqa: E402
 from jaxskin.io import data_dir  # noqa: E402
 
 ROOT = HERE.parent

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jaxskin.fitting import km as fkm
-from jaxskin.fitting.measurements import Measurement, read_measurement
 from jaxskin import km
 from jaxskin.cli import main
+from jaxskin.fitting import km as fkm
+from jaxskin.fitting.measurements import Measurement, read_measurement
 from jaxskin.io import InputError
 
 ROOT = Path(__file__).resolve().parent.parent
