@@ -14,6 +14,15 @@ The cosmetics model (`material.model = "spectral"`, Huang et al. 2013) shades in
 space instead, as the paper's SSS needs: irradiance, the Kubelka–Munk layers, the skin
 profile's blur over the texture, the highlights (`shading.layered`), then the finished
 colour is sampled into the view. No layers: no KM; `sss.enabled = false`: no blur.
+
+Shadows (`light.shadows`, `jaxskin.shadow`): a depth map from the light of the static
+configuration decides, once in `prepare`, which points the light reaches: every view
+sample for Blinn and Lafortune, every texel for the cosmetics model (so the SSS blur
+softens the shadow's edge). The direct light (diffuse and highlight) is multiplied by that
+0/1 visibility; ambient light is not. No shadows: no map, nothing traced.
+
+Texture-space images are padded beyond the mesh's texels before the view samples them
+(`view.pad_index`): bilinear samples at a silhouette read no background texels.
 """
 
 from __future__ import annotations
@@ -25,13 +34,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import cosmetics, skin, sss, texture
+from . import cosmetics, shadow, skin, sss, texture
 from .raster import interpolate
 from .scene import SceneConfig
 from .shading import blinn, lafortune, layered
-from .view import View, downsample, make_view, sample
+from .view import View, coverage, downsample, make_view, pad_index, sample
 
-__all__ = ["Prepared", "albedo", "encode_srgb", "prepare", "render", "render_prepared"]
+__all__ = ["OUTPUTS", "Prepared", "albedo", "decode_srgb", "encode_srgb", "prepare", "render",
+           "render_prepared", "render_rgba"]
+
+OUTPUTS = ("display", "rgba", "linear_rgba")
+SHADOW_MAX = 2048  # texels across the shadow map, at most
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -48,7 +61,8 @@ def prepare(config: SceneConfig) -> Prepared:
     view = make_view(s.tmap, config.image, config.camera, config.supersample, config.fov,
                      config.rotate, config.image_height)
     arrays = {"normals": s.normals, "mask": s.mask, "tex": jnp.asarray(view.tex),
-              "view_mask": jnp.asarray(view.mask)}
+              "view_mask": jnp.asarray(view.mask),
+              "pad": jnp.asarray(pad_index(s.tmap.raster.mask, s.tmap.wrap_x), jnp.int32)}
     if config.needs_furrows:
         arrays["h0"] = texture.furrows(config.texture)[0]
         arrays["noise"] = texture.noise(config.texture)
@@ -76,27 +90,73 @@ def prepare(config: SceneConfig) -> Prepared:
                      for layer in sp.layers]
             arrays["cover"] = jnp.asarray(np.stack(cover).reshape(len(cover), -1)[:, texels],
                                           jnp.float32)
+    if config.shadow is not None and config.mode != "height":
+        arrays["lit"] = _visibility(config, s, view)
     return Prepared(s, view, arrays, texel_mm)
 
 
-def render(config: SceneConfig, params: dict):
-    """The image `(size, size, 3)` of a scene, float32, display values (clip to [0, 1])."""
-    return _render(config, params, prepare(config).arrays)
+def _visibility(config: SceneConfig, s: texture.TextureSetup, view: View):
+    """The shadow test (`jaxskin.shadow`) for `config.shadow`'s light, in the object's
+    frame: per texel on the mesh `(P,)` for the cosmetics model, per view sample `(H, W)`
+    otherwise. The map is as fine as the finer of texture and view, up to `SHADOW_MAX`."""
+    m = s.mesh
+    d = np.asarray(config.shadow, np.float64)
+    direction = (d / np.linalg.norm(d)) @ view.R  # camera → object frame, as L in `_render`
+    size = min(SHADOW_MAX, max(s.tmap.width, s.tmap.height, *view.mask.shape))
+    smap = shadow.shadow_map(m.vertices, m.faces, direction, size)
+    if config.spectral is not None:
+        lit = shadow.visibility(m.vertices, m.faces, m.normals, s.tmap.raster, smap)
+        return jnp.asarray(lit.reshape(-1)[np.flatnonzero(s.tmap.raster.mask)])
+    return jnp.asarray(shadow.visibility(m.vertices, m.faces, m.normals, view.raster, smap))
 
 
-def render_prepared(config: SceneConfig, params: dict, arrays: dict):
+def render(config: SceneConfig, params: dict, output: str = "display"):
+    """The image of a scene, float32. `output`: `"display"` `(H, W, 3)` display values
+    (clip to [0, 1]) over a black background; `"rgba"` `(H, W, 4)` display colour with
+    straight alpha = the mesh's coverage of each pixel (PNG's convention); `"linear_rgba"`
+    linear light premultiplied by alpha (OpenEXR's convention).
+
+    With shadows, a concrete `light.direction` in `params` that differs from the static
+    configuration's gets its own shadow map (made here, outside any trace); a traced one
+    uses the configuration's (see `jaxskin.shadow`)."""
+    config = _shadow_config(config, params)
+    return _render(config, params, prepare(config).arrays, output)
+
+
+def render_rgba(config: SceneConfig, params: dict, linear: bool = False):
+    """`render` with alpha: `"linear_rgba"` if `linear`, else `"rgba"`."""
+    return render(config, params, "linear_rgba" if linear else "rgba")
+
+
+def render_prepared(config: SceneConfig, params: dict, arrays: dict,
+                    output: str = "display"):
     """`render` with the prepared arrays (`prepare(config).arrays`) passed in: inside your
     own jit, grad or vmap, pass them as arguments, or XLA folds them in as constants."""
-    return _render(config, params, arrays)
+    return _render(config, params, arrays, output)
 
 
-@functools.partial(jax.jit, static_argnums=0)
-def _render(config: SceneConfig, params: dict, arrays: dict):
+def _shadow_config(config: SceneConfig, params: dict) -> SceneConfig:
+    d = params.get("light.direction")
+    if config.shadow is None or d is None or isinstance(d, jax.core.Tracer):
+        return config
+    d = np.asarray(d, np.float64)
+    old = np.asarray(config.shadow, np.float64)
+    if np.allclose(d / np.linalg.norm(d), old / np.linalg.norm(old), rtol=0, atol=1e-7):
+        return config
+    return dataclasses.replace(config, shadow=tuple(float(c) for c in d))
+
+
+@functools.partial(jax.jit, static_argnums=(0, 3))
+def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "display"):
+    if output not in OUTPUTS:
+        raise ValueError(f"output must be one of {OUTPUTS}, got {output!r}")
     p = prepare(config)  # host-side, cached: only static facts (rotation, eye) are used
     mask, view_mask, k = arrays["mask"], arrays["view_mask"], config.supersample
 
-    def to_view(texture_image):  # bilinear samples at every (super)sample
-        return sample(texture_image, arrays["tex"], view_mask, p.view.wrap_x)
+    def to_view(texture_image):  # bilinear samples at every (super)sample, padded texture
+        C = texture_image.shape[-1]
+        padded = texture_image.reshape(-1, C)[arrays["pad"]]
+        return sample(padded, arrays["tex"], view_mask, p.view.wrap_x)
 
     if config.needs_furrows:
         maps = texture.bumped(arrays["normals"], mask, arrays["h0"], arrays["noise"], params)
@@ -107,7 +167,7 @@ def _render(config: SceneConfig, params: dict, arrays: dict):
         colour = jnp.repeat(to_view(height[..., None]), 3, axis=-1)
     elif config.spectral is not None:
         colour = to_view(_cosmetics_texture(config, p, params, arrays, normals))
-        return encode_srgb(downsample(colour, k))  # averaged in linear light, then encoded
+        return _finish(colour, view_mask, k, output, linear=True)
     else:
         # Shade where the camera looks: the bumped normal map sampled into the view (fewer
         # samples than texels), in the object's frame (L and V turned by Rᵀ instead of
@@ -124,6 +184,8 @@ def _render(config: SceneConfig, params: dict, arrays: dict):
             to_eye = jnp.asarray(p.view.eye, jnp.float32) - to_view(arrays["positions"]) @ R.T
             V = (to_eye / jnp.linalg.norm(to_eye, axis=-1, keepdims=True)) @ R
         ambient, light = params["light.ambient"], params["light.intensity"]
+        if "lit" in arrays:  # shadows: the direct light only where the light reaches
+            light = light * arrays["lit"][..., None]
         if config.material == "blinn":
             colour = blinn.shade(N, L, V, params["material.melanin"], params["material.blood"],
                                  params["material.specular"], params["material.shininess"],
@@ -131,7 +193,25 @@ def _render(config: SceneConfig, params: dict, arrays: dict):
         else:
             colour = lafortune.shade(params["material.lafortune"], N, L, V, ambient, light)
         colour = jnp.where(view_mask[..., None], colour, 0.0)
-    return downsample(colour, k)
+    return _finish(colour, view_mask, k, output, linear=False)
+
+
+def _finish(samples, view_mask, k: int, output: str, linear: bool):
+    """Samples `(k H, k W, 3)` (black off the mesh) → the pixels `render` returns.
+    `linear`: the samples are linear light (the cosmetics model), averaged in linear light
+    and encoded; else display values (Blinn, Lafortune, height: the paper's colours),
+    averaged as they are, and decoded for a linear output."""
+    if output == "display":
+        mean = downsample(samples, k)
+        return encode_srgb(mean) if linear else mean
+    alpha = jnp.asarray(coverage(view_mask, k))[..., None]
+    if output == "linear_rgba":
+        mean = downsample(samples if linear else decode_srgb(samples), k)
+        return jnp.concatenate([mean, alpha], axis=-1)
+    mean = downsample(samples, k)
+    covered = alpha > 0
+    straight = jnp.where(covered, mean / jnp.where(covered, alpha, 1.0), 0.0)
+    return jnp.concatenate([encode_srgb(straight) if linear else straight, alpha], axis=-1)
 
 
 def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: dict, normals):
@@ -157,6 +237,9 @@ def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: d
     else:  # texture-space positions: a view direction per texel
         to_eye = jnp.asarray(p.view.eye, normals.dtype) - to_list(arrays["positions"]) @ R.T
         V = (to_eye / jnp.linalg.norm(to_eye, axis=-1, keepdims=True)) @ R
+    light = params["light.intensity"]
+    if "lit" in arrays:  # shadows, per texel: the blur below softens their edges
+        light = light * arrays["lit"]
     blur = None
     if sp.sss is not None:
         def blur(colour):
@@ -172,9 +255,9 @@ def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: d
                   "K": arrays["K"] * per_layer("k_scale")[:, None],
                   "X": arrays["cover"] * per_layer("thickness_mm")[:, None],
                   "roughness": per_layer("roughness"), "rho": per_layer("specular")}
-    colour = layered.radiance(sp.grid, normals, L, V, params["light.ambient"],
-                              params["light.intensity"], skin_R, params["skin.roughness"],
-                              params["skin.specular"], blur=blur, **layers)
+    colour = layered.radiance(sp.grid, normals, L, V, params["light.ambient"], light, skin_R,
+                              params["skin.roughness"], params["skin.specular"], blur=blur,
+                              **layers)
     return to_image(colour)
 
 
@@ -185,6 +268,15 @@ def encode_srgb(linear):
     curved = x > 0.0031308
     power = 1.055 * jnp.where(curved, x, 1.0) ** (1 / 2.4) - 0.055
     return jnp.where(curved, power, 12.92 * x)
+
+
+def decode_srgb(display):
+    """The inverse of `encode_srgb`: display values → linear light (linear below 0.04045,
+    negative values included; finite value and gradient at 0)."""
+    x = jnp.asarray(display)
+    curved = x > 0.04045
+    power = ((jnp.where(curved, x, 1.0) + 0.055) / 1.055) ** 2.4
+    return jnp.where(curved, power, x / 12.92)
 
 
 def albedo(config: SceneConfig, params: dict):

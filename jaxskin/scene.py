@@ -24,6 +24,7 @@ brdf = "skin"                      # Lafortune: the preset, or a JSON from jaxsk
 direction = [0.0, 0.0, 1.0]        # toward the light, camera space (parallel light)
 ambient = 0.3                      # I_ambient
 intensity = 0.7                    # I_light
+shadows = false                    # a shadow map from the light (static: the direction above)
 [camera]
 projection = "orthographic"        # orthographic | perspective
 size = 512                         # image pixels across
@@ -135,6 +136,7 @@ SCHEMA: dict[str, _Key] = {
     "light.direction": _Key("vec3", (0.0, 0.0, 1.0), param=True),
     "light.ambient": _Key(float, 0.3, 0.0, 1.0, param=True),
     "light.intensity": _Key(float, 0.7, 0.0, 10.0, param=True),
+    "light.shadows": _Key(bool, False),
     "camera.projection": _Key(str, "orthographic", choices=("orthographic", "perspective")),
     "camera.size": _Key(int, 512, 16, 8192),
     "camera.height": _Key(int, 0, 0, 8192),
@@ -239,6 +241,8 @@ class SceneConfig:
     mode: str  # wrinkles | overview | height
     spectral: SpectralConfig | None = None  # the cosmetics model's, when it is the material
     image_height: int = 0  # 0: square
+    # The light direction (camera space) the shadow map is made for; None: no shadows.
+    shadow: tuple[float, float, float] | None = None
 
     @property
     def needs_furrows(self) -> bool:
@@ -268,7 +272,8 @@ class Scene:
         return SceneConfig(tex, v["material.model"], v["material.brdf"], v["camera.projection"],
                            v["camera.size"], v["camera.supersample"], v["camera.fov"],
                            tuple(v["camera.rotate"]), v["view.mode"], spectral,
-                           v["camera.height"])
+                           v["camera.height"],
+                           tuple(v["light.direction"]) if v["light.shadows"] else None)
 
     @functools.cached_property
     def params(self) -> dict:

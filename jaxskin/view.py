@@ -5,7 +5,12 @@ and is fixed per configuration; what follows — interpolating texture coordinat
 sampling the texture-space colour image bilinearly — is differentiable in the image
 (nvdiffrast's split). Orthographic by default, like the paper (the mesh's bounding box
 fills the image); perspective with perspective-correct barycentrics. `supersample` renders
-k × k samples per pixel and averages them (antialiasing).
+k × k samples per pixel and averages them (antialiasing); `coverage` is the fraction of a
+pixel's samples that see the mesh (the alpha of an RGBA image).
+
+Bilinear samples near a silhouette read texels just outside the mesh's part of texture
+space; `pad_index` fills those with their nearest texel on the mesh (computed once, a
+gather in the traced function), so no dark rim of background texels bleeds in.
 
 The camera looks down −z; `rotate` (degrees about x, then y, then z) turns the mesh, as
 the paper's mouse does, and the normals with it (§5.3).
@@ -20,11 +25,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from .projection import TextureMap
-from .raster import rasterize
+from .raster import Raster, rasterize
 
-__all__ = ["View", "downsample", "make_view", "rotation", "sample"]
+__all__ = ["View", "coverage", "downsample", "make_view", "pad_index", "rotation", "sample"]
 
 MARGIN = 0.05
+PAD = 3  # texels of padding around the mesh's texels (bilinear reads reach one)
 
 
 def rotation(degrees) -> np.ndarray:
@@ -40,13 +46,15 @@ def rotation(degrees) -> np.ndarray:
 class View:
     """Per image pixel (at the supersampled size): the texture coordinate it sees
     `tex (H, W, 2)` in texels, `mask (H, W)`; the model rotation `R`, the `eye` (None for
-    orthographic), and whether texture x wraps (a cylinder)."""
+    orthographic), whether texture x wraps (a cylinder), and the `raster` (triangle and
+    barycentrics, perspective-corrected) each sample sees."""
 
     tex: np.ndarray
     mask: np.ndarray
     R: np.ndarray
     eye: np.ndarray | None
     wrap_x: bool
+    raster: Raster | None = None
 
 
 def make_view(tmap: TextureMap, size: int, projection: str = "orthographic",
@@ -90,7 +98,8 @@ def make_view(tmap: TextureMap, size: int, projection: str = "orthographic",
         bary /= np.maximum(bary.sum(axis=-1, keepdims=True), 1e-300)
     corners = tmap.face_corners()  # (F, 3, 2) texture coordinates, unwrapped at the seam
     tex = np.einsum("hwk,hwkc->hwc", bary, corners[safe])
-    return View(tex.astype(np.float32), r.mask, R, eye, tmap.wrap_x)
+    return View(tex.astype(np.float32), r.mask, R, eye, tmap.wrap_x,
+                Raster(r.tri, bary.astype(np.float32)))
 
 
 def sample(image, tex, mask, wrap_x: bool, background=0.0):
@@ -111,6 +120,48 @@ def sample(image, tex, mask, wrap_x: bool, background=0.0):
     out = ((1 - fx) * (1 - fy) * at(x0, y0) + fx * (1 - fy) * at(x0 + 1, y0)
            + (1 - fx) * fy * at(x0, y0 + 1) + fx * fy * at(x0 + 1, y0 + 1))
     return jnp.where(jnp.asarray(mask)[..., None], out, background)
+
+
+def pad_index(mask, wrap_x: bool, width: int = PAD) -> np.ndarray:
+    """Flat texel indices `(H, W)` that pad a texture-space image beyond `mask (H, W)`:
+    each texel off the mesh within `width` texels (8-connected steps) of it takes its
+    nearest texel on the mesh (the first found, in a fixed order of neighbours); every
+    other texel itself. `image.reshape(-1, C)[index]` is the padded image. Texture x wraps
+    across a cylinder's seam when `wrap_x`."""
+    mask = np.asarray(mask, bool)
+    H, W = mask.shape
+    index = np.arange(H * W).reshape(H, W)
+    filled = mask.copy()
+    steps = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx]
+    steps.sort(key=lambda s: abs(s[0]) + abs(s[1]))  # edge neighbours before corners
+    for _ in range(width):
+        new_index, new_filled = index.copy(), filled.copy()
+        for dy, dx in steps:
+            src_filled = _shift(filled, dy, dx, wrap_x, False)
+            src_index = _shift(index, dy, dx, wrap_x, 0)
+            take = ~new_filled & src_filled
+            new_index[take], new_filled[take] = src_index[take], True
+        index, filled = new_index, new_filled
+    return index
+
+
+def _shift(a, dy, dx, wrap_x, fill):
+    """`a` moved so that out[i, j] = a[i + dy, j + dx]: `fill` beyond the edges, except
+    along x when it wraps."""
+    out = np.roll(a, (-dy, -dx), axis=(0, 1))
+    if dy:
+        out[(-1 if dy > 0 else 0), :] = fill
+    if dx and not wrap_x:
+        out[:, (-1 if dx > 0 else 0)] = fill
+    return out
+
+
+def coverage(mask, k: int) -> np.ndarray:
+    """The fraction of each pixel's k × k samples that see the mesh: `(H, W)` float32 from
+    a view's `mask (k H, k W)` (alpha, antialiased as the colour is)."""
+    m = np.asarray(mask, np.float32)
+    H, W = m.shape
+    return m.reshape(H // k, k, W // k, k).mean(axis=(1, 3))
 
 
 def downsample(image, k: int):

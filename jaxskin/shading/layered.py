@@ -60,7 +60,8 @@ def radiance(grid: Grid, N, L, V, ambient, light, skin_R, skin_roughness, skin_r
     - `grid`: the spectral grid (static).
     - `N (..., 3)` unit normals (any texel layout: an image, or a list of texels);
       `L (3,)` unit direction to the light; `V (3,)` or `(..., 3)` unit directions to the
-      viewer; `ambient`, `light`: I_ambient, I_light.
+      viewer; `ambient`, `light`: I_ambient, I_light (`light` may vary per texel, `(...)`:
+      the light that reaches each one, as with shadows).
     - `skin_R (n,)`: the skin's reflectance on `grid`; `skin_roughness`, `skin_rho`: its
       Kelemen m and ρ_s.
     - `S, K (L, n)` per mm, `X (L, ...)` mm, `roughness, rho (L,)`: the cosmetic layers,
@@ -76,7 +77,8 @@ def radiance(grid: Grid, N, L, V, ambient, light, skin_R, skin_roughness, skin_r
     to_rgb = jnp.asarray(grid.rgb_matrix, dtype)  # (n, 3)
     E = irradiance(N, L, ambient, light)[..., None]
     skin_rgb = skin_R @ to_rgb
-    h = light * kelemen.specular(N, L, V, skin_roughness, skin_rho)[..., None]  # white
+    h = jnp.asarray(light)[..., None] * kelemen.specular(N, L, V, skin_roughness,
+                                                        skin_rho)[..., None]  # white
     if X is None:
         skin = E * skin_rgb
         return (skin if blur is None else blur(skin)) + h
