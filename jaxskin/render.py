@@ -204,7 +204,7 @@ def _finish(samples, view_mask, k: int, output: str, linear: bool):
     if output == "display":
         mean = downsample(samples, k)
         return encode_srgb(mean) if linear else mean
-    alpha = jnp.asarray(coverage(view_mask, k))[..., None]
+    alpha = coverage(view_mask, k)[..., None]
     if output == "linear_rgba":
         mean = downsample(samples if linear else decode_srgb(samples), k)
         return jnp.concatenate([mean, alpha], axis=-1)

@@ -156,12 +156,10 @@ def _shift(a, dy, dx, wrap_x, fill):
     return out
 
 
-def coverage(mask, k: int) -> np.ndarray:
+def coverage(mask, k: int):
     """The fraction of each pixel's k × k samples that see the mesh: `(H, W)` float32 from
     a view's `mask (k H, k W)` (alpha, antialiased as the colour is)."""
-    m = np.asarray(mask, np.float32)
-    H, W = m.shape
-    return m.reshape(H // k, k, W // k, k).mean(axis=(1, 3))
+    return downsample(jnp.asarray(mask, jnp.float32)[..., None], k)[..., 0]
 
 
 def downsample(image, k: int):
