@@ -97,15 +97,16 @@ def prepare(config: SceneConfig) -> Prepared:
 
 def _visibility(config: SceneConfig, s: texture.TextureSetup, view: View):
     """The shadow test (`jaxskin.shadow`) for `config.shadow`'s light, in the object's
-    frame: per texel on the mesh `(P,)` for the cosmetics model, per view sample `(H, W)`
-    otherwise. The map is as fine as the finer of texture and view, up to `SHADOW_MAX`."""
+    frame: per texel on the mesh `(P,)` for the cosmetics model (the fraction of the
+    texel lit), per view sample `(H, W)` otherwise. The map is as fine as the finer of
+    texture and view, up to `SHADOW_MAX`."""
     m = s.mesh
     d = np.asarray(config.shadow, np.float64)
     direction = (d / np.linalg.norm(d)) @ view.R  # camera → object frame, as L in `_render`
     size = min(SHADOW_MAX, max(s.tmap.width, s.tmap.height, *view.mask.shape))
     smap = shadow.shadow_map(m.vertices, m.faces, direction, size)
     if config.spectral is not None:
-        lit = shadow.visibility(m.vertices, m.faces, m.normals, s.tmap.raster, smap)
+        lit = shadow.texture_visibility(s.tmap, smap)
         return jnp.asarray(lit.reshape(-1)[np.flatnonzero(s.tmap.raster.mask)])
     return jnp.asarray(shadow.visibility(m.vertices, m.faces, m.normals, view.raster, smap))
 

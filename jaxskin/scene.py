@@ -29,7 +29,7 @@ shadows = false                    # a shadow map from the light (static: the di
 projection = "orthographic"        # orthographic | perspective
 size = 512                         # image pixels across
 height = 0                         # image pixels high; 0: square
-supersample = 1                    # 1–4 samples per pixel per axis
+supersample = 2                    # 1–4 samples per pixel per axis (2: antialiased)
 fov = 30.0                         # perspective only, degrees
 rotate = [0.0, 0.0, 0.0]           # degrees about x, y, z: turns the mesh
 [view]
@@ -140,7 +140,7 @@ SCHEMA: dict[str, _Key] = {
     "camera.projection": _Key(str, "orthographic", choices=("orthographic", "perspective")),
     "camera.size": _Key(int, 512, 16, 8192),
     "camera.height": _Key(int, 0, 0, 8192),
-    "camera.supersample": _Key(int, 1, 1, 4),
+    "camera.supersample": _Key(int, 2, 1, 4),
     "camera.fov": _Key(float, 30.0, 1.0, 120.0),
     "camera.rotate": _Key("vec3", (0.0, 0.0, 0.0)),
     "view.mode": _Key(str, "wrinkles", choices=("wrinkles", "overview", "height")),
