@@ -80,7 +80,8 @@ def _parser() -> argparse.ArgumentParser:
         "render",
         help="render scenes to PNG (and their texture-space maps)",
         description="Render one or more scenes: a built-in name (hand, foot, arm: Bando 2001 "
-        "figs. 6.1-6.3) or a TOML scene file (format in the README). Writes DIR/<scene>.png; "
+        "figs. 6.1-6.3) or a TOML scene file (format in the README). Writes DIR/<scene>.png "
+        "(or .exr, --format); "
         "with --maps also DIR/<scene>_height.png (16-bit grey), DIR/<scene>_normal.png (the "
         "bump-mapped normal map) and DIR/<scene>_field.png (the mesh with d1 in red and d2 in "
         "green, as in the paper's fig. 3.4). Every scene is checked before anything is "
@@ -90,6 +91,14 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
     r.add_argument("--maps", action="store_true",
                    help="also write the texture-space maps (height, normals, fields)")
+    r.add_argument("--format", choices=("png", "png16", "exr"), default="png",
+                   help="image format: png (8-bit, default), png16 (16-bit PNG), exr (linear "
+                   "OpenEXR, float32 RGBA with premultiplied alpha; needs pip install "
+                   "'jaxskin[exr]')")
+    r.add_argument("--alpha", action="store_true",
+                   help="PNG with an alpha channel: alpha = the mesh's coverage of each pixel "
+                   "(antialiased with camera.supersample), the colour straight (not "
+                   "premultiplied); EXR always has alpha")
     r.add_argument("--glb", action="store_true",
                    help="also write DIR/<scene>.glb: the mesh with its skin colour and the "
                    "wrinkle normal map as textures (opens in Blender or any glTF viewer)")
@@ -204,6 +213,10 @@ def _render(args) -> int:
     from . import maps, render, texture
     from .scene import load_scene
 
+    if args.format == "exr" and not maps.exr_available():
+        raise InputError("--format exr needs the OpenEXR bindings: pip install 'jaxskin[exr]'")
+    output = "linear_rgba" if args.format == "exr" else "rgba" if args.alpha else "display"
+    ext = "exr" if args.format == "exr" else "png"
     scenes = [load_scene(name, args.overrides) for name in args.scenes]
     names = [sc.name for sc in scenes]
     if len(set(names)) != len(names):
@@ -226,14 +239,16 @@ def _render(args) -> int:
         if sweep:
             (key, values), = sweep
             batch = jax.jit(jax.vmap(lambda v, a, key=key, params=params, config=config:
-                                     render.render_prepared(config, {**params, key: v}, a),
+                                     render.render_prepared(config, {**params, key: v}, a,
+                                                            output),
                                      in_axes=(0, None)))
             images = batch(jnp.asarray(values, jnp.float32), render.prepare(config).arrays)
             for v, image in zip(values, np.asarray(images), strict=True):
-                maps.write_image(image, out / f"{sc.name}_{key}={v:g}.png")
+                maps.write_render(image, out / f"{sc.name}_{key}={v:g}.{ext}", args.format)
             written = len(values)
         else:
-            maps.write_image(np.asarray(render.render(config, params)), out / f"{sc.name}.png")
+            image = np.asarray(render.render(config, params, output))
+            maps.write_render(image, out / f"{sc.name}.{ext}", args.format)
             written = 1
         if args.maps or args.glb:
             s = texture.setup(config.texture)

@@ -1,12 +1,22 @@
-"""Writing texture-space maps: 16-bit height, normal map, and the field picture (fig. 3.4)."""
+"""Writing images and texture-space maps: renders as 8- or 16-bit PNG (RGB or RGBA) or
+linear OpenEXR, 16-bit height, normal map, and the field picture (fig. 3.4)."""
 
 from __future__ import annotations
 
+import os
+import struct
+import tempfile
+import zlib
+
 import numpy as np
 
-from .io import atomic_write
+from .io import InputError, atomic_write
 
-__all__ = ["png_bytes", "write_field_plot", "write_height", "write_image", "write_normals"]
+__all__ = ["FORMATS", "exr_available", "png16_bytes", "png_bytes", "read_exr", "write_exr",
+           "write_field_plot", "write_height", "write_image", "write_normals",
+           "write_render"]
+
+FORMATS = ("png", "png16", "exr")
 
 
 def png_bytes(image: np.ndarray) -> bytes:
@@ -20,10 +30,86 @@ def _write(path, data: bytes) -> None:
         fh.write(data)
 
 
-def write_image(image, path) -> None:
-    """An 8-bit RGB PNG of display values in [0, 1] (clipped)."""
+def write_image(image, path, bits: int = 8) -> None:
+    """A PNG of display values in [0, 1] (clipped), `(H, W, 3)` RGB or `(H, W, 4)` RGBA
+    (straight alpha, as PNG defines it), 8 or 16 bits per channel."""
     image = np.clip(np.asarray(image, np.float64), 0.0, 1.0)
-    _write(path, png_bytes(np.round(image * 255).astype(np.uint8)))
+    if bits not in (8, 16):
+        raise ValueError(f"bits must be 8 or 16, got {bits}")
+    if bits == 8:
+        _write(path, png_bytes(np.round(image * 255).astype(np.uint8)))
+    else:
+        _write(path, png16_bytes(np.round(image * 65535).astype(np.uint16)))
+
+
+def png16_bytes(image) -> bytes:
+    """A 16-bit PNG of `image (H, W)`, `(H, W, 3)` or `(H, W, 4)` uint16 (grey, RGB,
+    RGBA), written here (PNG 1.2: big-endian samples, filter 0, one zlib stream) because
+    Pillow writes 16 bits for grey only."""
+    image = np.asarray(image, np.uint16)
+    H, W = image.shape[:2]
+    C = 1 if image.ndim == 2 else image.shape[2]
+    colour_type = {1: 0, 3: 2, 4: 6}[C]
+    rows = image.astype(">u2").reshape(H, W * C).view(np.uint8)
+    data = np.concatenate([np.zeros((H, 1), np.uint8), rows], axis=1).tobytes()
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        crc = zlib.crc32(kind + body) & 0xFFFFFFFF
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", crc)
+
+    header = struct.pack(">IIBBBBB", W, H, 16, colour_type, 0, 0, 0)
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(data, 6))
+            + chunk(b"IEND", b""))
+
+
+def exr_available() -> bool:
+    """Whether the OpenEXR bindings (the `exr` extra) are installed."""
+    try:
+        import OpenEXR  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def write_exr(rgba, path) -> None:
+    """A linear OpenEXR `(H, W, 4)` float32 RGBA (premultiplied alpha, OpenEXR's
+    convention; primaries and white of sRGB/Rec. 709, the format's default), ZIP
+    compressed. Written by the Academy Software Foundation's `OpenEXR` bindings, beside the
+    target and renamed, as every output."""
+    import OpenEXR
+
+    rgba = np.asarray(rgba, np.float32)
+    if rgba.ndim != 3 or rgba.shape[-1] != 4:
+        raise ValueError(f"expected an (H, W, 4) RGBA image, got shape {rgba.shape}")
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    channels = {c: np.ascontiguousarray(rgba[..., i]) for i, c in enumerate("RGBA")}
+    with tempfile.TemporaryDirectory() as tmp:  # the bindings write to a file name
+        name = os.path.join(tmp, "image.exr")
+        with OpenEXR.File(header, channels) as f:
+            f.write(name)
+        with open(name, "rb") as fh:
+            _write(path, fh.read())
+
+
+def read_exr(path) -> np.ndarray:
+    """The `(H, W, 4)` float32 RGBA of an OpenEXR file `write_exr` wrote."""
+    import OpenEXR
+
+    with OpenEXR.File(str(path), separate_channels=True) as f:
+        channels = f.channels()
+        return np.stack([channels[c].pixels for c in "RGBA"], axis=-1).astype(np.float32)
+
+
+def write_render(image, path, fmt: str) -> None:
+    """A render in one of `FORMATS`: `png` 8-bit, `png16` 16-bit (display values, RGB or
+    straight RGBA), `exr` linear premultiplied RGBA."""
+    if fmt == "exr":
+        if not exr_available():
+            raise InputError("--format exr needs the OpenEXR bindings: pip install "
+                             "'jaxskin[exr]'")
+        write_exr(image, path)
+    else:
+        write_image(image, path, 16 if fmt == "png16" else 8)
 
 
 def write_height(h, path) -> None:
