@@ -6,9 +6,11 @@ Modules, one idea each:
   §3.1), texture space (§3.2) and the one rasterizer (texture space and camera views).
 - `wrinkles`, `bump`, `texture`: the furrow height field (§3.3) and bump normals (§4.1).
 - `shading.blinn`, `shading.lafortune`: skin shading (§4.2).
-- `scene`, `view`, `render`: TOML scenes → `render(config, params)`, the pure function.
+- `scene`, `view`, `shadow`, `render`: TOML scenes → `render(config, params)`, the pure
+  function; camera views, shadow maps from the light.
 - `km`, `spectral`: Kubelka–Munk layers and spectra → colour (Huang et al. 2013).
-- `maps`, `export`, `io`, `cli`: PNG/GLB output, input errors, the command line.
+- `maps`, `export`, `io`, `cli`: PNG (8/16-bit), OpenEXR and GLB output, input errors,
+  the command line.
 
 Everything numeric follows the dtype of its inputs; rendering defaults to float32
 (`jaxskin.DEFAULT_DTYPE`), fitting (`fitting`) runs in float64.
