@@ -124,11 +124,13 @@ def visibility(vertices, faces, normals, raster: Raster, smap: ShadowMap) -> np.
     return np.where(raster.mask, lit(smap, points, flat), True).astype(np.float32)
 
 
-def texture_visibility(tmap, smap: ShadowMap, k: int = SUBTEXEL) -> np.ndarray:
+def texture_visibility(tmap, smap: ShadowMap, k: int | None = None) -> np.ndarray:
     """The fraction of each texel of `tmap` (a `projection.TextureMap`) that the light
     reaches: `(H, W)` float32, from k × k tests per texel (texture space rasterized k
     times finer), so the shadow's edge is not a staircase of whole texels; 1 off the
-    mesh."""
+    mesh. `k`: `SUBTEXEL`, or 1 for textures over 1024² texels (host memory)."""
+    if k is None:
+        k = SUBTEXEL if tmap.width * tmap.height <= 1024 * 1024 else 1
     mesh = tmap.mesh
     fine = rasterize(np.asarray(tmap.xy) * k, mesh.faces, tmap.height * k, tmap.width * k,
                      tmap.depth, tmap.wrap_x)
