@@ -171,6 +171,8 @@ def test_render_gradients_with_shadows(shadowed, x64, scene):
     sc, arrays = shadowed[scene]
     arrays = _float64(arrays)
     assert float(arrays["lit"].min()) == 0.0  # some shadow in the picture
+    per = "texels" if scene == "face" else "view_mask"  # per texel (SSS) or per view sample
+    assert arrays["lit"].shape == arrays[per].shape
     params = _float64(sc.params)
     keys = ["light.intensity", "light.direction",
             "skin.melanin" if scene == "face" else "material.melanin"]
