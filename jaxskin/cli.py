@@ -56,10 +56,14 @@ def _number(kind=float, lo=None, hi=None, above=None):
         bad = not math.isfinite(value) or (lo is not None and value < lo) or (
             hi is not None and value > hi) or (above is not None and value <= above)
         if bad:
-            rng = (f"> {above:g}" if above is not None else f">= {lo:g}" if lo is not None
+            def fmt(x):
+                return str(x) if isinstance(x, int) else f"{x:g}"
+
+            rng = (f"> {fmt(above)}" if above is not None else f">= {fmt(lo)}" if lo is not None
                    else "")
-            rng += f" and <= {hi:g}" if hi is not None else ""
-            raise argparse.ArgumentTypeError(f"expected a finite number {rng}, got {text!r}")
+            rng += f" and <= {fmt(hi)}" if hi is not None else ""
+            noun = "an integer" if kind is int else "a finite number"
+            raise argparse.ArgumentTypeError(f"expected {noun} {rng}, got {text!r}")
         return value
 
     parse.__name__ = kind.__name__
@@ -219,7 +223,7 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--starts", type=_number(int, 1, 1024), default=8, metavar="S",
                    help="starts per channel, half from typical lobe shapes, half random (8); "
                    "the best finite fit wins")
-    b.add_argument("--seed", type=_number(int, 0, 2**31 - 1), default=0,
+    b.add_argument("--seed", type=_number(int, 0, 2147483647), default=0,
                    help="seed of the random starts (0)")
     b.add_argument("--no-report", action="store_true", help="write the JSON only, no PNG")
     return p
