@@ -11,9 +11,10 @@ on `jaxskin render` (2-core CPU, float32):
 | makeup, texture 1024², image 256² | 1.74 GB |
 | hand, texture 256², image 1024² × supersample 4 (4096² samples) | 4.10 GB |
 
-which give about 190 bytes per texel (Blinn / Lafortune), 24 bytes per texel, band and
-(layer + 2) for the cosmetics model, 220 bytes per image sample, over 0.45 GB of JAX
-itself. A sweep batches the whole render (vmap), so its variable part counts once per
+which give about 190 bytes per texel (Blinn / Lafortune), 5.5 more per texel, band and
+(layer + 2) for the cosmetics model (rounded up to 8: the face covers part of its texture),
+220 bytes per image sample, over 0.45 GB of JAX itself; the model is within 0.9-1.4x of
+every row (tests/test_cli.py checks it against this table). A sweep batches the whole render (vmap), so its variable part counts once per
 value. The model errs high rather than low; it is a guard against runs that cannot fit,
 not a forecast.
 """
@@ -28,7 +29,7 @@ __all__ = ["available_bytes", "check_memory", "render_bytes"]
 
 BASE = 0.45e9
 PER_TEXEL = 200
-PER_TEXEL_BAND_LAYER = 24
+PER_TEXEL_BAND_LAYER = 8
 PER_SAMPLE = 220
 
 
