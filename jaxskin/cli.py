@@ -26,6 +26,7 @@ import signal
 import sys
 import threading
 import time
+import warnings
 from pathlib import Path
 
 from . import __version__
@@ -81,10 +82,13 @@ def _on_sigterm(signum, frame):
 @contextlib.contextmanager
 def _signals():
     """SIGINT → KeyboardInterrupt, SIGTERM → _Terminated, for the duration of a command
-    (atomic_write removes its temporary file on either); the old handlers come back after."""
+    (atomic_write removes its temporary file on either), and warnings as one line each; the
+    old handlers come back after."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    old_format = warnings.formatwarning
+    warnings.formatwarning = _warning_line
     old = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     signal.signal(signal.SIGINT, signal.default_int_handler)
     signal.signal(signal.SIGTERM, _on_sigterm)
@@ -93,6 +97,12 @@ def _signals():
     finally:
         for sig, handler in old.items():
             signal.signal(sig, handler)
+        warnings.formatwarning = old_format
+
+
+def _warning_line(message, category, filename, lineno, line=None) -> str:
+    """A warning as one line, `jaxskin: warning: …` (not Python's two with the source)."""
+    return f"jaxskin: warning: {' '.join(str(message).split())}\n"
 
 
 class _Run:

@@ -5,18 +5,18 @@ on `jaxskin render` (2-core CPU, float32):
 
 | run | peak |
 |---|---|
-| hand, texture 1024², image 256² | 0.62 GB |
-| hand, texture 2048², image 256² | 1.20 GB |
-| makeup (3 layers, 41 bands), texture 512², image 256² | 0.69 GB |
-| makeup, texture 1024², image 256² | 1.74 GB |
-| hand, texture 256², image 1024² × supersample 4 (4096² samples) | 4.10 GB |
+| hand, texture 1024², image 256² | 0.64 GB |
+| hand, texture 2048², image 256² | 1.23 GB |
+| makeup (3 layers, 41 bands), texture 512², image 256² | 0.71 GB |
+| makeup, texture 1024², image 256² | 1.78 GB |
+| hand, texture 256², image 1024² × supersample 4 (4096² samples) | 4.19 GB |
 
 which give about 190 bytes per texel (Blinn / Lafortune), 5.5 more per texel, band and
 (layer + 2) for the cosmetics model (rounded up to 8: the face covers part of its texture),
-220 bytes per image sample, over 0.45 GB of JAX itself; the model is within 0.9-1.4x of
-every row (tests/test_cli.py checks it against this table). A sweep batches the whole render (vmap), so its variable part counts once per
-value. The model errs high rather than low; it is a guard against runs that cannot fit,
-not a forecast.
+220 bytes per image sample, over 0.45 GB of JAX itself; the model gives 0.99-1.34x each
+row (tests/test_cli.py checks it against this table). A sweep batches the whole render
+(vmap), so its variable part counts once per value. The model errs high rather than low;
+it is a guard against runs that cannot fit, not a forecast.
 """
 
 from __future__ import annotations
