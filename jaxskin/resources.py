@@ -7,13 +7,15 @@ on `jaxskin render` (2-core CPU, float32):
 |---|---|
 | hand, texture 1024², image 256² | 0.64 GB |
 | hand, texture 2048², image 256² | 1.23 GB |
+| hand, texture 4096², image 256² | 4.27 GB |
 | makeup (3 layers, 41 bands), texture 512², image 256² | 0.71 GB |
 | makeup, texture 1024², image 256² | 1.78 GB |
 | hand, texture 256², image 1024² × supersample 4 (4096² samples) | 4.19 GB |
 
-which give about 190 bytes per texel (Blinn / Lafortune), 5.5 more per texel, band and
-(layer + 2) for the cosmetics model (rounded up to 8: the face covers part of its texture),
-220 bytes per image sample, over 0.45 GB of JAX itself; the model gives 0.99-1.34x each
+which give 164, 182 and 227 bytes per texel at 1024², 2048² and 4096² (Blinn /
+Lafortune; growing with the size, so the model takes 280), 5.5 more per texel, band and
+(layer + 2) for the cosmetics model (taken as 8: the face covers part of its texture),
+220 bytes per image sample, over 0.45 GB of JAX itself; the model gives 0.99-1.39x each
 row (tests/test_cli.py checks it against this table). A sweep batches the whole render
 (vmap), so its variable part counts once per value. The model errs high rather than low;
 it is a guard against runs that cannot fit, not a forecast.
@@ -28,7 +30,7 @@ from .io import InputError
 __all__ = ["available_bytes", "check_memory", "render_bytes"]
 
 BASE = 0.45e9
-PER_TEXEL = 200
+PER_TEXEL = 280
 PER_TEXEL_BAND_LAYER = 8
 PER_SAMPLE = 220
 

@@ -103,6 +103,14 @@ def measurement(tmp):
                  (ROOT / "data" / "measurements" / "blush_rose.csv").read_text())
 
 
+def read_only_folder(tmp):
+    if os.geteuid() == 0:
+        pytest.skip("root writes into a read-only folder; out-unwritable covers it (/proc)")
+    (tmp / "ro").mkdir()
+    os.chmod(tmp / "ro", 0o555)
+    return ["render", "hand", "-o", str(tmp / "ro" / "out"), *SMALL]
+
+
 def symlinked_output(tmp):
     """out/m.png is a link to the scene's own layer map: writing it would overwrite an input."""
     import imageio.v3 as iio
@@ -218,6 +226,7 @@ CASES = {
     "out-under-file": lambda t: ["render", "hand", "-o", str(Path(write(t, "afile", "x")) / "sub"),
                                  *SMALL],
     "out-unwritable": lambda t: ["render", "hand", "-o", "/proc/jaxskin-test-out", *SMALL],
+    "out-read-only": read_only_folder,
     "out-is-input": output_is_input,
     "out-link-to-input": symlinked_output,
     "fit-brdf-out-folder": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t)],
