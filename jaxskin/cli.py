@@ -557,6 +557,12 @@ def _fit_brdf(args, run: _Run) -> int:
     report = None if args.no_report else outputs.plan(out.with_suffix(".png").name,
                                                       "the report")
     samples = brdf.read_samples(args.file)
+    from . import resources
+
+    resources.check_memory(resources.fit_brdf_bytes(len(samples.f), args.lobes, args.starts),
+                           f"fitting {args.lobes} lobes x {args.starts} starts to "
+                           f"{len(samples.f)} samples", args.file,
+                           hint="use fewer --starts or --lobes")
     run.outputs.append(outputs)
     run.stage = "fitting"
     print(f"fitting {args.lobes} lobes x {args.starts} starts x 3 channels to "

@@ -19,6 +19,10 @@ Lafortune; growing with the size, so the model takes 280), 5.5 more per texel, b
 row (tests/test_cli.py checks it against this table). A sweep batches the whole render
 (vmap), so its variable part counts once per value. The model errs high rather than low;
 it is a guard against runs that cannot fit, not a forecast.
+
+`fit_brdf_bytes` likewise, from `jaxskin fit-brdf` on the 4,000 shipped samples: 0.36 GB
+(3 lobes, 8 starts), 1.05 GB (3 lobes, 64 starts), 1.94 GB (6 lobes, 64 starts), about 100
+bytes per sample, channel, lobe parameter and start (the model takes 120: 1.08-1.28x).
 """
 
 from __future__ import annotations
@@ -27,12 +31,14 @@ import os
 
 from .io import InputError
 
-__all__ = ["available_bytes", "check_memory", "render_bytes"]
+__all__ = ["available_bytes", "check_memory", "fit_brdf_bytes", "render_bytes"]
 
 BASE = 0.45e9
 PER_TEXEL = 280
 PER_TEXEL_BAND_LAYER = 8
 PER_SAMPLE = 220
+FIT_BASE = 0.35e9
+PER_BRDF_VALUE = 120
 
 
 def render_bytes(config, count: int = 1) -> float:
@@ -46,6 +52,12 @@ def render_bytes(config, count: int = 1) -> float:
     width = config.image * config.supersample
     height = (config.image_height or config.image) * config.supersample
     return BASE + count * (texels * per_texel + width * height * PER_SAMPLE)
+
+
+def fit_brdf_bytes(samples: int, lobes: int, starts: int) -> float:
+    """Estimated peak bytes of fitting `lobes` Lafortune lobes (RGB) to `samples` samples
+    from `starts` starts at once (the Jacobians of every start are held together)."""
+    return FIT_BASE + PER_BRDF_VALUE * samples * 3 * (1 + 3 * lobes) * starts
 
 
 def available_bytes() -> tuple[float, str]:
@@ -65,10 +77,11 @@ def available_bytes() -> tuple[float, str]:
         return float("inf"), "unknown"
 
 
-def check_memory(estimate: float, what: str, where=None) -> None:
+def check_memory(estimate: float, what: str, where=None,
+                 hint: str = "use a smaller texture.size, camera.size, camera.supersample or "
+                 "sweep") -> None:
     """An `InputError` naming the estimate and the limit when `estimate` does not fit."""
     limit, source = available_bytes()
     if estimate > limit:
         raise InputError(f"{what} needs about {estimate / 2**30:.1f} GiB of memory; "
-                         f"{limit / 2**30:.1f} GiB is available ({source}); use a smaller "
-                         "texture.size, camera.size, camera.supersample or sweep", where)
+                         f"{limit / 2**30:.1f} GiB is available ({source}); {hint}", where)

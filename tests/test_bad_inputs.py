@@ -229,6 +229,8 @@ CASES = {
     "out-read-only": read_only_folder,
     "out-is-input": output_is_input,
     "out-link-to-input": symlinked_output,
+    "fit-brdf-memory": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "f.json"), "--lobes",
+                                  "16", "--starts", "1024"],
     "fit-brdf-out-folder": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t)],
     "fit-brdf-out-is-input": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "samples.csv")],
     "fit-brdf-out-newline": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "a\nb.json")],

@@ -176,6 +176,15 @@ def test_memory_estimate_against_measured_peaks(name, overrides, peak):
     assert 0.9 <= ratio <= 1.5, ratio
 
 
+@pytest.mark.parametrize("lobes, starts, peak", [(3, 8, 0.363e9), (3, 64, 1.052e9),
+                                                 (6, 64, 1.935e9)])
+def test_fit_memory_estimate_against_measured_peaks(lobes, starts, peak):
+    from jaxskin import resources
+
+    ratio = resources.fit_brdf_bytes(4000, lobes, starts) / peak  # 4,000 shipped samples
+    assert 0.9 <= ratio <= 1.5, ratio
+
+
 def test_an_absurd_size_is_refused_quickly_without_allocating(tmp_path, capsys):
     import resource
     import time
