@@ -22,6 +22,7 @@ import contextlib
 import hashlib
 import math
 import os
+import re
 import signal
 import sys
 import threading
@@ -245,12 +246,13 @@ def _list(args) -> int:
     from .mesh import BUILTIN as MESHES
     from .scene import builtin_scenes
 
-    def first_comment(path: Path, width: int = 90) -> str:
-        """The scene file's opening comment, cut at a word to `width` characters."""
+    def first_comment(path: Path, width: int = 100) -> str:
+        """The first sentence of the scene file's opening comment (at most `width` long)."""
         lines = path.read_text(encoding="utf-8").splitlines()
         text = " ".join(line.lstrip("# ").strip() for line in
                         lines[:next((i for i, t in enumerate(lines) if not t.startswith("#")),
                                     len(lines))])
+        text = re.split(r"(?<=\.) (?=[A-Z])", text)[0]
         return text if len(text) <= width else text[:width].rsplit(" ", 1)[0] + " …"
 
     rows = [("scene", name, first_comment(path)) for name, path in builtin_scenes().items()]
