@@ -221,6 +221,12 @@ CASES = {
                                            "lobes": [LOBE]}),
     "brdf-not-json": lambda t: brdf(t, "]"),
     "brdf-missing": lambda t: scene(t, '[material]\nmodel = "lafortune"\nbrdf = "nope.json"\n'),
+    # --- a bad scene after good ones: nothing is written for the good ones either
+    "later-scene-bad-image": lambda t: ["render", "hand", "foot",
+                                        *image(t, content=b"\x89PNG\r\n\x1a\n")[1:]],
+    "later-scene-zero-brdf": lambda t: ["render", "arm", *brdf(t, {
+        "model": "lafortune", "diffuse": [0, 0, 0], "lobes": [
+            {"Cxy": [0, 0, 0], "Cz": [0, 0, 0], "n": [1, 1, 1]}]})[1:]],
     # --- output paths
     "out-is-file": lambda t: ["render", "hand", "-o", write(t, "afile", "x"), *SMALL],
     "out-under-file": lambda t: ["render", "hand", "-o", str(Path(write(t, "afile", "x")) / "sub"),

@@ -1,6 +1,7 @@
 """The command line: help for every option, version, the persistent compilation cache."""
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -129,7 +130,16 @@ def test_wheel_installs_and_renders_from_an_empty_folder(tmp_path):
     wheels, target, empty = tmp_path / "wheels", tmp_path / "site", tmp_path / "empty"
     empty.mkdir()
     pip = [sys.executable, "-m", "pip", "--disable-pip-version-check", "-q"]
-    subprocess.run([*pip, "wheel", "--no-deps", "-w", str(wheels), str(ROOT)], check=True,
+    # Build from a clean copy of the sources: no build/ left in the checkout, and none of a
+    # stale one's files in the wheel.
+    src = tmp_path / "src"
+    src.mkdir()
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
+        shutil.copy(ROOT / name, src / name)
+    for name in ("jaxskin", "fitting", "data"):
+        shutil.copytree(ROOT / name, src / name,
+                        ignore=shutil.ignore_patterns("__pycache__", "*.egg-info", "build"))
+    subprocess.run([*pip, "wheel", "--no-deps", "-w", str(wheels), str(src)], check=True,
                    cwd=tmp_path, timeout=600)
     wheel, = wheels.glob("jaxskin-*.whl")
     names = zipfile.ZipFile(wheel).namelist()
