@@ -9,8 +9,8 @@ Modules, one idea each:
 - `scene`, `view`, `shadow`, `render`: TOML scenes → `render(config, params)`, the pure
   function; camera views, shadow maps from the light.
 - `km`, `spectral`: Kubelka–Munk layers and spectra → colour (Huang et al. 2013).
-- `maps`, `export`, `io`, `cli`: PNG (8/16-bit), OpenEXR and GLB output, input errors,
-  the command line.
+- `maps`, `export`, `io`, `outputs`, `resources`, `cli`: PNG (8/16-bit), OpenEXR and GLB
+  output, input errors, output folders and names, memory estimates, the command line.
 
 Everything numeric follows the dtype of its inputs; rendering defaults to float32
 (`jaxskin.DEFAULT_DTYPE`), fitting (`fitting`) runs in float64.
