@@ -108,8 +108,10 @@ def write_render(image, path, fmt: str) -> None:
             raise InputError("--format exr needs the OpenEXR bindings: pip install "
                              "'jaxskin[exr]'")
         write_exr(image, path)
+    elif fmt == "png16":
+        write_image(image, path, bits=16)
     else:
-        write_image(image, path, 16 if fmt == "png16" else 8)
+        write_image(image, path)
 
 
 def write_height(h, path) -> None:

@@ -23,6 +23,12 @@ def _render(tmp_path, *options):
     return out
 
 
+def _written(out, ext):
+    """The one image the render wrote (its name carries the -D overrides)."""
+    (path,) = out.glob(f"face*.{ext}")
+    return path
+
+
 @pytest.fixture(scope="module")
 def face():
     sc = load_scene("face", SMALL)
@@ -33,8 +39,8 @@ def test_png16_is_the_8_bit_png_to_within_rounding(tmp_path, face):
     out8 = _render(tmp_path / "a", "--alpha")
     out16 = _render(tmp_path / "b", "--alpha", "--format", "png16")
     png = pytest.importorskip("png", reason="pypng (the test extra) reads 16-bit colour")
-    a = iio.imread(out8 / "face.png")
-    width, height, rows, info = png.Reader(filename=str(out16 / "face.png")).asDirect()
+    a = iio.imread(_written(out8, "png"))
+    width, height, rows, info = png.Reader(filename=str(_written(out16, "png"))).asDirect()
     assert info["bitdepth"] == 16 and info["alpha"] and (width, height) == (32, 32)
     b = np.vstack([np.asarray(r, np.uint16) for r in rows]).reshape(32, 32, 4)
     assert a.dtype == np.uint8 and b.dtype == np.uint16 and a.shape == b.shape == (32, 32, 4)
@@ -42,7 +48,7 @@ def test_png16_is_the_8_bit_png_to_within_rounding(tmp_path, face):
     assert np.abs(b / 257.0 - a).max() <= 0.5 + 0.5 / 257 + 1e-9
     # And the 16-bit file holds the render to 16-bit precision.
     np.testing.assert_allclose(b / 65535.0, np.clip(face[1], 0, 1), atol=0.5 / 65535 + 1e-7)
-    plain = iio.imread(_render(tmp_path / "c") / "face.png")
+    plain = iio.imread(_written(_render(tmp_path / "c"), "png"))
     assert plain.shape == (32, 32, 3)  # no --alpha: RGB as before
 
 
@@ -50,7 +56,7 @@ def test_exr_holds_the_linear_render_with_alpha(tmp_path, face):
     pytest.importorskip("OpenEXR", reason="the exr extra (pip install 'jaxskin[exr]')")
     sc, rgba = face
     out = _render(tmp_path, "--format", "exr")
-    exr = maps.read_exr(out / "face.exr")
+    exr = maps.read_exr(_written(out, "exr"))
     linear = np.asarray(render.render(sc.config, sc.params, "linear_rgba"))
     np.testing.assert_array_equal(exr, linear)  # float32, lossless (ZIP)
     # The linear light is the display image before encoding (over black).
