@@ -7,7 +7,9 @@ in a T-pose, y up, facing +z, in metres. We keep the faces whose three vertices 
 box (each box holds one limb and nothing else), and turn it to suit the paper's projections:
 
 - foot: the right foot below the ankle (y < 0.10 m, x > 0), turned so that its top faces
-  the viewer (+z) and the toes point up (+y): planar projection, like Bando's fig. 6.2;
+  the viewer (+z) and the toes point up (+y): planar projection, like Bando's fig. 6.2.
+  The cut at the ankle is capped (`cap_holes`: a fan from each boundary loop's centroid),
+  so that the open leg is not seen as a dark cavity (issue 14);
 - arm: the right arm from below the shoulder to the wrist (0.30 m < x < 0.70 m), turned so
   that its axis is the y axis through the origin: cylindrical projection, like fig. 6.3.
 """
@@ -29,8 +31,32 @@ def cut(body: trimesh.Trimesh, keep_vertex) -> trimesh.Trimesh:
     return body.submesh([faces], append=True)
 
 
+def cap_holes(m: trimesh.Trimesh) -> trimesh.Trimesh:
+    """Close every boundary loop with a fan of triangles from the loop's centroid, wound
+    like the faces beside it (a boundary edge a → b of a face gives the cap b → a → c)."""
+    faces = np.asarray(m.faces)
+    directed = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    key = np.sort(directed, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    boundary = directed[counts[inverse.ravel()] == 1]  # (a, b) as the faces run
+    following = {int(a): int(b) for a, b in boundary}
+    vertices, new_faces = [np.asarray(m.vertices)], [faces]
+    count = len(m.vertices)
+    while following:
+        start = next(iter(following))
+        loop = [start]
+        while following[loop[-1]] != start:
+            loop.append(following.pop(loop[-1]))
+        following.pop(loop[-1])
+        loop = np.asarray(loop)
+        vertices.append(m.vertices[loop].mean(axis=0)[None])
+        new_faces.append(np.stack([np.roll(loop, -1), loop, np.full(len(loop), count)], 1))
+        count += 1
+    return trimesh.Trimesh(np.concatenate(vertices), np.concatenate(new_faces), process=False)
+
+
 def foot(body):
-    m = cut(body, lambda v: (v[:, 1] < 0.10) & (v[:, 0] > 0.0))
+    m = cap_holes(cut(body, lambda v: (v[:, 1] < 0.10) & (v[:, 0] > 0.0)))
     v = m.vertices
     # (x, y, z) -> (-x, z, y): top of the foot (+y) to +z, toes (+z) to +y. A proper rotation.
     m.vertices = np.stack([-v[:, 0], v[:, 2], v[:, 1]], axis=1)
