@@ -97,7 +97,7 @@ def furrows(config: TextureConfig):
     return wrinkles.height_field(
         s.mask, s.field1, s.field2, jnp.asarray(s.tmap.centroids(), jnp.float32),
         config.k_scale, jax.random.key(config.seed),
-        radius=wrinkles.window_radius(config.k_scale), records=RECORDS)
+        radius=wrinkles.window_radius(config.k_scale), records=RECORDS, wrap=s.tmap.wrap_x)
 
 
 def texture_maps(config: SceneConfig, params: dict) -> dict:
