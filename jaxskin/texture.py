@@ -94,10 +94,14 @@ RECORDS = 4096
 def furrows(config: TextureConfig):
     """The furrow height field before noise, `(H, W)`, and the furrow records."""
     s = setup(config)
-    return wrinkles.height_field(
-        s.mask, s.field1, s.field2, jnp.asarray(s.tmap.centroids(), jnp.float32),
-        config.k_scale, jax.random.key(config.seed),
-        radius=wrinkles.window_radius(config.k_scale), records=RECORDS, wrap=s.tmap.wrap_x)
+    # The furrow program is an int32/float32 program, not differentiable: the same under
+    # a caller's float64 (jax.enable_x64), as in a gradient check of a wrinkled scene.
+    with jax.enable_x64(False):
+        return wrinkles.height_field(
+            s.mask, s.field1, s.field2, jnp.asarray(s.tmap.centroids(), jnp.float32),
+            config.k_scale, jax.random.key(config.seed),
+            radius=wrinkles.window_radius(config.k_scale), records=RECORDS,
+            wrap=s.tmap.wrap_x)
 
 
 def texture_maps(config: SceneConfig, params: dict) -> dict:
