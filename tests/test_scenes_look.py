@@ -5,13 +5,13 @@ import numpy as np
 import pytest
 
 from jaxskin import render
-from jaxskin.scene import load_scene
+from jaxskin.scene import load_scene, scene_at_width
 
 
 def dark_fraction(name, size=128):
     """The share of the part's pixels darker than half their median brightness, at a small
     size, without wrinkles (the cavity is geometry)."""
-    scene = load_scene(name, ["view.mode=overview", f"camera.size={size}", "texture.size=128"])
+    scene = scene_at_width(name, size, ["view.mode=overview", "texture.size=128"])
     image = np.asarray(render.render(scene.config, scene.params)).mean(axis=-1)
     values = image[np.asarray(render.prepare(scene.config).view.mask)]
     return float(np.mean(values < 0.5 * np.median(values)))
