@@ -232,3 +232,30 @@ def test_arm_furrows_are_furrows_all_round():
     for k in range(8):
         sector = np.asarray(s.mask) & (np.floor(angle / (2 * math.pi) * 8) == k)[None]
         assert np.corrcoef(shift[sector], hs[sector])[0, 1] < -0.9
+
+
+def test_arm_render_gradients_through_the_frame_bump(x64):
+    """check_grads (float64, fwd and rev) of a whole arm render (cylindrical: the general
+    form, the seam's wrap) with respect to k_bump, k_noise and the light."""
+    from conftest import check_grads_scaled
+
+    from jaxskin import render
+    from jaxskin.scene import scene_at_width
+
+    scene = scene_at_width("arm", 32, ["texture.size=48", "wrinkles.k_noise=0.2"])
+    arrays = jax.tree.map(lambda a: jnp.asarray(a, jnp.float64)
+                          if jnp.issubdtype(jnp.asarray(a).dtype, jnp.floating) else a,
+                          render.prepare(scene.config).arrays)
+    assert "grad_s" in arrays
+    params = jax.tree.map(lambda a: jnp.asarray(a, jnp.float64)
+                          if jnp.issubdtype(jnp.asarray(a).dtype, jnp.floating) else a,
+                          scene.params)
+
+    def f(k_bump, k_noise, light):
+        p = {**params, "wrinkles.k_bump": k_bump, "wrinkles.k_noise": k_noise,
+             "light.direction": light}
+        return render.render_prepared(scene.config, p, arrays)
+
+    values = [params["wrinkles.k_bump"], params["wrinkles.k_noise"], params["light.direction"]]
+    assert np.all(np.isfinite(f(*values)))
+    check_grads_scaled(f, values, [0.05, 0.02, 0.05], order=1, eps=1e-4, atol=1e-5, rtol=1e-4)
