@@ -28,6 +28,7 @@ from common import HERE, machine, srgb_lab, table, timeit, write_section  # noqa
 
 from jaxskin import km, render  # noqa: E402
 from jaxskin.scene import load_scene  # noqa: E402
+from jaxskin.view import coverage  # noqa: E402
 
 HD = ["camera.size=1280", "camera.height=720"]
 
@@ -86,7 +87,7 @@ def grid_study():
                                                          f"spectral.step={step}"])
         results[step] = (image, warm)
         print(f"grid {step} nm: {warm * 1e3:.0f} ms", flush=True)
-    mask = np.asarray(render.prepare(sc.config).view.mask)
+    mask = np.asarray(coverage(render.prepare(sc.config).view.mask, sc.config.supersample)) == 1
     ref = results[1][0]
     rows = []
     for step, (image, warm) in results.items():
@@ -106,7 +107,7 @@ def texture_study():
         sc, _, image, _, _, warm = frame("makeup", HD + [f"texture.size={size}"])
         images[size] = (image, warm)
         print(f"texture {size}²: {warm * 1e3:.0f} ms", flush=True)
-    mask = np.asarray(render.prepare(sc.config).view.mask)
+    mask = np.asarray(coverage(render.prepare(sc.config).view.mask, sc.config.supersample)) == 1
     ref = images[2048][0]
     curve = {s: (w, float(np.percentile(delta_e(i, ref, mask), 99))) for s, (i, w) in
              images.items() if s != 2048}

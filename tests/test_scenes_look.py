@@ -13,7 +13,11 @@ def dark_fraction(name, size=128):
     size, without wrinkles (the cavity is geometry)."""
     scene = scene_at_width(name, size, ["view.mode=overview", "texture.size=128"])
     image = np.asarray(render.render(scene.config, scene.params)).mean(axis=-1)
-    values = image[np.asarray(render.prepare(scene.config).view.mask)]
+    from jaxskin.view import coverage
+
+    whole = np.asarray(coverage(render.prepare(scene.config).view.mask,
+                                scene.config.supersample)) == 1  # pixels all on the part
+    values = image[whole]
     return float(np.mean(values < 0.5 * np.median(values)))
 
 
