@@ -145,7 +145,7 @@ def test_radiance_of_bare_skin(x64):
                        order=1)
 
 
-@pytest.mark.parametrize("blurred", [False, True], ids=["no blur", "blur"])
+@pytest.mark.parametrize("blurred", [False, True], ids=["unblurred", "blurred"])
 def test_radiance_through_the_chunked_jvp(x64, blurred):
     """Three layers through the makeup gradient's own rule (`layered._colours`' custom JVP,
     chunks of 1024 texels) on 2500 texels: two full chunks and a ragged 452, with and

@@ -362,3 +362,44 @@ def test_view_samples_a_checkerboard_at_texel_centres(x64):
     wrapped = 0.75 * board[0, 0] + 0.25 * board[0, W - 1]
     assert float(view.sample(image, edge, [[True]], True)[0, 0, 0]) == wrapped
     assert float(view.sample(image, edge, [[False]], True, background=7.0)[0, 0, 1]) == 7.0
+
+
+def test_downsample_is_the_block_mean():
+    image = np.arange(4 * 6 * 2, dtype=np.float64).reshape(4, 6, 2)
+    out = np.asarray(view.downsample(jnp.asarray(image), 2))
+    assert out.shape == (2, 3, 2)
+    # Block (1, 2): rows 2–3, columns 4–5, channel 1: (2·6 + 4)·2 + 1 = 33, 35, 45, 47.
+    assert out[1, 2, 1] == (33 + 35 + 45 + 47) / 4
+
+
+# ------------------------------------------------------------------ furrows (§5.2) and fields
+
+
+@pytest.mark.parametrize("x, k_scale", [(0.5, 1.3), (1.5, 0.7), (2.0, 2.0)])
+def test_furrow_functions_by_hand(x, k_scale):
+    """Bando 2001 §5.2 at |d| = x, written out: f_angle = 1 − 0.4x, f_length = k(4 + x),
+    f_density = k(1 + 6x), f_width = kx, f_depth = 0.25x², f_limit = ⌊30 − 10x⌋."""
+    from jaxskin import wrinkles
+
+    got = [float(v) for v in wrinkles.furrow(jnp.float32(x), k_scale)]
+    expected = [1 - 0.4 * x, k_scale * (4 + x), k_scale * (1 + 6 * x), k_scale * x,
+                0.25 * x * x, math.floor(30 - 10 * x)]
+    np.testing.assert_allclose(got, expected, rtol=1e-6)  # float32: measured 1e-7
+
+
+def test_initial_fields_by_hand():
+    """§3.1: d1 = (0, 1, 0) made tangent, d2 = d1 × n. On the flat mesh (n = +z):
+    d1 = (0, 1, 0), d2 = (1, 0, 0); on a plane tilted about x by 30°, d1 = (0, cos², −cos·sin)
+    scaled: the projection of (0, 1, 0) onto the plane."""
+    from jaxskin.fields import initial_fields
+
+    mesh = _square_mesh()
+    d1, d2 = initial_fields(mesh)
+    np.testing.assert_allclose(d1, np.tile([0.0, 1.0, 0.0], (9, 1)), atol=0)
+    np.testing.assert_allclose(d2, np.tile([1.0, 0.0, 0.0], (9, 1)), atol=0)
+    t = math.radians(30)
+    n = np.array([0.0, math.sin(t), math.cos(t)])
+    tilted = Mesh("tilted", mesh.vertices, mesh.faces, np.tile(n, (9, 1)), None)
+    d1, _ = initial_fields(tilted)
+    np.testing.assert_allclose(d1[0], [0.0, math.cos(t) ** 2, -math.cos(t) * math.sin(t)],
+                               atol=1e-15)
