@@ -126,7 +126,7 @@ MUTANTS = [
            _k("tests/test_km.py", "high_precision")),
     # ---- the cosmetics model (Huang et al. 2013 §3)
     Mutant("layered-cosmetic-surface-depth-x10", "jaxskin/shading/layered.py",
-           "COVER_MM = 0.001", "COVER_MM = 0.01", _k("tests/test_makeup.py", "highlights")),
+           "COVER_MM = 0.001", "COVER_MM = 0.01", _k(REF, "highlight_coverage")),
     Mutant("layered-no-skin-interreflection", "jaxskin/shading/layered.py",
            "g = 1.0 / (1.0 - top.R_back * skin_R)", "g = 1.0",
            _k("tests/test_makeup.py", "exact_spectral_over")),

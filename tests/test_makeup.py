@@ -84,7 +84,7 @@ def test_highlights_bottom_to_top(x64, three_materials):
                            K[2:], jnp.asarray(X), np.array([0.2]), np.array([0.3]))
     R, T = km.layer(S[2], K[2], 0.05)
     h_layer = float(kelemen.specular(N, L, V, 0.2, 0.3)[0])
-    cover = 1 - np.exp(-0.05 / layered.COVER_MM)
+    cover = 1.0  # 1 − exp(−50 µm / 1 µm): fully covered (partial cover: test_references.py)
     expected = (h_skin * np.asarray(spectral.to_rgb(T * T, grid)) + cover * h_layer
                 + np.asarray(spectral.to_rgb(R, grid)) * float(N[0] @ L))
     np.testing.assert_allclose(out[0], expected, rtol=1e-6, atol=1e-9)

@@ -403,3 +403,61 @@ def test_initial_fields_by_hand():
     d1, _ = initial_fields(tilted)
     np.testing.assert_allclose(d1[0], [0.0, math.cos(t) ** 2, -math.cos(t) * math.sin(t)],
                                atol=1e-15)
+
+
+# ------------------------------------------------------------------ a layer's highlight
+
+
+def test_layer_highlight_coverage_by_hand(x64):
+    """Huang et al. §3.3 with our coverage weight 1 − exp(−X / 1 µm): a layer 1.5 µm thick
+    adds 1 − e^−1.5 = 0.77687 of its own Kelemen highlight (white), found as the change
+    when the layer's ρ_s goes from 0 to 0.3."""
+    from jaxskin.shading import layered
+
+    grid = spectral.Grid(step=20)
+    n = len(grid)
+    N = jnp.asarray([[0.0, 0.0, 1.0]])
+    L, V = direction(20, 0), direction(25, 180)
+    args = (grid, N, L, V, 0.3, 0.9, np.full(n, 0.4), 0.3, 0.18, np.full((1, n), 30.0),
+            np.full((1, n), 2.0), jnp.asarray([[0.0015]]), np.array([0.25]))
+    with_h = np.asarray(layered.radiance(*args, np.array([0.3])))
+    without = np.asarray(layered.radiance(*args, np.array([0.0])))
+    h = 0.9 * kelemen_by_hand(np.array([0.0, 0.0, 1.0]), L, V, 0.25, 0.3)
+    np.testing.assert_allclose(with_h - without, (1 - math.exp(-1.5)) * h,
+                               rtol=3e-14)  # measured 3.1e-15
+
+
+# ------------------------------------------------------------------ a whole render, analytic
+
+
+def test_flat_skin_plane_render_by_hand(tmp_path):
+    """The cosmetics model end to end on a flat square facing the camera (orthographic, no
+    SSS, no layers): every pixel inside is encode_sRGB(E · rgb(R) + I_light · f_Kelemen)
+    with E = I_ambient + I_light cos θ, R the NIST spectrum darkened by melanin (Jacques'
+    slope), rgb by colour-science's pipeline, Kelemen by hand, the sRGB curve by
+    colour-science."""
+    obj = tmp_path / "plane.obj"
+    obj.write_text("v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nvn 0 0 1\n"
+                   "f 1//1 2//1 3//1\nf 1//1 3//1 4//1\n")
+    from jaxskin.scene import load_scene
+
+    light = direction(40, 30)
+    sc = load_scene("face", [f"mesh.file={obj}", "mesh.projection=planar", "texture.size=32",
+                             "camera.projection=orthographic", "camera.size=24",
+                             "sss.enabled=false", "skin.subject=40", "skin.melanin=0.6",
+                             "skin.roughness=0.35", "skin.specular=0.2",
+                             f"light.direction=[{light[0]}, {light[1]}, {light[2]}]",
+                             "light.ambient=0.2", "light.intensity=0.8",
+                             "spectral.step=10"])
+    image = np.asarray(render.render(sc.config, sc.params))
+    grid = spectral.Grid(step=10)
+    wl, R = skin.nist_spectrum(40)
+    R = np.interp(grid.wavelengths, wl, R) * np.exp(-0.6 * (grid.wavelengths / 500) ** -3.33)
+    rgb = colour_science_srgb(R[None], grid.wavelengths, "D65")[0]
+    N = np.array([0.0, 0.0, 1.0])
+    linear = (0.2 + 0.8 * light[2]) * rgb + 0.8 * kelemen_by_hand(N, light, N, 0.35, 0.2)
+    expected = colour.cctf_encoding(linear, "sRGB")
+    inside = image[4:-4, 4:-4].reshape(-1, 3)  # the square fills 90 % of the image
+    np.testing.assert_allclose(inside, np.broadcast_to(expected, inside.shape),
+                               atol=6e-7)  # float32 render: measured 6.3e-8
+    assert np.all(image[0, 0] == 0)  # the margin is black
