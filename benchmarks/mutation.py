@@ -176,6 +176,15 @@ MUTANTS = [
     Mutant("wrinkles-noise-raises-not-lowers", "jaxskin/wrinkles.py",
            "h - k_noise * r, h)", "h + k_noise * r, h)",
            _k("tests/test_wrinkles.py", "step_nine")),
+    # ---- texture space
+    Mutant("projection-texel-size-area-not-length", "jaxskin/projection.py",
+           "return math.sqrt(surface / max(texels, 1e-300))",
+           "return surface / max(texels, 1e-300)",
+           _k("tests/test_makeup.py", "texel_size")),
+    Mutant("skin-melanin-one-pass-not-two", "jaxskin/skin.py",
+           "return base * jnp.exp(-melanin * jnp.asarray(shape, base.dtype))",
+           "return base * jnp.exp(-0.5 * melanin * jnp.asarray(shape, base.dtype))",
+           _k(REF, "melanin or flat_skin")),
     # ---- rasterizer and interpolation
     Mutant("raster-pixel-corner-not-centre", "jaxskin/raster.py",
            "cx, cy = px + 0.5, py + 0.5", "cx, cy = px + 0.0, py + 0.0",

@@ -26,7 +26,8 @@ def test_the_published_values_at_the_normal(x64):
     diffuse = np.array([0.428425, 0.301341, 0.331054]) / np.pi
     lobe1 = np.array([0.380123, 0.410559, 0.437367]) ** np.array([3.685044, 4.266495, 4.539742])
     lobe2 = np.array([0.857998, 0.703913, 0.573625]) ** np.array([64.208486, 63.919687, 43.809866])
-    np.testing.assert_allclose(L.brdf(p, u, v), diffuse + lobe1 + lobe2, rtol=1e-12)
+    np.testing.assert_allclose(L.brdf(p, u, v), diffuse + lobe1 + lobe2,
+                               rtol=2e-15)  # measured 2.2e-16
 
 
 def test_negative_base_is_clamped_to_zero_not_nan(x64):
