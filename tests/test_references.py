@@ -328,10 +328,12 @@ def test_colorchecker_through_the_renderers_encoding_matches_colour_science(x64,
 
 def test_srgb_encoding_by_hand(x64):
     """IEC 61966-2-1: 12.92 x below 0.0031308, 1.055 x^(1/2.4) − 0.055 above; values worked
-    out by hand (0.5^(1/2.4) = 0.74915353843834, 0.18^(1/2.4) = 0.48943708957388)."""
-    x = jnp.asarray([0.0, 0.001, 0.0031308, 0.18, 0.5, 1.0, -0.01])
-    expected = [0.0, 0.01292, 0.040449936, 1.055 * 0.48943708957388 - 0.055,
-                1.055 * 0.74915353843834 - 0.055, 1.0, -0.1292]
+    out by hand (0.5^(1/2.4) = 0.74915353843834, 0.18^(1/2.4) = 0.48943708957388,
+    0.02^(1/2.4) = 0.19592769603435; 0.02 lies between the joint and 0.04045)."""
+    x = jnp.asarray([0.0, 0.001, 0.0031308, 0.02, 0.18, 0.5, 1.0, -0.01])
+    expected = [0.0, 0.01292, 0.040449936, 1.055 * 0.19592769603435 - 0.055,
+                1.055 * 0.48943708957388 - 0.055, 1.055 * 0.74915353843834 - 0.055, 1.0,
+                -0.1292]
     np.testing.assert_allclose(render.encode_srgb(x), expected, rtol=0,
                                atol=2e-14)  # measured 1.8e-15 (roots to 14 digits)
 
