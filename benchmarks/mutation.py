@@ -96,6 +96,8 @@ MUTANTS = [
     Mutant("view-wrap-ignored", "jaxskin/view.py",
            "xi = jnp.mod(xi, Wt) if wrap_x else jnp.clip(xi, 0, Wt - 1)",
            "xi = jnp.clip(xi, 0, Wt - 1)", _k(REF, "checkerboard")),
+    Mutant("view-perspective-barycentrics-not-corrected", "jaxskin/view.py",
+           "bary = bary / w[mesh.faces[safe]]", "bary = bary / 1.0", _k(REF, "ray_casting")),
     Mutant("view-downsample-max-not-mean", "jaxskin/view.py",
            ".mean(axis=(1, 3))", ".max(axis=(1, 3))", _k(REF, "downsample")),
     # ---- spectral → colour
