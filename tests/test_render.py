@@ -47,7 +47,7 @@ def test_lafortune_shade_matches_the_brdf_in_the_local_frame(x64):
     local = lambda w: np.array([w @ t, w @ b, w @ N])  # noqa: E731
     f = lafortune.brdf(p, local(L), local(V))
     expected = 0.3 * np.asarray(p.diffuse) + 0.7 * np.asarray(f) * (N @ L)
-    np.testing.assert_allclose(lafortune.shade(p, N, L, V), expected, rtol=2e-15)  # meas. 1.8e-16
+    np.testing.assert_allclose(lafortune.shade(p, N, L, V), expected, rtol=1e-12)
 
 
 POINTS = {
@@ -96,11 +96,12 @@ def test_render_gradients_wrt_material_light_and_bump(small_hand):
     grads = jax.grad(loss)(sub)
     for k in keys:
         assert bool(jnp.all(jnp.isfinite(grads[k]))) and float(jnp.abs(grads[k]).sum()) > 0, k
-    # Gradient against central differences in melanin (float32 render): measured 4.2e-6.
+    # Gradient against central differences in melanin (float32 render): measured 4.2e-6
+    # with eq. 5.7's colours, 3.5e-4 with the sRGB-encoded renders of branch `look`.
     h = 1e-2
     plus = loss({**sub, "material.melanin": sub["material.melanin"] + h})
     minus = loss({**sub, "material.melanin": sub["material.melanin"] - h})
-    np.testing.assert_allclose(grads["material.melanin"], (plus - minus) / (2 * h), rtol=4e-5)
+    np.testing.assert_allclose(grads["material.melanin"], (plus - minus) / (2 * h), rtol=4e-3)
 
 
 def test_view_sampling_gradient(x64):
