@@ -453,13 +453,36 @@ def test_flat_skin_plane_render_by_hand(tmp_path):
     from jaxskin.scene import load_scene
 
     light = direction(40, 30)
-    sc = load_scene("face", [f"mesh.file={obj}", "mesh.projection=planar", "texture.size=32",
-                             "camera.projection=orthographic", "camera.size=24",
-                             "sss.enabled=false", "skin.subject=40", "skin.melanin=0.6",
-                             "skin.roughness=0.35", "skin.specular=0.2",
-                             f"light.direction=[{light[0]}, {light[1]}, {light[2]}]",
-                             "light.ambient=0.2", "light.intensity=0.8",
-                             "spectral.step=10"])
+    scene = tmp_path / "plane.toml"
+    scene.write_text(f"""
+[mesh]
+file = "{obj}"
+projection = "planar"
+[texture]
+size = 32
+[wrinkles]
+enabled = false
+[material]
+model = "spectral"
+[skin]
+subject = 40
+melanin = 0.6
+roughness = 0.35
+specular = 0.2
+[spectral]
+step = 10
+illuminant = "D65"
+[sss]
+enabled = false
+[light]
+direction = [{light[0]}, {light[1]}, {light[2]}]
+ambient = 0.2
+intensity = 0.8
+[camera]
+projection = "orthographic"
+size = 24
+""")
+    sc = load_scene(scene)
     image = np.asarray(render.render(sc.config, sc.params))
     grid = spectral.Grid(step=10)
     wl, R = skin.nist_spectrum(40)
