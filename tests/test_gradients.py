@@ -86,11 +86,10 @@ def test_kelemen_extremes(x64, case):
     """cos α = N·H just above the 1e-4 cut-off (P_H underflows to 0, gradient finite and
     0), and nearly mirror-like roughness at a half vector 0.5° off the normal."""
     N = np.array([0.0, 0.0, 1.0])
-    if case == "near the cut-off":
-        H = unit([1.0, 0.0, 2e-4])
-        V = unit([0.3, 0.0, 1.0])
-        L = 2 * (V @ H) * H - V  # L's half vector with V is H
-        m = 0.3
+    if case == "near the cut-off":  # both above the surface, N·H = 1.17e-4
+        L, V = unit([1.0, 0.3, 1e-4]), unit([0.2, 1.0, 1e-4])
+        assert 1e-4 < float(N @ unit(L + V)) < 1.2e-4
+        m = 1.0
     else:
         L, V = unit([np.tan(np.radians(0.5)) * 2, 0, 1.0]), N
         m = float(case.split()[1])
