@@ -25,7 +25,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import HERE, cold_and_warm, machine, median_time, table, timeit, write_section  # noqa: E402
 
-from jaxskin import km, skin, spectral  # noqa: E402
+from jaxskin import formats, km, spectral  # noqa: E402
 from jaxskin.fitting import km as fit_km  # noqa: E402
 from jaxskin.fitting.measurements import read_measurement  # noqa: E402
 from jaxskin.io import data_dir  # noqa: E402
@@ -50,7 +50,7 @@ def load_materials(wavelengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def skin_reflectance(wavelengths: np.ndarray) -> np.ndarray:
     """NIST subject 1's mean forearm reflectance, interpolated onto `wavelengths`."""
-    return np.interp(wavelengths, *skin.nist_spectrum(1))
+    return np.interp(wavelengths, *formats.nist_spectrum(1))
 
 
 def thickness_maps(n: int, seed: int = 0) -> np.ndarray:

@@ -31,6 +31,8 @@ from .measurements import Measurement
 __all__ = ["KMFit", "closed_form", "fit", "identifiable", "model_reflectance"]
 
 DEFAULT_NOISE = 0.002  # σ of one reflectance reading
+MAX_NOISE = 0.5  # σ beyond this is not a reflectance measurement
+MAX_SMOOTH = 1e6  # 1/W = 1e-6 per band: already a constant spectrum
 NOISE_SIGMAS = 3.0  # a difference counts when it exceeds this many σ
 
 
@@ -53,8 +55,10 @@ class KMFit:
     smooth: float
     noise: float
 
-    def to_json(self, measurement: Measurement) -> dict:
-        """The material file: what `jaxskin` reads for a cosmetic layer, plus the fit's record."""
+    def to_json(self, measurement: Measurement, extrapolate: str | None = None) -> dict:
+        """The material file: what `jaxskin` reads for a cosmetic layer, plus the fit's record.
+        `extrapolate` ("hold", "linear" or None) says how a renderer may extend S and K
+        beyond the measured wavelengths (`cosmetics.load_material`)."""
 
         def clean(a):
             return [None if not np.isfinite(v) else float(v) for v in np.asarray(a)]
@@ -67,11 +71,12 @@ class KMFit:
             "K_per_mm": clean(self.K_per_mm),
             "identifiable": [bool(v) for v in self.identifiable],
             "rmse": float(self.rmse),
+            **({"extrapolate": extrapolate} if extrapolate else {}),
             "fit": {
                 "source": measurement.path.name,
                 "thickness_mm": clean(measurement.thickness_mm),
                 "method": "closed form (Huang et al. 2013 eq. 6-7) then Levenberg-Marquardt "
-                "on log S, log K (optimistix, float64)",
+                "on log S, log K (float64; per band, or block-tridiagonal with the prior)",
                 "smooth": self.smooth,
                 "noise": self.noise,
                 "steps": int(self.steps),

@@ -18,9 +18,10 @@ import time
 from pathlib import Path
 
 from . import __version__
-from .io import InputError, atomic_write
+from .io import FitError, InputError
 
 EXIT_INPUT = 2
+EXIT_FAILED = 1
 
 
 def _enable_compilation_cache() -> None:
@@ -74,6 +75,11 @@ def _parser() -> argparse.ArgumentParser:
                    help="standard deviation of one reflectance reading (default 0.002); a band "
                    "is identifiable when some thin layer and the background each differ from "
                    "R_inf by more than 3σ")
+    c.add_argument("--extrapolate", choices=("hold", "linear"), default=None,
+                   help="how the renderer may extend S, K beyond the measured wavelengths to "
+                   "its 380-780 nm grid: hold the end values, or continue log S, log K "
+                   "linearly; without it a material that does not cover the grid is refused "
+                   "at render time (calibrate warns)")
     c.add_argument("--no-report", action="store_true", help="write the JSON only, no PNG")
 
     r = sub.add_parser(
@@ -128,10 +134,11 @@ def _calibrate(args) -> int:
     from jaxskin.fitting.measurements import read_measurement
 
     noise = fit_km.DEFAULT_NOISE if args.noise is None else args.noise
-    if not noise >= 0:
-        raise InputError(f"--noise must be >= 0, got {args.noise}")
-    if not args.smooth >= 0:
-        raise InputError(f"--smooth must be >= 0, got {args.smooth}")
+    if not 0 <= noise <= fit_km.MAX_NOISE:
+        raise InputError(f"--noise must be in [0, {fit_km.MAX_NOISE:g}] (a reflectance "
+                         f"standard deviation), got {args.noise}")
+    if not 0 <= args.smooth <= fit_km.MAX_SMOOTH:
+        raise InputError(f"--smooth must be in [0, {fit_km.MAX_SMOOTH:g}], got {args.smooth}")
     out = Path(args.output)
     inputs = {Path(f).resolve() for f in args.files}
     # Check everything first: a bad file anywhere means nothing is written.
@@ -149,19 +156,27 @@ def _calibrate(args) -> int:
             fit_km.fit(m, noise=noise)  # raises the InputError that explains why
         measurements.append(m)
 
-    import json
-
     from tqdm import tqdm
 
     from jaxskin.fitting.report import write_report
+    from jaxskin.formats import write_json
+    from jaxskin.spectral import Grid
+
+    grid = Grid().wavelengths
+    for m in measurements:
+        for note in m.notes:
+            print(f"jaxskin: note: {note}", file=sys.stderr)
+        wl = m.wavelength_nm
+        if args.extrapolate is None and (wl[0] > grid[0] or wl[-1] < grid[-1]):
+            print(f"jaxskin: warning: {m.path}: covers {wl[0]:g}-{wl[-1]:g} nm, not the "
+                  f"renderer's {grid[0]:g}-{grid[-1]:g} nm: the material will be refused at "
+                  "render time; pass --extrapolate hold|linear to allow it", file=sys.stderr)
 
     rows = []
     for m in tqdm(measurements, desc="calibrate", unit="file", disable=None):
         t0 = time.perf_counter()
         result = fit_km.fit(m, smooth=args.smooth, noise=noise)
-        with atomic_write(out / f"{m.name}.json", "w") as fh:
-            json.dump(result.to_json(m), fh, indent=1)
-            fh.write("\n")
+        write_json(result.to_json(m, extrapolate=args.extrapolate), out / f"{m.name}.json")
         if not args.no_report:
             write_report(m, result, out / f"{m.name}.png")
         rows.append((m.name, result, time.perf_counter() - t0))
@@ -259,8 +274,8 @@ def _render(args) -> int:
 
 
 def _fit_brdf(args) -> int:
+    from jaxskin import formats
     from jaxskin.fitting import brdf
-    from jaxskin.shading import lafortune
 
     if args.lobes < 1:
         raise InputError(f"--lobes must be >= 1, got {args.lobes}")
@@ -279,7 +294,7 @@ def _fit_brdf(args) -> int:
     result = brdf.fit(samples, lobes=args.lobes, starts=args.starts, seed=args.seed)
     seconds = time.perf_counter() - t0
     stats = result.stats()
-    lafortune.save(result.params, out, fit={"source": Path(args.file).name, **stats})
+    formats.write_lafortune(result.params, out, fit={"source": Path(args.file).name, **stats})
     if not args.no_report:
         brdf.write_report(samples, result, report)
     print(f"{'channel':<8} {'rel. RMS error':>14} {'failed starts':>13} {'steps':>6}")
@@ -303,6 +318,9 @@ def main(argv=None) -> int:
     except InputError as e:
         print(f"jaxskin: error: {e}", file=sys.stderr)
         return EXIT_INPUT
+    except FitError as e:
+        print(f"jaxskin: error: {e}", file=sys.stderr)
+        return EXIT_FAILED
 
 
 if __name__ == "__main__":

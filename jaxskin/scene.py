@@ -283,11 +283,12 @@ class Scene:
                 key = f"layer.{layer.name}.{k}"
                 out[key] = jnp.asarray(self.values[key], jnp.float32)
         if model == "lafortune":
+            from .formats import read_lafortune
             from .shading import lafortune
 
             brdf = self.values["material.brdf"]
             out["material.lafortune"] = (lafortune.skin() if brdf == "skin" else
-                                         lafortune.load(brdf))
+                                         read_lafortune(brdf))
         return out
 
 

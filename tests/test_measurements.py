@@ -101,7 +101,8 @@ BAD = [
         "R_g equals R_inf",
     ),
     ("duplicate column", lambda t: t.replace("R_0.15mm", "R_0.05mm"), 2, "R_0.05mm", "twice"),
-    ("first column", lambda t: t.replace("wavelength_nm", "lambda"), 2, "lambda", "wavelength_nm"),
+    ("no wavelength column", lambda t: t.replace("wavelength_nm", "nm"), None, None,
+     "no header row"),
     ("bare R without thickness", lambda t: t.replace("R_0.15mm", "R"), 2, "R", "thickness"),
     (
         "bad thickness comment",
@@ -122,7 +123,7 @@ def test_bad_input_names_file_line_and_column(tmp_path, what, breaker, line, col
         read_measurement(path)
     message = str(info.value)
     assert "\n" not in message
-    assert message.startswith(f"{path}:{line}"), message
+    assert message.startswith(f"{path}:{line}:" if line else f"{path}: "), message
     if column is not None:
         assert f"column '{column}'" in message, message
     assert words in message, message
