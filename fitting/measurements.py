@@ -80,8 +80,8 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
     - `path`: the CSV file.
     - `thickness_mm`: thickness for a bare `R` column; overrides `# thickness_mm:`.
     - `percent`: reflectance columns are 0–100 instead of 0–1 (radiance columns unaffected).
-      Without it, reflectances whose median is above 1.5 and that all lie in [0, 100] are
-      read as percent, with a note; anything else above 1 is an error.
+      Without it, reflectances whose median is above 1.5 are read as percent (and must then
+      lie in [0, 100]), with a note; otherwise anything above 1 is an error.
 
     Wavelengths all under 10 are read as µm (× 1000, with a note); after that they must lie
     in 200–3000 nm and increase.
@@ -220,8 +220,8 @@ def _classify(header, path, line, bare_thickness):
 
 def _reflectances(data, header, columns, path, numbers, percent, notes):
     """Reflectance per role (thin columns by name), checked to lie in [0, 1]. Reflectance
-    columns are read as percent when `percent`, or when their median is above 1.5 and all lie
-    in [0, 100] (a note is added to `notes`)."""
+    columns are read as percent when `percent`, or when their median is above 1.5 (a note is
+    added to `notes`)."""
     index = {name: i + 1 for i, name in enumerate(header[1:])}
     for name in columns:
         if _is_radiance(name):
@@ -240,7 +240,7 @@ def _reflectances(data, header, columns, path, numbers, percent, notes):
     plain = [index[n] for n in columns if not _is_radiance(n)]
     if plain and not percent:
         values = data[:, plain]
-        if np.median(values) > PERCENT_MEDIAN and values.min() >= 0 and values.max() <= 100:
+        if np.median(values) > PERCENT_MEDIAN:  # then [0, 100] is checked below
             percent = True
             notes.append(f"{path}: reflectances have a median of {np.median(values):.3g}: read "
                          "as percent (/ 100)")
