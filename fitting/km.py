@@ -163,6 +163,20 @@ def _cost(y, args):
     return 0.5 * (jnp.sum(r * r) + prior**2 * jnp.sum(jnp.diff(y, axis=0) ** 2))
 
 
+def _normal_equations(y, args):
+    """At `y (n, 2)`: the cost (`_cost`), its gradient `g (n, 2)` and the data's Gauss–Newton
+    blocks `H (n, 2, 2)` = Jᵀ J per band (the prior's part is added by the solver)."""
+    prior, ident = args[4], args[5]
+    y_eff, r, J = _linearise(y, args)
+    diff = jnp.diff(y_eff, axis=0)
+    pad = jnp.zeros((1, 2), y.dtype)
+    g_prior = (jnp.concatenate([pad, diff]) - jnp.concatenate([diff, pad])) * jnp.stack(
+        [ident, jnp.ones_like(ident)], -1)
+    g = jnp.einsum("nri,nr->ni", J, r) + prior**2 * g_prior
+    H = jnp.einsum("nri,nrj->nij", J, J)
+    return 0.5 * (jnp.sum(r * r) + prior**2 * jnp.sum(diff**2)), g, H
+
+
 def block_tridiagonal_solve(D, off, b):
     """Solve the symmetric block-tridiagonal system with 2×2 diagonal blocks `D (n, 2, 2)`,
     diagonal 2×2 off-diagonal blocks `off (n - 1, 2)` (their diagonals) and `b (n, 2)`:
@@ -215,20 +229,15 @@ def _solve_banded(y0, args, max_steps=256, rtol=1e-9, atol=1e-12):
     count = jnp.concatenate([links, jnp.zeros((1, 2), y0.dtype)]) + jnp.concatenate(
         [jnp.zeros((1, 2), y0.dtype), links])
 
-    def normal_equations(y):
-        y_eff, r, J = _linearise(y, args)
-        diff = jnp.diff(y_eff, axis=0)
-        pad = jnp.zeros((1, 2), y.dtype)
-        g_prior = jnp.concatenate([pad, diff]) - jnp.concatenate([diff, pad])
-        g = jnp.einsum("nri,nr->ni", J, r) + prior**2 * g_prior * mask
-        H = jnp.einsum("nri,nrj->nij", J, J)
-        cost = 0.5 * (jnp.sum(r * r) + prior**2 * jnp.sum(diff**2))
-        return cost, g, H
+    normal_equations = functools.partial(_normal_equations, args=args)
 
     def step(state):
         y, cost, g, H, mu, nu, k, done = state
         D = H + (prior**2 * count + mu)[:, :, None] * jnp.eye(2, dtype=y.dtype)
-        delta = block_tridiagonal_solve(D, -prior**2 * links, -g)
+        if y.shape[0] == 1:  # one band (the separable case): a 2×2 solve, no scan
+            delta = -(_inverse2(D[0]) @ g[0])[None]
+        else:
+            delta = block_tridiagonal_solve(D, -prior**2 * links, -g)
         y_new = y + delta
         cost_new, g_new, H_new = normal_equations(y_new)
         predicted = 0.5 * jnp.sum(delta * (mu * delta - g))
