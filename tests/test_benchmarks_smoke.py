@@ -70,5 +70,5 @@ def test_bench_km_calibration_scaling_inputs_and_table():
     assert m.R.shape == (2, 21) and m.wavelength_nm[0] == 380 and m.wavelength_nm[-1] == 780
     text = bench_km.scaling_section([(21, 0.0, 0.01, 0.5, 3, True), (21, 20.0, 0.01, None, 4,
                                                                       True)],
-                                    {0.0: (400.0, 420.0, 5.0)}, 1.0)
+                                    {0.0: (400.0, 420.0, 5.0, (3.0, 500.0))}, 1.0)
     assert "| 21 | 0 | 0.010 | 0.500 | 50.0 | 3 | True |" in text
