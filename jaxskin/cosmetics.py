@@ -24,7 +24,7 @@ from . import formats, km
 from .io import InputError, data_dir
 from .spectral import Grid
 
-__all__ = ["Material", "coverage", "ellipse_map", "extend", "image_map", "layers",
+__all__ = ["Material", "check_material", "coverage", "ellipse_map", "extend", "image_map", "layers",
            "load_material", "material_path", "on_grid", "polygon_map", "shipped_materials"]
 
 
@@ -67,6 +67,12 @@ def load_material(name_or_path, grid: Grid) -> Material:
                          path)
     f = formats.read_material(path)
     return on_grid(f, grid)
+
+
+def check_material(path) -> None:
+    """Read a material file and check that it covers the render grid (380–780 nm at any
+    step) or says how to extend it; `InputError` otherwise. For checks before any work."""
+    on_grid(formats.read_material(path), Grid())
 
 
 def on_grid(f: formats.MaterialFile, grid: Grid) -> Material:

@@ -483,6 +483,7 @@ def _layer(i, e, path, values) -> LayerSpec:
         names = ", ".join(cosmetics.shipped_materials())
         raise InputError(f"no material file {file} (shipped materials: {names})", path,
                          key=f"{where}.material")
+    cosmetics.check_material(file)  # readable and covering the render grid, before any work
     material = str(file)
     image = e.get("image")
     if image is not None:

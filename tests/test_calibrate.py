@@ -354,3 +354,55 @@ def test_ten_thousand_bands(smooth):
     assert r.converged and r.identifiable.all()
     tol = 1e-6 if smooth == 0 else 0.02  # the prior pulls a little (measured below)
     assert np.max(np.abs(r.S_per_mm / S - 1)) < tol
+
+
+# ------------------------------------------------------------------ finite numbers only
+
+
+@pytest.mark.parametrize("flags", [["--smooth", "inf"], ["--smooth", "nan"], ["--smooth", "-1"],
+                                   ["--smooth", "1e300"], ["--noise", "nan"], ["--noise", "1"],
+                                   ["--thickness", "inf"], ["--thickness", "1e308"]])
+def test_cli_non_finite_or_absurd_flags_exit_2(tmp_path, capsys, flags):
+    src = ROOT / "data" / "measurements" / "blush_rose.csv"
+    assert main(["calibrate", str(src), "-o", str(tmp_path / "out"), *flags]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("jaxskin: error:") and flags[0] in err[0]
+    assert not (tmp_path / "out").exists()
+
+
+def test_cli_a_fit_that_fails_exits_1_with_one_line(tmp_path, capsys, monkeypatch):
+    """A solver that ends in NaN (forced here) is a failed fit: exit 1, one line, no JSON."""
+    real = fkm._solve_separable
+
+    def broken(y0, args, max_steps=256):
+        y, ok, steps = real(y0, args, max_steps)
+        return y * np.nan, ok, steps
+
+    monkeypatch.setattr(fkm, "_solve_separable", broken)
+    src = ROOT / "data" / "measurements" / "foundation_beige.csv"
+    assert main(["calibrate", str(src), "-o", str(tmp_path / "out"), "--no-report"]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"jaxskin: error: {src}:")
+    assert "the fit failed" in err[0]
+    assert not (tmp_path / "out" / "foundation_beige.json").exists()
+
+
+def test_render_refuses_a_material_that_does_not_cover_the_grid(tmp_path, capsys):
+    """Checked when the scene is loaded, before any render: one line naming the material
+    file and the range it covers."""
+    doc = {"wavelength_nm": [400, 550, 700], "S_per_mm": [5, 5, 5], "K_per_mm": [1, 1, 1]}
+    (tmp_path / "narrow.json").write_text(json.dumps(doc))
+    scene = (ROOT / "data" / "scenes" / "makeup.toml").read_text().replace(
+        'material = "foundation_beige"', 'material = "narrow.json"', 1)
+    (tmp_path / "s.toml").write_text(scene)
+    out = tmp_path / "out"
+    assert main(["render", str(tmp_path / "s.toml"), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1, err
+    assert err[0].startswith(f"jaxskin: error: {tmp_path / 'narrow.json'}: key 'wavelength_nm'")
+    assert "covers 400-700 nm" in err[0] and not out.exists()
+    doc["extrapolate"] = "hold"
+    (tmp_path / "narrow.json").write_text(json.dumps(doc))
+    from jaxskin.scene import load_scene
+
+    load_scene(str(tmp_path / "s.toml"))  # accepted now
