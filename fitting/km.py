@@ -2,9 +2,13 @@
 
 Huang et al. 2013 §4: a thin layer over a background (R), an opaque layer (R∞) and the
 background alone (Rg). The closed form (eq. 6–7) gives a start where its domain holds;
-Levenberg–Marquardt (optimistix, float64) then fits log S and log K at every band at once,
-to every thin-layer thickness and to R∞ together, optionally with a smoothness prior across
-bands.
+Levenberg–Marquardt (float64) then fits log S and log K to every thin-layer thickness and to
+R∞ together, optionally with a smoothness prior across bands. The problem is separable per
+band apart from the prior: without it each band's two-parameter problem is solved on its own
+(vmapped over bands); with it the normal equations are block-tridiagonal (2×2 blocks) and are
+solved by block elimination in a scan. Time and memory are O(bands) either way.
+`solver="dense"` keeps the earlier solver (optimistix over all bands, a dense Jacobian: O(n²)
+memory) as a reference.
 
 Identifiability: where the thin layer is as good as opaque (|R − R∞| <= 3σ, σ the noise of
 one reading) or the background is as bright as the opaque layer (|Rg − R∞| <= 3σ), the band
