@@ -223,7 +223,9 @@ def _solve_banded(y0, args, max_steps=256, rtol=1e-9, atol=1e-12):
     (a 2×2 block), the prior only neighbouring bands' same variable. Damping μ by Nielsen's
     rule (Madsen, Nielsen, Tingleff 2004, §3.2); stops when an accepted step moves no
     variable by more than `atol + rtol |y|` and lowers the cost by less than
-    `atol + rtol · cost`, or after `max_steps`.
+    `atol + rtol · cost`, or such a step is rejected and was predicted to gain no more
+    (the cost at its rounding floor), or no decrease is predicted at all (all: converged);
+    when μ passes 1e30 (stuck: not converged); or after `max_steps`.
 
     **Returns:** `(y, converged, steps)`.
     """
@@ -236,7 +238,7 @@ def _solve_banded(y0, args, max_steps=256, rtol=1e-9, atol=1e-12):
     normal_equations = functools.partial(_normal_equations, args=args)
 
     def step(state):
-        y, cost, g, H, mu, nu, k, done = state
+        y, cost, g, H, mu, nu, k, done, ok = state
         D = H + (prior**2 * count + mu)[:, :, None] * jnp.eye(2, dtype=y.dtype)
         if y.shape[0] == 1:  # one band (the separable case): a 2×2 solve, no scan
             delta = -(_inverse2(D[0]) @ g[0])[None]
@@ -247,20 +249,27 @@ def _solve_banded(y0, args, max_steps=256, rtol=1e-9, atol=1e-12):
         predicted = 0.5 * jnp.sum(delta * (mu * delta - g))
         rho = (cost - cost_new) / jnp.where(predicted > 0, predicted, 1.0)
         accept = (predicted > 0) & (cost_new < cost) & jnp.isfinite(cost_new)
-        small = (jnp.max(jnp.abs(delta)) <= atol + rtol * jnp.max(jnp.abs(y))) & (
-            cost - cost_new <= atol + rtol * cost)
-        stuck = ~accept & ((mu > 1e30) | (predicted <= 0))  # no step lowers the cost
+        small_step = jnp.max(jnp.abs(delta)) <= atol + rtol * jnp.max(jnp.abs(y))
+        tiny = atol + rtol * cost
+        # Converged: an accepted step that is small and gains little; or a rejected step that
+        # is small and was predicted to gain little (the cost is at its rounding floor, as
+        # MINPACK's xtol test); or no decrease predicted at all. μ beyond 1e30 without
+        # either: stuck, not converged.
+        converged = jnp.where(accept, small_step & (cost - cost_new <= tiny),
+                              (small_step & (predicted <= tiny)) | (predicted <= 0))
+        stuck = ~accept & (mu > 1e30)
         mu = jnp.where(accept, mu * jnp.maximum(1 / 3, 1 - (2 * rho - 1) ** 3), mu * nu)
         nu = jnp.where(accept, 2.0, 2 * nu)
         pick = lambda a, b: jnp.where(accept, a, b)  # noqa: E731
         return (pick(y_new, y), pick(cost_new, cost), pick(g_new, g), pick(H_new, H), mu, nu,
-                k + 1, (accept & small) | stuck)
+                k + 1, converged | stuck, converged)
 
     cost, g, H = normal_equations(y0)
     mu = 1e-3 * jnp.max(jnp.diagonal(H, axis1=1, axis2=2))
-    state = (y0, cost, g, H, jnp.maximum(mu, 1e-12), jnp.asarray(2.0, y0.dtype), 0, False)
-    state = jax.lax.while_loop(lambda s: ~s[-1] & (s[-2] < max_steps), step, state)
-    return state[0], state[-1], state[-2]
+    state = (y0, cost, g, H, jnp.maximum(mu, 1e-12), jnp.asarray(2.0, y0.dtype), 0, False,
+             False)
+    state = jax.lax.while_loop(lambda s: ~s[-2] & (s[-3] < max_steps), step, state)
+    return state[0], state[-1], state[-3]
 
 
 def _dense_residuals(y, args):
