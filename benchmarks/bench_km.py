@@ -321,14 +321,14 @@ compilation cache warm; `/usr/bin/time -v`):
 
 Aim (issue 13): 10,001 rows under 10 s warm and under 1 GiB peak, with and without the prior.
 
-Reading: the banded fit is linear in the number of bands (0.15 s warm at 10,001 bands
-without the prior, 0.03 s with it, where the prior's coupling makes Levenberg–Marquardt take
-fewer steps) and its memory is O(N) (the fit adds under 200 MiB at 10,001 bands, compilation
-included), against the dense Jacobian's O(N²). Its results match the dense solver's on the
-shipped examples to 5.5e-9 relative in S and K (`tests/test_calibrate.py`). The dense warm
-times here are far above the 0.027 s the `km` section measured on a quieter machine: this
-run shared the 2 cores with other work, and the dense solve suffered far more from that
-than the banded one; read its ratio as "orders of magnitude", not as a precise figure.
+Reading: the banded fit's time grows linearly with the number of bands (well under a
+second at 10,001) and its memory is O(N) (the fit adds under 200 MiB at 10,001 bands,
+compilation included), against the dense Jacobian's O(N²). Its results match the dense
+solver's on the shipped examples to 5.5e-9 relative in S and K (`tests/test_calibrate.py`).
+The dense warm times here are far above the 0.027 s the `km` section measured on a quieter
+machine: this run shared the 2 cores with other work, and the dense solve suffered far more
+from that than the banded one; read its ratio as "orders of magnitude", not as a precise
+figure.
 """
 
 
