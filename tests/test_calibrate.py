@@ -306,7 +306,7 @@ def test_gradient_and_stationarity_against_the_dense_residuals(smooth):
     """The solver's hand-assembled gradient (data Jᵀr per band + the prior's banded part, S
     held where unidentifiable) equals autodiff of the dense residuals' ½‖r‖² (the old
     formulation, written independently) at a random point; at the fit's solution that
-    gradient is ~0 (measured 1.9e-10 of its size at the start without the prior, 3.4e-9
+    gradient is ~0 (measured 3.1e-10 of its size at the start without the prior, 3.4e-9
     with it: the stopping test's rtol 1e-9 on the step)."""
     import jax
     import jax.numpy as jnp
@@ -337,7 +337,7 @@ def test_gradient_and_stationarity_against_the_dense_residuals(smooth):
 def test_ten_thousand_bands(smooth):
     """10,001 rows (0.04 nm, a spectroradiometer's native output), which the dense solver
     could not fit (27 GB): converges, recovers the noiseless truth, and the warm fit takes
-    well under a second here (0.03–0.11 s measured; 10 s allowed on a shared machine)."""
+    well under a second here (0.03–0.15 s measured; 10 s allowed on a shared machine)."""
     import time
 
     wl = np.linspace(380.0, 780.0, 10_001)
@@ -352,7 +352,8 @@ def test_ten_thousand_bands(smooth):
     r = fkm.fit(m, smooth=smooth)
     assert time.perf_counter() - t0 < 10.0
     assert r.converged and r.identifiable.all()
-    tol = 1e-6 if smooth == 0 else 0.02  # the prior pulls a little (measured below)
+    # Measured: 1.5e-9 without the prior; 6.8e-5 with it (the prior pulls a little).
+    tol = 1e-8 if smooth == 0 else 5e-4
     assert np.max(np.abs(r.S_per_mm / S - 1)) < tol
 
 
