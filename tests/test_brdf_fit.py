@@ -121,3 +121,23 @@ def test_cli_bad_input_exit_2_one_line(tmp_path):
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
     assert not (tmp_path / "x.json").exists()
+
+
+def test_cli_a_fit_that_fails_exits_1_with_one_line(tmp_path, capsys, monkeypatch):
+    """Every start ending in NaN (forced here) is a failed fit: exit 1, one line, no JSON."""
+    from jaxskin.cli import main
+
+    real = brdf._solve_all
+
+    def broken(*args, **kwargs):
+        theta, loss, ok, steps = real(*args, **kwargs)
+        return theta, loss * np.nan, ok, steps
+
+    monkeypatch.setattr(brdf, "_solve_all", broken)
+    src = write(tmp_path, HEADER + "".join(f"{t},0,{t + 5},180,0.2,0.1,0.1\n"
+                                           for t in range(0, 80, 5)))
+    out = tmp_path / "out" / "fit.json"
+    assert main(["fit-brdf", str(src), "-o", str(out), "--lobes", "1", "--starts", "1"]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"jaxskin: error: {src}: every start failed")
+    assert not out.exists()
