@@ -361,7 +361,7 @@ def test_ten_thousand_bands(smooth):
 
 
 @pytest.mark.parametrize("flags", [["--smooth", "inf"], ["--smooth", "nan"], ["--smooth", "-1"],
-                                   ["--smooth", "1e300"], ["--noise", "nan"], ["--noise", "1"],
+                                   ["--smooth", "1e300"], ["--noise", "nan"], ["--noise", "2"],
                                    ["--thickness", "inf"], ["--thickness", "1e308"]])
 def test_cli_non_finite_or_absurd_flags_exit_2(tmp_path, capsys, flags):
     src = ROOT / "data" / "measurements" / "blush_rose.csv"
