@@ -323,8 +323,10 @@ Aim (issue 13): 10,001 rows under 10 s warm and under 1 GiB peak, with and witho
 
 Reading: the banded fit's time grows linearly with the number of bands (well under a
 second at 10,001) and its memory is O(N) (the fit adds under 200 MiB at 10,001 bands,
-compilation included), against the dense Jacobian's O(N²). Its results match the dense
-solver's on the shipped examples to 5.5e-9 relative in S and K (`tests/test_calibrate.py`).
+compilation included; a separate run at 100,001 bands peaked at 458–484 MiB, about 0.5 KB
+per band above the 10,001-band figure), against the dense Jacobian's O(N²). Its results
+match the dense solver's on the shipped examples to 5.5e-9 relative in S and K
+(`tests/test_calibrate.py`).
 The dense warm times here are far above the 0.027 s the `km` section measured on a quieter
 machine: this run shared the 2 cores with other work, and the dense solve suffered far more
 from that than the banded one; read its ratio as "orders of magnitude", not as a precise
