@@ -89,6 +89,15 @@ def cases(large: bool = False):
     for k in (0.5, 1e3):
         out.append((f"bump.bump_normals (n_z → 0, k_bump {k:g})",
                     lambda n, hh, kk=k: bump.bump_normals(n, hh, kk), [nmap, h]))
+    # The general form (cylindrical, uv): ∇s along n (a tangent seen edge-on) on alternate
+    # rows, n_z → 0, the seam's wrap, a huge k_bump.
+    tilt = np.random.default_rng(1).normal(size=(8, 8, 3))
+    g_s = np.where(np.arange(8)[:, None, None] % 2 == 0, nmap, [1.0, 0.0, 0.0]) + 1e-7 * tilt
+    g_t = np.tile([0.0, 1.0, 0.0], (8, 8, 1))
+    for k in (0.5, 1e3):
+        out.append((f"bump.frame_bump_normals (∇s ∥ n, n_z → 0, seam, k_bump {k:g})",
+                    lambda n, hh, a, b, kk=k: bump.frame_bump_normals(n, hh, kk, a, b, True),
+                    [nmap, h, g_s, g_t]))
     # Texture sizes: a furrowed height field over a sphere-like normal map.
     for n in (64, 4096) if large else (64,):
         y, x = (np.mgrid[0:n, 0:n] + 0.5) / n * 2 - 1

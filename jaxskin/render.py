@@ -52,6 +52,7 @@ def prepare(config: SceneConfig) -> Prepared:
     if config.needs_furrows:
         arrays["h0"] = texture.furrows(config.texture)[0]
         arrays["noise"] = texture.noise(config.texture)
+        arrays.update(s.frame)  # the surface gradients for the general bump form
     if view.eye is not None:  # perspective: the view direction varies per texel
         arrays["positions"] = interpolate(s.mesh.vertices.astype(np.float32), s.mesh.faces,
                                           s.tmap.raster)
@@ -99,7 +100,9 @@ def _render(config: SceneConfig, params: dict, arrays: dict):
         return sample(texture_image, arrays["tex"], view_mask, p.view.wrap_x)
 
     if config.needs_furrows:
-        maps = texture.bumped(arrays["normals"], mask, arrays["h0"], arrays["noise"], params)
+        frame = {k: arrays[k] for k in ("grad_s", "grad_t") if k in arrays}
+        maps = texture.bumped(arrays["normals"], mask, arrays["h0"], arrays["noise"], params,
+                              frame, p.setup.tmap.wrap_x)
         height, normals = maps["height"], maps["normals"]
     else:
         height, normals = jnp.ones(mask.shape, jnp.float32), arrays["normals"]

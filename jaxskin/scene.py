@@ -102,7 +102,7 @@ from .projection import KINDS
 from .spectral import ILLUMINANTS, STEPS, Grid
 
 __all__ = ["BUILTIN_SCENES", "Scene", "SceneConfig", "TextureConfig", "builtin_scenes",
-           "load_scene"]
+           "load_scene", "scene_at_width"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -297,6 +297,18 @@ BUILTIN_SCENES = ("hand", "foot", "arm", "face", "makeup")
 
 def builtin_scenes() -> dict[str, Path]:
     return {name: data_dir() / "scenes" / f"{name}.toml" for name in BUILTIN_SCENES}
+
+
+def scene_at_width(name_or_path, width: int, overrides=()) -> Scene:
+    """The scene with its image `width` pixels wide; a scene that sets `camera.height` (a
+    wide or tall frame) keeps its aspect, so small renders (tests, the gallery) frame it
+    as its default view does."""
+    scene = load_scene(name_or_path, overrides)
+    size, height = scene.values["camera.size"], scene.values["camera.height"]
+    extra = [f"camera.size={width}"]
+    if height:
+        extra.append(f"camera.height={max(16, round(height * width / size))}")
+    return load_scene(name_or_path, [*overrides, *extra])
 
 
 def load_scene(name_or_path, overrides=()) -> Scene:

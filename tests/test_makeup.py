@@ -105,7 +105,8 @@ def test_zero_thickness_gives_exactly_the_no_makeup_image(sss_on):
 
 
 def test_what_a_scene_does_not_need_is_not_traced(monkeypatch):
-    """No layers: no KM; sss.enabled = false: no blur; the face runs no furrows."""
+    """No layers: no KM; sss.enabled = false: no blur. (The face's skin microstructure runs
+    furrows, and none with wrinkles.enabled = false: tests/test_face_wrinkles.py.)"""
     calls = {"km": 0, "blur": 0}
     layer, blur = km.layer, sss.blur
 
@@ -127,7 +128,7 @@ def test_what_a_scene_does_not_need_is_not_traced(monkeypatch):
         jax.make_jaxpr(lambda p, sc=sc: render._render(sc.config, p, render.prepare(
             sc.config).arrays))(sc.params)
         assert calls == expected, (name, overrides, calls)
-        assert not sc.config.needs_furrows
+        assert sc.config.needs_furrows
 
 
 def _float64(tree):
