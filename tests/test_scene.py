@@ -122,10 +122,11 @@ def test_render_maps_command(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "jaxskin.cli", "render", "foot", "-o", str(out),
                            "--maps", "-D", "texture.size=96"], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
-    height = iio.imread(out / "foot_height.png")
+    base = out / "foot_texture.size-96"  # -D overrides name the outputs
+    height = iio.imread(f"{base}_height.png")
     assert height.dtype == np.uint16 and height.shape == (96, 96) and height.min() < 60000
-    assert iio.imread(out / "foot_normal.png").shape == (96, 96, 3)
-    assert iio.imread(out / "foot_field.png").ndim == 3
+    assert iio.imread(f"{base}_normal.png").shape == (96, 96, 3)
+    assert iio.imread(f"{base}_field.png").ndim == 3
 
 
 def test_render_bad_scene_exit_2_and_nothing_written(tmp_path):
@@ -140,12 +141,13 @@ def test_render_bad_scene_exit_2_and_nothing_written(tmp_path):
 
 
 def test_paths_from_the_file_and_from_the_command_line(tmp_path, monkeypatch):
+    from jaxskin.formats import write_lafortune
     from jaxskin.shading import lafortune
 
     (tmp_path / "scenes").mkdir()
     (tmp_path / "fits").mkdir()
-    lafortune.save(lafortune.skin(), tmp_path / "scenes" / "mine.json")
-    lafortune.save(lafortune.skin(), tmp_path / "fits" / "other.json")
+    write_lafortune(lafortune.skin(), tmp_path / "scenes" / "mine.json")
+    write_lafortune(lafortune.skin(), tmp_path / "fits" / "other.json")
     scene = tmp_path / "scenes" / "s.toml"
     scene.write_text(GOOD + '\n[material]\nmodel = "lafortune"\nbrdf = "mine.json"\n')
     assert load_scene(scene).values["material.brdf"] == str(tmp_path / "scenes" / "mine.json")
