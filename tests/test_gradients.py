@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from conftest import check_grads_scaled
 
-from jaxskin import km, raster, render, skin, spectral, sss, view, wrinkles
+from jaxskin import formats, km, raster, render, skin, spectral, sss, view, wrinkles
 from jaxskin.scene import load_scene
 from jaxskin.shading import blinn, kelemen, layered
 
@@ -36,7 +36,7 @@ def test_to_xyz(x64):
 
 @pytest.mark.parametrize("melanin", [0.0, 0.7, 20.0])
 def test_skin_reflectance(x64, melanin):
-    base = skin.nist_reflectance(7, GRID)
+    base = formats.nist_reflectance(7, GRID)
     check_grads_scaled(lambda b, m: skin.reflectance(b, m, GRID), [base, melanin],
                        [0.01, 0.01], order=1)
 
@@ -139,7 +139,7 @@ def test_radiance_of_bare_skin(x64):
     def f(N, L, V, ambient, light, skin_R, m_s, rho_s):
         return layered.radiance(GRID, N, L, V, ambient, light, skin_R, m_s, rho_s)
 
-    args = [N, L, V, 0.3, 0.7, skin.nist_reflectance(3, GRID), 0.3, 0.18]
+    args = [N, L, V, 0.3, 0.7, formats.nist_reflectance(3, GRID), 0.3, 0.18]
     check_grads_scaled(jax.jit(f), args, [1e-3, 1e-3, 1e-3, 0.01, 0.01, 0.01, 0.01, 0.01],
                        order=1)
 
@@ -169,7 +169,7 @@ def test_radiance_through_the_chunked_jvp(x64, blurred):
         return layered.radiance(GRID, N, L, V, ambient, light, skin_R, m_s, rho_s, S=S, K=K,
                                 X=X, roughness=m, rho=rho, blur=blur)
 
-    args = [N, L, V, 0.3, 0.7, skin.nist_reflectance(3, GRID), 0.3, 0.18, X, S, K,
+    args = [N, L, V, 0.3, 0.7, formats.nist_reflectance(3, GRID), 0.3, 0.18, X, S, K,
             np.array([0.4, 0.25, 0.2]), np.array([0.1, 0.2, 0.3])]
     scales = [1e-3, 1e-3, 1e-3, 0.01, 0.01, 0.01, 0.01, 0.01, 1e-3, 0.5, 0.5, 0.01, 0.01]
     check_grads_scaled(jax.jit(f), args, scales, order=1)

@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxskin import render, skin, spectral, sss, view
+from jaxskin import formats, render, skin, spectral, sss, view
 from jaxskin.fields import Edit, interpolate_fields
 from jaxskin.mesh import Mesh
 from jaxskin.shading import blinn, kelemen, lafortune
@@ -486,7 +486,7 @@ size = 24
     sc = load_scene(scene)
     image = np.asarray(render.render(sc.config, sc.params))
     grid = spectral.Grid(step=10)
-    wl, R = skin.nist_spectrum(40)
+    wl, R = formats.nist_spectrum(40)
     R = np.interp(grid.wavelengths, wl, R) * np.exp(-0.6 * (grid.wavelengths / 500) ** -3.33)
     rgb = colour_science_srgb(R[None], grid.wavelengths, "D65")[0]
     N = np.array([0.0, 0.0, 1.0])
