@@ -133,7 +133,7 @@ def cosmetics_cases(N, L, large=False):
     K/S 1e6, grazing light, n_z → 0), the skin blur (a point of light at a mesh edge, 64²
     to 2048²), melanin, the sRGB encoding at 0 and below, and a whole makeup render with
     empty cosmetic maps."""
-    from jaxskin import cosmetics, render, skin, spectral, sss
+    from jaxskin import cosmetics, formats, render, skin, spectral, sss
     from jaxskin.scene import load_scene
     from jaxskin.shading import layered
 
@@ -141,7 +141,7 @@ def cosmetics_cases(N, L, large=False):
     mats = [cosmetics.load_material(n, grid) for n in ("foundation_beige", "blush_rose",
                                                        "lipstick_red")]
     S0, K0 = np.stack([m.S for m in mats]), np.stack([m.K for m in mats])
-    skin_R = skin.nist_reflectance(12, grid)
+    skin_R = formats.nist_reflectance(12, grid)
     thick = np.array([0.0, 1e-6, 0.01, 10.0])
     X = np.stack([np.repeat(thick, len(N) // len(thick) + 1)[:len(N)]] * 3)
     X[1] = X[1][::-1]

@@ -34,7 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import cosmetics, shadow, skin, sss, texture
+from . import cosmetics, formats, shadow, skin, sss, texture
 from .raster import interpolate
 from .scene import SceneConfig
 from .shading import blinn, lafortune, layered
@@ -73,7 +73,7 @@ def prepare(config: SceneConfig) -> Prepared:
     sp, texel_mm = config.spectral, 0.0
     if sp is not None:
         grid = sp.grid
-        arrays["skin"] = jnp.asarray(skin.nist_reflectance(sp.subject, grid), jnp.float32)
+        arrays["skin"] = jnp.asarray(formats.nist_reflectance(sp.subject, grid), jnp.float32)
         texel_mm = sp.texel_mm or sp.unit_mm * s.tmap.texel_size()
         # The model shades the texels on the mesh only, as a list (the rest stay black).
         texels = np.flatnonzero(np.asarray(s.mask))

@@ -288,11 +288,12 @@ class Scene:
                 key = f"layer.{layer.name}.{k}"
                 out[key] = jnp.asarray(self.values[key], jnp.float32)
         if model == "lafortune":
+            from .formats import read_lafortune
             from .shading import lafortune
 
             brdf = self.values["material.brdf"]
             out["material.lafortune"] = (lafortune.skin() if brdf == "skin" else
-                                         lafortune.load(brdf))
+                                         read_lafortune(brdf))
         return out
 
 
@@ -499,6 +500,7 @@ def _layer(i, e, path, values) -> LayerSpec:
         names = ", ".join(cosmetics.shipped_materials())
         raise InputError(f"no material file {file} (shipped materials: {names})", path,
                          key=f"{where}.material")
+    cosmetics.check_material(file)  # readable and covering the render grid, before any work
     material = str(file)
     image = e.get("image")
     if image is not None:
