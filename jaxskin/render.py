@@ -31,7 +31,7 @@ from .scene import SceneConfig
 from .shading import blinn, lafortune, layered
 from .view import View, downsample, make_view, sample
 
-__all__ = ["Prepared", "albedo", "encode_srgb", "prepare", "render", "render_prepared"]
+__all__ = ["Prepared", "albedo", "encode_srgb", "expose", "prepare", "render", "render_prepared"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -80,7 +80,9 @@ def prepare(config: SceneConfig) -> Prepared:
 
 
 def render(config: SceneConfig, params: dict):
-    """The image `(size, size, 3)` of a scene, float32, display values (clip to [0, 1])."""
+    """The image `(size, size, 3)` of a scene, float32, display values (clip to [0, 1]):
+    the linear image of any material model × 2^`camera.exposure`, sRGB-encoded (the
+    height mode: the height itself)."""
     return _render(config, params, prepare(config).arrays)
 
 
@@ -107,7 +109,6 @@ def _render(config: SceneConfig, params: dict, arrays: dict):
         colour = jnp.repeat(to_view(height[..., None]), 3, axis=-1)
     elif config.spectral is not None:
         colour = to_view(_cosmetics_texture(config, p, params, arrays, normals))
-        return encode_srgb(downsample(colour, k))  # averaged in linear light, then encoded
     else:
         # Shade where the camera looks: the bumped normal map sampled into the view (fewer
         # samples than texels), in the object's frame (L and V turned by Rᵀ instead of
@@ -131,7 +132,16 @@ def _render(config: SceneConfig, params: dict, arrays: dict):
         else:
             colour = lafortune.shade(params["material.lafortune"], N, L, V, ambient, light)
         colour = jnp.where(view_mask[..., None], colour, 0.0)
-    return downsample(colour, k)
+    if config.mode == "height":
+        return downsample(colour, k)
+    # Every material model gives linear sRGB on one scale (`shading.blinn`'s docstring):
+    # averaged in linear light, exposed, then encoded.
+    return encode_srgb(expose(downsample(colour, k), params["camera.exposure"]))
+
+
+def expose(linear, stops):
+    """The camera's exposure: `linear` × 2^`stops` (linear light, before encoding)."""
+    return linear * jnp.exp2(jnp.asarray(stops, jnp.result_type(linear)))
 
 
 def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: dict, normals):
@@ -188,13 +198,14 @@ def encode_srgb(linear):
 
 
 def albedo(config: SceneConfig, params: dict):
-    """The diffuse colour a glTF export carries: `(3,)` for Blinn (r_diffuse) and Lafortune
-    (ρd); for the cosmetics model the texture `(H, W, 3)` of the layers over the skin
-    (spectral, no SSS, no highlight), sRGB-encoded."""
+    """The diffuse colour a glTF export carries, sRGB-encoded (glTF's base colour): `(3,)`
+    for Blinn (the skin albedo) and Lafortune (ρd); for the cosmetics model the texture
+    `(H, W, 3)` of the layers over the skin (spectral, no SSS, no highlight)."""
     if config.material == "blinn":
-        return blinn.skin_colour(params["material.melanin"], params["material.blood"])
+        return encode_srgb(blinn.skin_colour(params["material.melanin"],
+                                             params["material.blood"]))
     if config.material == "lafortune":
-        return params["material.lafortune"].diffuse
+        return encode_srgb(params["material.lafortune"].diffuse)
     p = prepare(config)
     arrays = p.arrays
     flat = {**params, "light.ambient": jnp.float32(1.0), "light.intensity": jnp.float32(0.0)}

@@ -22,10 +22,13 @@ shininess = 100.0
 brdf = "skin"                      # Lafortune: the preset, or a JSON from jaxskin fit-brdf
 [light]
 direction = [0.0, 0.0, 1.0]        # toward the light, camera space (parallel light)
-ambient = 0.3                      # I_ambient
-intensity = 0.7                    # I_light
+ambient = 0.3                      # I_ambient: irradiance reaching every point
+intensity = 0.7                    # I_light: the light's irradiance at normal incidence
+                                   #   (units: a white matte surface facing the light shows
+                                   #   ambient + intensity, linear, before the exposure)
 [camera]
 projection = "orthographic"        # orthographic | perspective
+exposure = 0.0                     # stops: the linear image × 2^exposure, then sRGB
 size = 512                         # image pixels across
 height = 0                         # image pixels high; 0: square
 supersample = 1                    # 1–4 samples per pixel per axis
@@ -140,6 +143,7 @@ SCHEMA: dict[str, _Key] = {
     "camera.height": _Key(int, 0, 0, 8192),
     "camera.supersample": _Key(int, 1, 1, 4),
     "camera.fov": _Key(float, 30.0, 1.0, 120.0),
+    "camera.exposure": _Key(float, 0.0, -20.0, 20.0, param=True),
     "camera.rotate": _Key("vec3", (0.0, 0.0, 0.0)),
     "view.mode": _Key(str, "wrinkles", choices=("wrinkles", "overview", "height")),
     "skin.subject": _Key(int, 1, 1, 100),
