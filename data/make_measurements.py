@@ -12,14 +12,18 @@ hides what is under it. Spectra: the BabelColor average of 30 ColorChecker chart
 (BabelColor 2012, via colour-science's `SDS_COLOURCHECKERS`, 380–730 nm, held flat to
 780 nm) and the NIST skin reflectance set (Cooksey et al. 2017, `spectra/`).
 
-| product | mass tone R∞ | S₅₅₀ /mm | why |
-|---|---|---|---|
-| foundation_light | NIST subject 42 (the set's lightest skin, L* 74) | 40 | a foundation matches a skin |
-| foundation_beige | ColorChecker "light skin" (L* 65) | 40 | the chart's light skin tone |
-| foundation_dark | ColorChecker "dark skin" (L* 38) | 40 | the chart's dark skin tone |
-| blush_rose | 20 % ColorChecker "moderate red" in its "white 9.5", mixed by K/S (KM's one-constant rule) | 30 | a blush is a red pigment tinted with white: rose pink (L* 69, C* 33, h 12°) |
-| lipstick_red | ColorChecker "red" (L* 41, C* 57, h 27°) | 150 | a lipstick is opaque in one coat |
-| eyeshadow_taupe | ColorChecker "dark skin" and "neutral 5" mixed 1:1 by K/S | 60 | a taupe cream shadow (L* 43, C* 13, h 53°) |
+Mass tones (S₅₅₀ per mm in brackets; the table in data/README.md has the sources):
+
+- foundation_light: NIST subject 42, the set's lightest skin, L* 74 (40): a foundation
+  is made to match a skin;
+- foundation_beige: ColorChecker "light skin", L* 65 (40);
+- foundation_dark: ColorChecker "dark skin", L* 38 (40);
+- blush_rose: 20 % ColorChecker "moderate red" in the chart's "white 9.5", mixed by K/S
+  (KM's one-constant rule): a red pigment tinted with white, rose pink L* 69, C* 33,
+  h 12° (30);
+- lipstick_red: ColorChecker "red", L* 41, C* 57, h 27° (150: opaque in one coat);
+- eyeshadow_taupe: ColorChecker "dark skin" and "neutral 5" 1:1 by K/S, a taupe,
+  L* 43, C* 13, h 53° (60).
 
 The files exercise every form the reader accepts: several thicknesses over a black card, and a
 bare `R` with `# thickness_mm:` over a white card as raw radiance (E_… and E_white under D55,
@@ -45,12 +49,12 @@ OUT = Path(__file__).resolve().parent / "measurements"
 
 # name: (mass tone, S at 550 nm per mm, measured thicknesses in mm over a black card)
 PRODUCTS = {
-    "foundation_light": ("nist:42", 40.0, (0.01, 0.03)),
-    "foundation_beige": ("cc:light skin", 40.0, (0.01, 0.03)),
-    "foundation_dark": ("cc:dark skin", 40.0, (0.005, 0.015)),
+    "foundation_light": ("nist:42", 40.0, (0.003, 0.01)),
+    "foundation_beige": ("cc:light skin", 40.0, (0.003, 0.01)),
+    "foundation_dark": ("cc:dark skin", 40.0, (0.003, 0.01)),
     "blush_rose": ("tint:moderate red:0.2", 30.0, (0.02,)),  # over white, as radiance
     "lipstick_red": ("cc:red", 150.0, (0.003, 0.01)),
-    "eyeshadow_taupe": ("mix:dark skin:neutral 5 (.70 D)", 60.0, (0.005, 0.015)),
+    "eyeshadow_taupe": ("mix:dark skin:neutral 5 (.70 D)", 60.0, (0.003, 0.01)),
 }
 
 

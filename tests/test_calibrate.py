@@ -19,6 +19,8 @@ sys.path.insert(0, str(ROOT / "data"))
 import make_measurements  # noqa: E402  (the example generator, with its true S and K)
 
 WL = np.arange(380.0, 781.0, 5.0)
+FOUNDATION_MM = list(make_measurements.PRODUCTS["foundation_beige"][2])  # 3 and 10 µm
+LIPSTICK_MM = list(make_measurements.PRODUCTS["lipstick_red"][2])  # 3 and 10 µm
 
 
 def synthetic(S, K, thicknesses, Rg, noise=0.0, seed=0, name="synthetic"):
@@ -56,7 +58,7 @@ WHITE = np.full_like(WL, 0.88)
 @pytest.mark.parametrize("background", ["black", "white"])
 def test_noiseless_closed_form_and_lm_agree_with_the_truth(background):
     S, K = make_measurements.true_spectra("foundation_beige")
-    m = synthetic(S, K, [0.05, 0.15], BLACK if background == "black" else WHITE)
+    m = synthetic(S, K, FOUNDATION_MM, BLACK if background == "black" else WHITE)
     S_cf, K_cf = fkm.closed_form(m)
     np.testing.assert_allclose(S_cf, S, rtol=1e-6)
     np.testing.assert_allclose(K_cf, K, rtol=1e-6)
@@ -68,15 +70,17 @@ def test_noiseless_closed_form_and_lm_agree_with_the_truth(background):
 
 
 def test_noisy_round_trip_recovers_s_and_k_and_beats_the_closed_form():
-    """σ = 0.001 reflectance noise: S and K within 10 % (median 3 %) on every band; the LM fit
-    reproduces the data at the noise level and never worse than the closed form."""
+    """σ = 0.001 reflectance noise: S and K within 15 % (median 3 %) on every band; the LM fit
+    reproduces the data at the noise level and never worse than the closed form. Measured
+    (seed 3): max 8.8 % (S) and 9.8 % (K), at the blue end where K/S is largest; median
+    0.5 % and 0.9 %."""
     S, K = make_measurements.true_spectra("foundation_beige")
-    m = synthetic(S, K, [0.05, 0.15], BLACK, noise=0.001, seed=3)
+    m = synthetic(S, K, FOUNDATION_MM, BLACK, noise=0.001, seed=3)
     r = fkm.fit(m, noise=0.001)
     assert r.converged and r.identifiable.all()
     for got, true in ((r.S_per_mm, S), (r.K_per_mm, K)):
         err = np.abs(got / true - 1)
-        assert err.max() < 0.10 and np.median(err) < 0.03, (err.max(), np.median(err))
+        assert err.max() < 0.15 and np.median(err) < 0.03, (err.max(), np.median(err))
     assert 0.0005 < r.rmse < 0.0015
     S_cf, K_cf = fkm.closed_form(m)
     ok = np.isfinite(S_cf)
@@ -85,7 +89,7 @@ def test_noisy_round_trip_recovers_s_and_k_and_beats_the_closed_form():
 
 def test_smoothing_prior_reduces_roughness_without_losing_the_fit():
     S, K = make_measurements.true_spectra("foundation_beige")
-    m = synthetic(S, K, [0.05, 0.15], BLACK, noise=0.002, seed=5)
+    m = synthetic(S, K, FOUNDATION_MM, BLACK, noise=0.002, seed=5)
 
     def roughness(x):
         return np.sum(np.diff(np.log(x)) ** 2)
@@ -103,7 +107,7 @@ def test_smoothing_prior_reduces_roughness_without_losing_the_fit():
 
 def test_opaque_bands_are_flagged_filled_from_neighbours_and_keep_r_inf():
     S, K = make_measurements.true_spectra("lipstick_red")
-    m = synthetic(S, K, [0.1, 0.3], BLACK, noise=0.001, seed=7)
+    m = synthetic(S, K, LIPSTICK_MM, BLACK, noise=0.001, seed=7)
     r = fkm.fit(m, noise=0.001)
     assert r.converged
     assert np.all(np.isfinite(r.S_per_mm)) and np.all(np.isfinite(r.K_per_mm))
@@ -171,7 +175,11 @@ def test_cli_writes_material_and_report(tmp_path, capsys):
 def test_cli_bad_file_writes_nothing_and_exits_2(tmp_path):
     good = ROOT / "data" / "measurements" / "foundation_beige.csv"
     bad = tmp_path / "bad.csv"
-    bad.write_text(good.read_text().replace("0.4638", "x"))
+    lines = good.read_text().splitlines(keepends=True)
+    header = next(i for i, line in enumerate(lines) if line.startswith("wavelength_nm"))
+    cells = lines[header + 1].split(",")
+    lines[header + 1] = ",".join([cells[0], cells[1], "x", *cells[3:]])  # R at 10 µm
+    bad.write_text("".join(lines))
     out = tmp_path / "out"
     proc = subprocess.run(
         [sys.executable, "-m", "jaxskin.cli", "calibrate", str(good), str(bad), "-o", str(out)],
@@ -181,7 +189,7 @@ def test_cli_bad_file_writes_nothing_and_exits_2(tmp_path):
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in proc.stderr
-    assert lines[0].startswith(f"jaxskin: error: {bad}:4: column 'R_0.15mm'")
+    assert lines[0].startswith(f"jaxskin: error: {bad}:{header + 2}: column 'R_0.01mm'")
     assert not out.exists()
 
 
