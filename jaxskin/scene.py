@@ -15,7 +15,7 @@ k_bump = 0.5                       # 0–1
 seed = 0
 [material]
 model = "blinn"                    # blinn | lafortune
-melanin = 0.2                      # Blinn (eq. 5.7): melanin, blood 0–1; specular 0–1;
+melanin = 0.2                      # Blinn: melanin, blood 0–1 (shading.blinn); specular 0–1;
 blood = 0.5                        #   shininess 0–10000
 specular = 0.2
 shininess = 100.0

@@ -94,11 +94,13 @@ def test_smoothing_prior_reduces_roughness_without_losing_the_fit():
     def roughness(x):
         return np.sum(np.diff(np.log(x)) ** 2)
 
-    # Measured (seeds 5, 6): W = 50 halves the roughness, K's median error falls from
-    # 1.4-1.6 % to 0.8 %, the rmse rises from 1.1e-3 to 1.4e-3.
-    plain, smooth = fkm.fit(m), fkm.fit(m, smooth=50.0)
+    # Measured (seeds 5, 6) on the 3 and 10 µm beige films: W = 20 cuts the roughness of
+    # log S to 0.34 / 0.18 and of log K to 0.79 / 0.72 of the plain fit's (K is steep at the
+    # blue end), K's median error falls from 1.8-2.1 % to 1.3-1.5 %, the rmse rises from
+    # 1.07e-3 to 1.24-1.28e-3 (W = 50 smooths more but costs 1.7x the rmse).
+    plain, smooth = fkm.fit(m), fkm.fit(m, smooth=20.0)
     assert roughness(smooth.S_per_mm) < 0.6 * roughness(plain.S_per_mm)
-    assert roughness(smooth.K_per_mm) < 0.8 * roughness(plain.K_per_mm)  # K is steep: 0.69
+    assert roughness(smooth.K_per_mm) < 0.85 * roughness(plain.K_per_mm)
     assert smooth.rmse < 1.5 * plain.rmse
     err_plain = np.median(np.abs(plain.K_per_mm / K - 1))
     err_smooth = np.median(np.abs(smooth.K_per_mm / K - 1))

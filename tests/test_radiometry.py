@@ -166,3 +166,16 @@ def test_skin_colour_gradients_at_the_ends(x64, point):
     check_grads_scaled(blinn.skin_colour, list(point), [0.01, 0.01], order=1)
     check_grads_scaled(lambda m, b: blinn.shade(N, L, V, m, b, 0.2, 100.0), list(point),
                        [0.01, 0.01], order=1)
+
+
+def test_skin_grid_renders_darker_with_melanin():
+    """The README's grid (jaxskin.skin_grid): one render per (blood, melanin), darker to the
+    right in every row."""
+    from jaxskin.skin_grid import skin_grid
+
+    images = decode(np.clip(skin_grid([0.0, 0.5, 1.0], [0.0, 1.0], size=24,
+                                      overrides=["texture.size=64"]), 0, 1))
+    assert images.shape == (2, 3, 24, 24, 3)
+    on = images[0, 0].sum(-1) > 0
+    Y = (images[:, :, on] @ LUMA).mean(-1)
+    assert np.all(np.diff(Y, axis=1) < 0), Y
