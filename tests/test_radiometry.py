@@ -84,6 +84,27 @@ def test_exposure_gradient(x64):
     check_grads_scaled(lambda e, x: render.expose(x, e), [0.3, image], [0.1, 0.01], order=1)
 
 
+def test_cosmetics_model_on_the_same_scale(x64):
+    """Bare skin of a flat (grey) spectral albedo a in the cosmetics model, no highlight, no
+    blur, against a Lafortune surface with ρd = (a, a, a) and no lobes: both
+    I_ambient a + I_light a cos θ (by hand), equal to float64 rounding (measured 1e-15)."""
+    from jaxskin import spectral
+    from jaxskin.shading import layered
+
+    grid = spectral.Grid(step=20)
+    a = 0.37
+    zero = jnp.zeros((1, 3), jnp.float64)
+    p = lafortune.Lafortune(jnp.full(3, a), zero, zero, jnp.ones((1, 3), jnp.float64))
+    N, V = jnp.asarray([[0.0, 0.0, 1.0]]), unit([0.3, 0.1, 1.0])
+    for theta in (0.0, 0.7, 1.4):
+        L = jnp.asarray([np.sin(theta), 0.0, np.cos(theta)])
+        skin = layered.radiance(grid, N, L, V, 0.25, 0.9, jnp.full(len(grid), a), 0.3, 0.0)
+        by_hand = (0.25 + 0.9 * np.cos(theta)) * a
+        np.testing.assert_allclose(skin[0], by_hand, rtol=1e-12)
+        np.testing.assert_allclose(lafortune.shade(p, N, L, V, 0.25, 0.9)[0], by_hand,
+                                   rtol=1e-12)
+
+
 def test_the_same_light_in_every_model():
     """A white Lambertian facing the light gives I_ambient + I_light in Blinn (r = 1 is not
     a skin, so through shade's formula with the albedo factored out) and in the cosmetics
