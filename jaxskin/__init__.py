@@ -8,7 +8,8 @@ Modules, one idea each:
 - `shading.blinn`, `shading.lafortune`: skin shading (§4.2).
 - `scene`, `view`, `render`: TOML scenes → `render(config, params)`, the pure function.
 - `km`, `spectral`: Kubelka–Munk layers and spectra → colour (Huang et al. 2013).
-- `maps`, `export`, `io`, `cli`: PNG/GLB output, input errors, the command line.
+- `maps`, `export`, `io`, `outputs`, `resources`, `cli`: PNG/GLB output, input errors, output
+  folders and names, memory estimates, the command line.
 
 Everything numeric follows the dtype of its inputs; rendering defaults to float32
 (`jaxskin.DEFAULT_DTYPE`), fitting (`fitting`) runs in float64.

@@ -1,26 +1,126 @@
 """The `jaxskin` command line.
 
     jaxskin --version
+    jaxskin list                                          # built-in scenes, meshes, materials …
     jaxskin calibrate FILE.csv [FILE.csv ...] -o OUTDIR   # S(λ), K(λ) of cosmetics
     jaxskin fit-brdf FILE.csv -o OUT.json [--lobes N]     # Lafortune lobes
     jaxskin render SCENE [SCENE ...] -o DIR --maps        # wrinkle height and normal maps
 
-Bad input (a file, a column, a value) is reported as one line `jaxskin: error: …` with exit
-code 2 and no traceback. Output files are written under temporary names and renamed.
+(`python -m jaxskin …` is the same.) Exit codes: 0 done; 2 bad input (a file, a column, a
+value, an option, an output path, a run that cannot fit in memory), reported as one line
+`jaxskin: error: …` before any work and with nothing written; 1 an unexpected failure (out of
+memory, disk full, a bug): one line saying what failed and which files are complete, the
+traceback only with `--debug`; 130 / 143 interrupted by SIGINT / SIGTERM: one line naming the
+files finished. Output files are written under temporary names and renamed, so every file
+present is complete; none is written outside the output folder or over an input.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import hashlib
+import math
 import os
+import re
+import signal
 import sys
+import threading
 import time
+import warnings
 from pathlib import Path
 
 from . import __version__
 from .io import InputError, atomic_write
+from .outputs import Outputs, check_name, slug
 
-EXIT_INPUT = 2
+EXIT_FAILURE, EXIT_INPUT, EXIT_SIGINT, EXIT_SIGTERM = 1, 2, 130, 143
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: `jaxskin: error: …`, exit 2 (no usage block)."""
+
+    def error(self, message):
+        command = self.prog.removeprefix("jaxskin").strip()
+        self.exit(EXIT_INPUT, f"jaxskin: error: {command + ': ' if command else ''}{message} "
+                  f"(see {self.prog} --help)\n")
+
+
+def _number(kind=float, lo=None, hi=None, above=None):
+    """An argparse type: a finite `kind` in [lo, hi] (or > `above`); nan and inf refused."""
+    def parse(text):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected {'an integer' if kind is int else 'a number'}, got {text!r}"
+            ) from None
+        bad = not math.isfinite(value) or (lo is not None and value < lo) or (
+            hi is not None and value > hi) or (above is not None and value <= above)
+        if bad:
+            def fmt(x):
+                return str(x) if isinstance(x, int) else f"{x:g}"
+
+            rng = (f"> {fmt(above)}" if above is not None else f">= {fmt(lo)}" if lo is not None
+                   else "")
+            rng += f" and <= {fmt(hi)}" if hi is not None else ""
+            noun = "an integer" if kind is int else "a finite number"
+            raise argparse.ArgumentTypeError(f"expected {noun} {rng}, got {text!r}")
+        return value
+
+    parse.__name__ = kind.__name__
+    return parse
+
+
+class _Terminated(BaseException):
+    """SIGTERM, raised in the main thread like KeyboardInterrupt is for SIGINT."""
+
+
+def _on_sigterm(signum, frame):
+    raise _Terminated()
+
+
+@contextlib.contextmanager
+def _signals():
+    """SIGINT → KeyboardInterrupt, SIGTERM → _Terminated, for the duration of a command
+    (atomic_write removes its temporary file on either), and warnings as one line each; the
+    old handlers come back after."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old_format = warnings.formatwarning
+    warnings.formatwarning = _warning_line
+    old = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, _on_sigterm)
+    try:
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+        warnings.formatwarning = old_format
+
+
+def _warning_line(message, category, filename, lineno, line=None) -> str:
+    """A warning as one line, `jaxskin: warning: …` (not Python's two with the source)."""
+    return f"jaxskin: warning: {' '.join(str(message).split())}\n"
+
+
+class _Run:
+    """What a command has written so far: for the last line after a failure or a signal."""
+
+    def __init__(self):
+        self.outputs: list[Outputs] = []
+        self.stage = "checking the inputs"
+
+    def finished(self) -> str:
+        written = [p for o in self.outputs for p in o.written]
+        if not written:
+            return "no file was written"
+        folders = sorted({str(p.parent) for p in written})
+        names = ", ".join(p.name for p in written)
+        return (f"{len(written)} file(s) complete in {', '.join(folders)}: {names}; no partial "
+                "file is left")
 
 
 def _enable_compilation_cache() -> None:
@@ -41,14 +141,22 @@ def _enable_compilation_cache() -> None:
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="jaxskin",
-        description="Differentiable rendering of human skin and cosmetics in JAX, with fitting.",
-        epilog="Environment: JAXSKIN_NO_COMPILE_CACHE=1 turns off the compilation cache kept in "
-        "$XDG_CACHE_HOME/jaxskin (or JAXSKIN_CACHE_DIR). Bad input exits with code 2.",
+        description="Differentiable rendering of human skin and cosmetics in JAX, with fitting. "
+        "Also runs as `python -m jaxskin`.",
+        epilog="Exit codes: 0 done, 2 bad input (one line, nothing written), 1 unexpected "
+        "failure (one line; the traceback with --debug), 130 SIGINT, 143 SIGTERM. "
+        "Environment: JAXSKIN_NO_COMPILE_CACHE=1 turns off the compilation cache kept in "
+        "$XDG_CACHE_HOME/jaxskin (or JAXSKIN_CACHE_DIR).",
     )
     p.add_argument("--version", action="version", version=f"jaxskin {__version__}")
+    p.add_argument("--debug", action="store_true",
+                   help="on an unexpected failure, print the traceback too")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
+    sub.add_parser("list", help="list the built-in scenes, meshes, materials, BRDF presets, "
+                   "illuminants and spectral steps",
+                   description="One line for each built-in thing a scene can name.")
 
     c = sub.add_parser(
         "calibrate",
@@ -62,15 +170,15 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("files", nargs="+", metavar="FILE.csv", help="measurement CSVs")
     c.add_argument("-o", "--output", required=True, metavar="OUTDIR",
                    help="folder for <name>.json and <name>.png (created if missing)")
-    c.add_argument("--thickness", type=float, metavar="MM",
+    c.add_argument("--thickness", type=_number(above=0.0, hi=1000.0), metavar="MM",
                    help="thickness in mm of a bare 'R' column (overrides '# thickness_mm:')")
     c.add_argument("--percent", action="store_true",
                    help="reflectance columns are in percent (0–100) instead of 0–1")
-    c.add_argument("--smooth", type=float, default=0.0, metavar="W",
+    c.add_argument("--smooth", type=_number(lo=0.0, hi=1e6), default=0.0, metavar="W",
                    help="smoothness prior: neighbouring bands' log S and log K differ by about "
                    "1/W (a Gaussian prior weighed against readings of σ = --noise); 0 (default) "
                    "fits each band on its own; 20 allows about 5%% per band")
-    c.add_argument("--noise", type=float, default=None, metavar="σ",
+    c.add_argument("--noise", type=_number(lo=0.0, hi=1.0), default=None, metavar="σ",
                    help="standard deviation of one reflectance reading (default 0.002); a band "
                    "is identifiable when some thin layer and the background each differ from "
                    "R_inf by more than 3σ")
@@ -83,8 +191,15 @@ def _parser() -> argparse.ArgumentParser:
         "figs. 6.1-6.3) or a TOML scene file (format in the README). Writes DIR/<scene>.png; "
         "with --maps also DIR/<scene>_height.png (16-bit grey), DIR/<scene>_normal.png (the "
         "bump-mapped normal map) and DIR/<scene>_field.png (the mesh with d1 in red and d2 in "
-        "green, as in the paper's fig. 3.4). Every scene is checked before anything is "
-        "written. All scenes render in one process; each static configuration compiles once.",
+        "green, as in the paper's fig. 3.4). With -D overrides the name gets "
+        "_<key>-<value> for each (DIR/hand_material.melanin-0.5.png), a sweep "
+        "_sweep-<index>_<key>-<value> with a zero-padded index (DIR/hand_sweep-02_"
+        "material.melanin-0.25.png). A scene name must be a plain file name (no '/', '..', "
+        "leading dot or control character) or it is refused. Everything is checked before "
+        "anything is written: every scene, override, sweep, mesh, material, BRDF file, layer "
+        "image and polygon, the output folder, that no output is an input, and that the "
+        "render fits in memory. All scenes render in one process; each static configuration "
+        "compiles once.",
     )
     r.add_argument("scenes", nargs="+", metavar="SCENE", help="built-in name or TOML file")
     r.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
@@ -96,7 +211,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--sweep", action="append", default=[], metavar="KEY=START:STOP:COUNT",
                    help="render COUNT images with a parameter from START to STOP, vmapped in "
                    "one compiled program, e.g. --sweep material.melanin=0:1:5; writes "
-                   "DIR/<scene>_<key>=<value>.png")
+                   "DIR/<scene>_sweep-<i>_<key>-<value>.png")
     r.add_argument("-D", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene value, e.g. -D wrinkles.k_scale=1.3 (repeatable; "
                    "applies to every scene)")
@@ -114,40 +229,66 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("file", metavar="FILE.csv", help="BRDF samples")
     b.add_argument("-o", "--output", required=True, metavar="OUT.json",
                    help="the material file to write (the report goes beside it as .png)")
-    b.add_argument("--lobes", type=int, default=3, metavar="N", help="lobes per channel (3)")
-    b.add_argument("--starts", type=int, default=8, metavar="S",
+    b.add_argument("--lobes", type=_number(int, 1, 16), default=3, metavar="N",
+                   help="lobes per channel, 1-16 (3)")
+    b.add_argument("--starts", type=_number(int, 1, 1024), default=8, metavar="S",
                    help="starts per channel, half from typical lobe shapes, half random (8); "
                    "the best finite fit wins")
-    b.add_argument("--seed", type=int, default=0, help="seed of the random starts (0)")
+    b.add_argument("--seed", type=_number(int, 0, 2147483647), default=0,
+                   help="seed of the random starts (0)")
     b.add_argument("--no-report", action="store_true", help="write the JSON only, no PNG")
     return p
 
 
-def _calibrate(args) -> int:
+def _list(args) -> int:
+    """One line per built-in scene, mesh, material, BRDF preset, illuminant, spectral step."""
+    from . import cosmetics, spectral
+    from .mesh import BUILTIN as MESHES
+    from .scene import builtin_scenes
+
+    def first_comment(path: Path, width: int = 100) -> str:
+        """The first sentence of the scene file's opening comment (at most `width` long)."""
+        lines = path.read_text(encoding="utf-8").splitlines()
+        text = " ".join(line.lstrip("# ").strip() for line in
+                        lines[:next((i for i, t in enumerate(lines) if not t.startswith("#")),
+                                    len(lines))])
+        text = re.split(r"(?<=\.) (?=[A-Z])", text)[0]
+        return text if len(text) <= width else text[:width].rsplit(" ", 1)[0] + " …"
+
+    rows = [("scene", name, first_comment(path)) for name, path in builtin_scenes().items()]
+    rows += [("mesh", name, f"data/meshes/{file}") for name, file in MESHES.items()]
+    for name in cosmetics.shipped_materials():
+        rows.append(("material", name, "a calibrated cosmetic (S, K per mm; data/materials)"))
+    rows.append(("brdf", "skin", "Lafortune preset: pbrt-v1's 3-lobe fit to measured skin "
+                 "(material.brdf; or a JSON from jaxskin fit-brdf)"))
+    for name in spectral.ILLUMINANTS:
+        rows.append(("illuminant", name, f"CIE illuminant {name} (spectral.illuminant)"))
+    for step in spectral.STEPS:
+        n = len(spectral.Grid(step).wavelengths)
+        rows.append(("step", f"{step} nm", f"{n} bands, 380-780 nm (spectral.step)"))
+    for kind, name, text in rows:
+        print(f"{kind:<10} {name:<20} {text}")
+    return 0
+
+
+def _calibrate(args, run: _Run) -> int:
     from jaxskin.fitting import km as fit_km
     from jaxskin.fitting.measurements import read_measurement
 
     noise = fit_km.DEFAULT_NOISE if args.noise is None else args.noise
-    if not noise >= 0:
-        raise InputError(f"--noise must be >= 0, got {args.noise}")
-    if not args.smooth >= 0:
-        raise InputError(f"--smooth must be >= 0, got {args.smooth}")
-    out = Path(args.output)
-    inputs = {Path(f).resolve() for f in args.files}
+    outputs = Outputs(args.output, args.files)
     # Check everything first: a bad file anywhere means nothing is written.
-    measurements, names = [], {}
+    measurements, paths = [], []
     for f in args.files:
         m = read_measurement(f, thickness_mm=args.thickness, percent=args.percent)
-        if m.name in names:
-            raise InputError(f"name '{m.name}' is also the name of {names[m.name]}; "
-                             "give each a distinct '# name:'", f)
-        names[m.name] = f
-        for ext in (".json", ".png"):
-            if (out / (m.name + ext)).resolve() in inputs:
-                raise InputError("the output would overwrite this input; choose another -o", f)
+        check_name(m.name, f, key="name")
+        json_path = outputs.plan(f"{m.name}.json", f)
+        png_path = None if args.no_report else outputs.plan(f"{m.name}.png", f)
         if not fit_km.identifiable(m, noise).any():
             fit_km.fit(m, noise=noise)  # raises the InputError that explains why
         measurements.append(m)
+        paths.append((json_path, png_path))
+    run.outputs.append(outputs)
 
     import json
 
@@ -156,14 +297,18 @@ def _calibrate(args) -> int:
     from jaxskin.fitting.report import write_report
 
     rows = []
-    for m in tqdm(measurements, desc="calibrate", unit="file", disable=None):
+    for m, (json_path, png_path) in tqdm(list(zip(measurements, paths, strict=True)),
+                                         desc="calibrate", unit="file", disable=None):
+        run.stage = f"fitting {m.name}"
         t0 = time.perf_counter()
         result = fit_km.fit(m, smooth=args.smooth, noise=noise)
-        with atomic_write(out / f"{m.name}.json", "w") as fh:
-            json.dump(result.to_json(m), fh, indent=1)
+        with atomic_write(json_path, "w") as fh:
+            json.dump(result.to_json(m), fh, indent=1, allow_nan=False)
             fh.write("\n")
-        if not args.no_report:
-            write_report(m, result, out / f"{m.name}.png")
+        outputs.done(json_path)
+        if png_path is not None:
+            write_report(m, result, png_path)
+            outputs.done(png_path)
         rows.append((m.name, result, time.perf_counter() - t0))
     print(f"{'material':<24} {'bands':>5} {'identifiable':>12} {'rmse':>9} {'steps':>5} "
           f"{'time s':>7}")
@@ -171,31 +316,151 @@ def _calibrate(args) -> int:
         flag = "" if r.converged else "  (not converged: see report)"
         print(f"{name:<24} {len(r.wavelength_nm):>5} {int(r.identifiable.sum()):>12} "
               f"{r.rmse:>9.2e} {r.steps:>5} {dt:>7.2f}{flag}")
-    print(f"wrote {len(rows)} material(s) to {out}/")
+    _print_written(outputs)
     return 0
 
 
-def _parse_sweep(text: str, params: dict):
-    """`key=start:stop:count` over a scalar parameter → (key, values)."""
+def _print_written(outputs: Outputs) -> None:
+    print(f"wrote {len(outputs.written)} file(s) to {outputs.folder}/:")
+    for path in outputs.written:
+        print(f"  {path}")
+
+
+def _parse_sweep(text: str, sc):
+    """`key=start:stop:count` over a scalar parameter of scene `sc` → (key, values); the
+    ends are checked like `-D` values (finite, in the key's range)."""
     import numpy as np
 
-    key, _, spec = text.partition("=")
+    from .scene import check_value
+
+    key, sep, spec = text.partition("=")
+    key = key.strip()
     parts = spec.split(":")
     try:
         start, stop, count = float(parts[0]), float(parts[1]), int(parts[2])
-        ok = len(parts) == 3 and count >= 1
+        ok = bool(sep) and len(parts) == 3
     except (ValueError, IndexError):
         ok = False
     if not ok:
-        raise InputError(f"--sweep expects key=start:stop:count, got {text!r}")
-    if key not in params or params[key].ndim != 0:
+        raise InputError(f"--sweep expects key=start:stop:count (count an integer), got "
+                         f"{text!r}")
+    if not (math.isfinite(start) and math.isfinite(stop)):
+        raise InputError(f"start and stop must be finite numbers, got {start:g} and {stop:g}",
+                         f"--sweep {text}", key=key)
+    if not 1 <= count <= 1000:
+        raise InputError(f"count must be in [1, 1000], got {count}", f"--sweep {text}",
+                         key=key)
+    params = sc.params
+    if key not in params or getattr(params[key], "ndim", 1) != 0:
         scalars = ", ".join(k for k, v in params.items() if getattr(v, "ndim", 1) == 0)
         raise InputError(f"--sweep: '{key}' is not a scalar parameter of this scene; "
-                         f"parameters: {scalars}")
+                         f"parameters: {scalars}", sc.source)
+    layers = [layer.name for layer in sc.layers]
+    for value in (start, stop):
+        check_value(key, value, f"--sweep {text}", layers)
     return key, np.linspace(start, stop, count)
 
 
-def _render(args) -> int:
+def _base_name(sc, overrides) -> str:
+    """The scene's output name: its (checked) name, then `_<key>-<value>` per override."""
+    named = [item for item in overrides if item.partition("=")[0].strip() == "name"]
+    base = check_name(sc.name, f"-D {named[-1]}" if named else sc.source, key="name")
+    parts = []
+    for item in overrides:
+        key, _, value = (s.strip() for s in item.partition("="))
+        if key != "name":
+            parts.append(f"{slug(key)}-{slug(value)}")
+    suffix = "_".join(parts)
+    if len(suffix) > 120:  # many overrides: a digest keeps runs apart and names short
+        suffix = "D-" + hashlib.sha1("\0".join(overrides).encode()).hexdigest()[:12]
+    return f"{base}_{suffix}" if suffix else base
+
+
+@contextlib.contextmanager
+def _reading(path, key=None):
+    """A file nested too deeply for Python's parsers is bad input, not a crash."""
+    try:
+        yield
+    except RecursionError:
+        raise InputError("nested too deeply to read", path, key=key) from None
+
+
+def _check_scene(sc, count: int) -> list:
+    """Everything a scene reads, checked before any render: memory first (no allocation),
+    then the mesh, edits, polygons, BRDF file, materials and layer images. Returns the
+    scene's input files."""
+    import numpy as np
+
+    from . import cosmetics, resources
+    from .mesh import BUILTIN as MESHES
+    from .mesh import load_mesh
+
+    config = sc.config
+    resources.check_memory(resources.render_bytes(config, count),
+                           f"scene {sc.name!r} (texture {config.texture.size}², image "
+                           f"{config.image}x{config.image_height or config.image}, "
+                           f"supersample {config.supersample}"
+                           + (f", {count} sweep values" if count > 1 else "") + ")",
+                           sc.source)
+    inputs = [sc.source]
+    mesh_name = config.texture.mesh
+    with _reading(mesh_name):
+        mesh = load_mesh(mesh_name)
+    if mesh_name not in MESHES:
+        inputs.append(mesh_name)
+    if config.texture.projection == "uv" and mesh.uv is None:
+        raise InputError(f"mesh '{mesh.name}' has no texture coordinates; use planar or "
+                         "cylindrical projection", sc.source, key="mesh.projection")
+    for i, e in enumerate(config.texture.edits):
+        if e.vertex is not None and e.vertex >= len(mesh.vertices):
+            raise InputError(f"vertex {e.vertex} does not exist; the mesh has "
+                             f"{len(mesh.vertices)} vertices", sc.source,
+                             key=f"fields.edit[{i}].vertex")
+    if config.material == "lafortune":
+        if config.brdf != "skin":
+            inputs.append(config.brdf)
+        with _reading(config.brdf, "material.brdf"):
+            lobes = sc.params["material.lafortune"]
+        arrays = [np.asarray(a) for a in (lobes.diffuse, lobes.Cxy, lobes.Cz)]
+        if not any(np.any(a != 0) for a in arrays):
+            raise InputError("every term is zero (diffuse and all lobes): this material "
+                             "reflects no light; expected a fit from jaxskin fit-brdf",
+                             config.brdf)
+    sp = config.spectral
+    for layer in sp.layers if sp is not None else ():
+        inputs.append(layer.material)
+        with _reading(layer.material):
+            cosmetics.load_material(layer.material, sp.grid)
+        if layer.image is not None:
+            inputs.append(layer.image)
+            _check_image(layer.image, sc.source, f"layer.{layer.name}.image")
+        for i, (_, vertices, _) in enumerate(layer.polygons):
+            if vertices is not None and max(vertices) >= len(mesh.vertices):
+                raise InputError(f"vertex {max(vertices)} does not exist; the mesh has "
+                                 f"{len(mesh.vertices)} vertices", sc.source,
+                                 key=f"layer.{layer.name}.polygon[{i}].vertices")
+    return inputs
+
+
+def _check_image(path, scene, key) -> None:
+    """A layer map: a readable 2-D greyscale (or grey-as-RGB) image of finite numbers."""
+    import imageio.v3 as iio
+    import numpy as np
+
+    try:
+        img = np.asarray(iio.imread(path))
+    except Exception as e:  # noqa: BLE001  (imageio raises many kinds; all mean unreadable)
+        raise InputError(f"cannot read as an image ({e.__class__.__name__})", path) from None
+    ok = img.dtype.kind in "uif b" and (img.ndim == 2 or (img.ndim == 3 and img.shape[-1] in (
+        1, 2, 3, 4))) and img.size > 0
+    if not ok:
+        raise InputError(f"expected a greyscale image (H, W), got an array of shape "
+                         f"{img.shape} and type {img.dtype}", path)
+    if img.dtype.kind == "f" and not np.all(np.isfinite(img)):
+        raise InputError("the image has non-finite values", path)
+
+
+def _render(args, run: _Run) -> int:
     import jax
     import jax.numpy as jnp
     import numpy as np
@@ -204,24 +469,45 @@ def _render(args) -> int:
     from . import maps, render, texture
     from .scene import load_scene
 
-    scenes = [load_scene(name, args.overrides) for name in args.scenes]
-    names = [sc.name for sc in scenes]
-    if len(set(names)) != len(names):
-        raise InputError(f"two scenes are both named {max(names, key=names.count)!r}; their "
-                         "outputs would collide (set 'name' in the scene file)")
     if len(args.sweep) > 1:
         raise InputError(f"one --sweep at a time for now (got {len(args.sweep)})")
-    # Everything checked before any output: static setup (mesh, projection, fields), the
-    # parameters (a Lafortune file is loaded here) and the sweep's key against them.
-    sweeps = []
+    outputs = Outputs(args.output)
+    # Everything checked before any output: every scene, its inputs, the sweep, memory,
+    # the output names (distinct, safe, not an input).
+    scenes = []
+    for name in args.scenes:
+        with _reading(name):
+            scenes.append(load_scene(name, args.overrides))
+    plans = []
     for sc in scenes:
-        texture.setup(sc.config.texture)
-        sweeps.append([_parse_sweep(text, sc.params) for text in args.sweep])
-    out = Path(args.output)
+        sweep = [_parse_sweep(text, sc) for text in args.sweep]
+        count = len(sweep[0][1]) if sweep else 1
+        outputs.inputs += [Path(p) for p in _check_scene(sc, count)]
+        plans.append((sc, sweep, _base_name(sc, args.overrides)))
+    files = []
+    for sc, sweep, base in plans:
+        planned = {}
+        if sweep:
+            (key, values), = sweep
+            width = max(2, len(str(len(values))))
+            planned["sweep"] = [outputs.plan(
+                f"{base}_sweep-{i + 1:0{width}d}_{slug(key)}-{slug(f'{v:g}')}.png", sc.source)
+                for i, v in enumerate(values)]
+        else:
+            planned["image"] = outputs.plan(f"{base}.png", sc.source)
+        if args.glb:
+            planned["glb"] = outputs.plan(f"{base}.glb", sc.source)
+        if args.maps:
+            for kind in ("height", "normal", "field"):
+                planned[kind] = outputs.plan(f"{base}_{kind}.png", sc.source)
+        files.append(planned)
+    run.outputs.append(outputs)
     rows = []
-    for sc, sweep in tqdm(list(zip(scenes, sweeps, strict=True)), desc="render", unit="scene",
-                          disable=None):
+    for (sc, sweep, _), planned in tqdm(list(zip(plans, files, strict=True)), desc="render",
+                                        unit="scene", disable=None):
+        run.stage = f"rendering {sc.name}"
         t0 = time.perf_counter()
+        n0 = len(outputs.written)
         config, params = sc.config, sc.params
         if sweep:
             (key, values), = sweep
@@ -229,12 +515,12 @@ def _render(args) -> int:
                                      render.render_prepared(config, {**params, key: v}, a),
                                      in_axes=(0, None)))
             images = batch(jnp.asarray(values, jnp.float32), render.prepare(config).arrays)
-            for v, image in zip(values, np.asarray(images), strict=True):
-                maps.write_image(image, out / f"{sc.name}_{key}={v:g}.png")
-            written = len(values)
+            for image, path in zip(np.asarray(images), planned["sweep"], strict=True):
+                maps.write_image(image, path)
+                outputs.done(path)
         else:
-            maps.write_image(np.asarray(render.render(config, params)), out / f"{sc.name}.png")
-            written = 1
+            maps.write_image(np.asarray(render.render(config, params)), planned["image"])
+            outputs.done(planned["image"])
         if args.maps or args.glb:
             s = texture.setup(config.texture)
             result = texture.texture_maps(config, params)
@@ -242,37 +528,45 @@ def _render(args) -> int:
             from .export import write_glb
 
             albedo = render.albedo(config, params)
-            write_glb(s, np.asarray(albedo), result["normals"], out / f"{sc.name}.glb")
-            written += 1
+            write_glb(s, np.asarray(albedo), result["normals"], planned["glb"])
+            outputs.done(planned["glb"])
         if args.maps:
-            maps.write_height(result["height"], out / f"{sc.name}_height.png")
-            maps.write_normals(result["normals"], s.mask, out / f"{sc.name}_normal.png")
-            maps.write_field_plot(s, out / f"{sc.name}_field.png")
-            written += 3
+            maps.write_height(result["height"], planned["height"])
+            outputs.done(planned["height"])
+            maps.write_normals(result["normals"], s.mask, planned["normal"])
+            outputs.done(planned["normal"])
+            maps.write_field_plot(s, planned["field"])
+            outputs.done(planned["field"])
         size = f"{config.image}x{config.image_height or config.image}"
-        rows.append((sc.name, size, written, time.perf_counter() - t0))
+        rows.append((sc.name, size, len(outputs.written) - n0, time.perf_counter() - t0))
     print(f"{'scene':<16} {'image':>9} {'files':>6} {'time s':>7}")
     for name, size, n, dt in rows:
         print(f"{name:<16} {size:>9} {n:>6} {dt:>7.2f}")
-    print(f"wrote {sum(r[2] for r in rows)} file(s) to {out}/")
+    _print_written(outputs)
     return 0
 
 
-def _fit_brdf(args) -> int:
+def _fit_brdf(args, run: _Run) -> int:
     from jaxskin.fitting import brdf
     from jaxskin.shading import lafortune
 
-    if args.lobes < 1:
-        raise InputError(f"--lobes must be >= 1, got {args.lobes}")
-    if args.starts < 1:
-        raise InputError(f"--starts must be >= 1, got {args.starts}")
     out = Path(args.output)
-    report = out.with_suffix(".png")
+    if out.is_dir():
+        raise InputError("-o: expected the file to write (OUT.json), but this is a folder",
+                         out)
+    outputs = Outputs(out.parent, [args.file])
+    out = outputs.plan(out.name, "the fit")
+    report = None if args.no_report else outputs.plan(out.with_suffix(".png").name,
+                                                      "the report")
     samples = brdf.read_samples(args.file)
-    for target in (out, report):
-        if target.resolve() == Path(args.file).resolve():
-            raise InputError("the output would overwrite the input; choose another -o",
-                             args.file)
+    from . import resources
+
+    resources.check_memory(resources.fit_brdf_bytes(len(samples.f), args.lobes, args.starts),
+                           f"fitting {args.lobes} lobes x {args.starts} starts to "
+                           f"{len(samples.f)} samples", args.file,
+                           hint="use fewer --starts or --lobes")
+    run.outputs.append(outputs)
+    run.stage = "fitting"
     print(f"fitting {args.lobes} lobes x {args.starts} starts x 3 channels to "
           f"{len(samples.f)} samples ...", flush=True)
     t0 = time.perf_counter()
@@ -280,13 +574,15 @@ def _fit_brdf(args) -> int:
     seconds = time.perf_counter() - t0
     stats = result.stats()
     lafortune.save(result.params, out, fit={"source": Path(args.file).name, **stats})
-    if not args.no_report:
+    outputs.done(out)
+    if report is not None:
         brdf.write_report(samples, result, report)
+        outputs.done(report)
     print(f"{'channel':<8} {'rel. RMS error':>14} {'failed starts':>13} {'steps':>6}")
     for k, name in enumerate("RGB"):
         print(f"{name:<8} {result.rel_rms[k]:>14.2%} {stats['failed_starts'][k]:>13} "
               f"{stats['steps_of_best'][k]:>6}")
-    print(f"wrote {out}" + ("" if args.no_report else f" and {report}") + f" ({seconds:.1f} s)")
+    print(f"wrote {out}" + ("" if report is None else f" and {report}") + f" ({seconds:.1f} s)")
     return 0
 
 
@@ -296,13 +592,36 @@ def main(argv=None) -> int:
     if args.command is None:
         parser.print_help()
         return 0
+    if args.command == "list":
+        return _list(args)
     _enable_compilation_cache()
-    try:
-        commands = {"calibrate": _calibrate, "fit-brdf": _fit_brdf, "render": _render}
-        return commands[args.command](args)
-    except InputError as e:
-        print(f"jaxskin: error: {e}", file=sys.stderr)
-        return EXIT_INPUT
+    run = _Run()
+    commands = {"calibrate": _calibrate, "fit-brdf": _fit_brdf, "render": _render}
+    with _signals():
+        try:
+            return commands[args.command](args, run)
+        except InputError as e:
+            _say(f"jaxskin: error: {e}")
+            return EXIT_INPUT
+        except KeyboardInterrupt:
+            _say(f"jaxskin: interrupted (SIGINT) while {run.stage}; {run.finished()}")
+            return EXIT_SIGINT
+        except _Terminated:
+            _say(f"jaxskin: terminated (SIGTERM) while {run.stage}; {run.finished()}")
+            return EXIT_SIGTERM
+        except Exception as e:  # noqa: BLE001  (anything else: a bug, memory, the disk)
+            if args.debug:
+                raise
+            what = " ".join(f"{e.__class__.__name__}: {e}".split())[:300]
+            _say(f"jaxskin: error: {args.command} failed unexpectedly while {run.stage} "
+                 f"({what}); {run.finished()}; run again with --debug for the traceback")
+            return EXIT_FAILURE
+
+
+def _say(line: str) -> None:
+    """One line on stderr, whatever the message holds (newlines become spaces)."""
+    print(" ".join(line.split()) if len(line.splitlines()) > 1 else line, file=sys.stderr,
+          flush=True)
 
 
 if __name__ == "__main__":

@@ -55,7 +55,11 @@ def load_mesh(name_or_path) -> Mesh:
     try:
         loaded = trimesh.load(path, process=False, force="mesh")
     except Exception as e:  # noqa: BLE001  (trimesh raises many kinds; all mean "unreadable")
-        raise InputError(f"cannot read as a mesh ({e.__class__.__name__}: {e})", path) from None
+        # An ImportError is trimesh reaching for an optional decoder of text in an unknown
+        # encoding: for the user, a file that is not a mesh.
+        why = ("not text in a known encoding" if isinstance(e, ImportError) else
+               f"{e.__class__.__name__}: {e}")
+        raise InputError(f"cannot read as a mesh ({why})", path) from None
     vertices = np.asarray(getattr(loaded, "vertices", np.empty((0, 3))), np.float64)
     faces = np.asarray(getattr(loaded, "faces", np.empty((0, 3))), np.int64)
     if len(vertices) == 0 or len(faces) == 0:

@@ -557,3 +557,9 @@ def _numbers(value, n, path, where, positive=False):
         raise InputError(f"expected {n} finite{' positive' if positive else ''} numbers, got "
                          f"{value!r}", path, key=where)
     return tuple(float(c) for c in value)
+
+
+def check_value(key: str, value, where, layers=()):
+    """`value` for `key`, checked as a scene file's or `-D`'s value is (type, range); an
+    `InputError` naming `where` and the key otherwise. `layers`: the scene's layer names."""
+    return _check(key, value, where, tuple(layers))

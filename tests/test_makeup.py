@@ -284,8 +284,8 @@ def test_render_command_sweeps_a_layer(tmp_path):
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     names = sorted(p.name for p in tmp_path.glob("*.png"))
-    assert names == sorted(f"makeup_layer.lipstick.thickness_mm={v}.png" for v in
-                           ("0", "0.025", "0.05"))
+    assert names == [f"makeup_texture.size-64_camera.size-32_sweep-{i:02d}_layer.lipstick."
+                     f"thickness_mm-{v}.png" for i, v in ((1, "0"), (2, "0.025"), (3, "0.05"))]
     r = subprocess.run([sys.executable, "-m", "jaxskin.cli", "render", "makeup", "-o",
                         str(tmp_path / "x"), "-D", "layer.lips.thickness_mm=1"],
                        capture_output=True, text=True)
@@ -307,4 +307,4 @@ def test_glb_albedo_of_the_makeup_is_the_layers_over_the_skin(tmp_path):
                         str(tmp_path), "-D", "texture.size=64", "-D", "camera.size=16", "--glb"],
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
-    assert (tmp_path / "makeup.glb").stat().st_size > 1000
+    assert (tmp_path / "makeup_texture.size-64_camera.size-16.glb").stat().st_size > 1000

@@ -1,7 +1,14 @@
 """The README starts with exactly two commands, and CI runs the second one verbatim."""
 
+import importlib.util
 import re
+import shlex
+import shutil
+import subprocess
+import sys
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -30,3 +37,83 @@ def test_readme_main_command_renders_the_default_scene():
     install_run = readme_commands()[0]
     assert "jaxskin render hand" in install_run
     assert (ROOT / "data" / "scenes" / "hand.toml").is_file()
+
+
+# --- Every Python and shell example in the README runs (issue 13, item 9).
+
+JAXSKIN = Path(sys.executable).parent / "jaxskin"  # the script of the environment under test
+SMALL = ["-D", "texture.size=64", "-D", "camera.size=32", "-D", "camera.height=0"]
+
+
+def fenced(lang: str) -> list[str]:
+    return re.findall(rf"```{lang}\n(.*?)```", (ROOT / "README.md").read_text(), re.S)
+
+
+def shell_examples() -> list[str]:
+    """Every command line of every ```bash block but the first (the install commands: CI
+    runs the second verbatim, and the first's render part is kept here)."""
+    first, *rest = fenced("bash")
+    install_run = first.splitlines()[0]
+    render_part = install_run.split("&&")[-1].strip().replace(".venv/bin/jaxskin", "jaxskin")
+    return [render_part] + [line for block in rest for line in block.splitlines()
+                            if line.strip() and not line.lstrip().startswith("#")]
+
+
+def test_readme_links_stay_inside_the_repository():
+    text = (ROOT / "README.md").read_text()
+    assert "../shared" not in text and "JAXSKIN_DATA" not in text
+    for target in re.findall(r"\]\(([^)#][^)]*)\)", text):
+        assert "://" in target or (ROOT / target).exists(), target
+
+
+def test_readme_python_examples_run(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    blocks = fenced("python")
+    assert len(blocks) >= 2
+    for block in blocks:
+        exec(compile(block, "README.md", "exec"), {})  # noqa: S102
+
+
+@pytest.mark.slow
+def test_readme_shell_examples_run(tmp_path):
+    """Each line runs in an empty folder with the environment's `jaxskin`; renders get tiny
+    sizes appended (-D wins in order). Files the examples name are made first: the README's
+    scene file as my_scene.toml, a Lafortune file at out/skin_fit.json (the fit-brdf example
+    comes later), the example measurements as foundation.csv and lipstick.csv, the BRDF
+    samples at data/brdf/. The benchmark scripts take minutes: for those lines the script is
+    imported and must have `main` (tests/test_benchmarks_smoke.py runs their parts)."""
+    from jaxskin.shading import lafortune
+
+    (tmp_path / "my_scene.toml").write_text(fenced("toml")[0])
+    lafortune.save(lafortune.skin(), tmp_path / "out" / "skin_fit.json")
+    for src, dst in (("foundation_beige", "foundation"), ("lipstick_red", "lipstick")):
+        shutil.copy(ROOT / "data" / "measurements" / f"{src}.csv", tmp_path / f"{dst}.csv")
+    (tmp_path / "data").mkdir()
+    shutil.copytree(ROOT / "data" / "brdf", tmp_path / "data" / "brdf")
+    ran = 0
+    for line in shell_examples():
+        words = shlex.split(line, comments=True)
+        if words[0] == ".venv/bin/python" and words[1].startswith("benchmarks/"):
+            spec = importlib.util.spec_from_file_location("bench", ROOT / words[1])
+            sys.path.insert(0, str(ROOT / "benchmarks"))
+            try:
+                module = importlib.util.module_from_spec(spec)
+                spec.loader.exec_module(module)
+            finally:
+                sys.path.remove(str(ROOT / "benchmarks"))
+            assert callable(module.main), line
+            continue
+        if words[0] == "jaxskin":
+            argv = [str(JAXSKIN), *words[1:]]
+        elif words[:3] == ["python", "-m", "jaxskin"]:
+            argv = [sys.executable, *words[1:]]
+        else:
+            raise AssertionError(f"README command not handled by this test: {line}")
+        if "render" in words:
+            argv += SMALL
+        proc = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, (line, proc.stderr)
+        for written in re.findall(r"^  (\S+)$", proc.stdout, re.M):
+            assert (tmp_path / written).stat().st_size > 0, (line, written)
+        ran += 1
+    assert ran >= 14

@@ -151,7 +151,11 @@ def test_render_command_with_a_vmapped_sweep(tmp_path):
                            "-D", "texture.size=64", "-D", "camera.size=32", "--sweep",
                            "material.melanin=0:1:3"], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
-    images = [iio.imread(out / f"foot_material.melanin={v}.png") for v in ("0", "0.5", "1")]
+    names = [f"foot_texture.size-64_camera.size-32_sweep-{i:02d}_material.melanin-{v}.png"
+             for i, v in ((1, "0"), (2, "0.5"), (3, "1"))]
+    assert sorted(p.name for p in out.iterdir()) == names  # sorted = sweep order
+    assert all(str(out / n) in proc.stdout for n in names)  # the run reports every file
+    images = [iio.imread(out / n) for n in names]
     means = [im[im.sum(-1) > 0].mean() for im in images]
     assert means[0] > means[1] > means[2]  # more melanin, darker skin
     bad = subprocess.run([sys.executable, "-m", "jaxskin.cli", "render", "foot", "-o", str(out),
@@ -167,13 +171,14 @@ def test_glb_export_reloads_with_textures(tmp_path):
                            "--glb", "-D", "texture.size=128", "-D", "camera.size=32"],
                           capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
-    scene = trimesh.load(out / "arm.glb")
+    glb = out / "arm_texture.size-128_camera.size-32.glb"
+    scene = trimesh.load(glb)
     mesh = next(iter(scene.geometry.values()))
     normal = np.asarray(mesh.visual.material.normalTexture)[..., :3] / 255.0 * 2 - 1
     assert mesh.visual.uv.shape == (3 * len(mesh.faces), 2)
     # Tangent space: mostly facing out (+z), tilted by the wrinkles.
     assert np.median(normal[..., 2]) > 0.9 and np.std(normal[..., 0]) > 1e-3
-    assert (out / "arm.glb").stat().st_mode & 0o044  # readable like any written file
+    assert glb.stat().st_mode & 0o044  # readable like any written file
 
 
 def test_output_files_get_ordinary_permissions(tmp_path):

@@ -122,10 +122,11 @@ def test_render_maps_command(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "jaxskin.cli", "render", "foot", "-o", str(out),
                            "--maps", "-D", "texture.size=96"], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
-    height = iio.imread(out / "foot_height.png")
+    base = out / "foot_texture.size-96"  # -D overrides name the outputs
+    height = iio.imread(f"{base}_height.png")
     assert height.dtype == np.uint16 and height.shape == (96, 96) and height.min() < 60000
-    assert iio.imread(out / "foot_normal.png").shape == (96, 96, 3)
-    assert iio.imread(out / "foot_field.png").ndim == 3
+    assert iio.imread(f"{base}_normal.png").shape == (96, 96, 3)
+    assert iio.imread(f"{base}_field.png").ndim == 3
 
 
 def test_render_bad_scene_exit_2_and_nothing_written(tmp_path):

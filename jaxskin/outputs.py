@@ -1,0 +1,129 @@
+"""Where a command writes: checked output folders, safe file names, inputs never overwritten.
+
+The rules every command follows, all checked before any work:
+
+- The output folder exists or can be created, is a folder (not a file) and is writable.
+- An output name is one safe path component: no separator, no `..`, no leading dot, no
+  control character, at most 200 characters. A scene name that breaks this is refused
+  (exit 2), never silently changed; the parts jaxskin adds itself (override and sweep
+  suffixes) are sanitised by `slug`.
+- Every output path lies directly inside the output folder (checked on resolved paths).
+- No output is the same file as an input of the run (`os.path.samefile`, links resolved).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+import tempfile
+from pathlib import Path
+
+from .io import InputError
+
+__all__ = ["Outputs", "check_folder", "check_name", "slug"]
+
+MAX_NAME = 200
+_UNSAFE = re.compile(r"[^A-Za-z0-9._+=-]+")
+
+
+def check_name(name: str, where=None, key: str | None = "name") -> str:
+    """`name` if it is one safe path component, else an `InputError` saying why."""
+    why = None
+    if not isinstance(name, str) or not name:
+        why = "is empty"
+    elif any(ord(c) < 32 or ord(c) == 127 for c in name):
+        why = "contains a control character"
+    elif "/" in name or "\\" in name or (os.altsep and os.altsep in name):
+        why = "contains a path separator"
+    elif name in (".", "..") or name.startswith("."):
+        why = "starts with a dot"
+    elif len(name) > MAX_NAME:
+        why = f"is longer than {MAX_NAME} characters"
+    if why is not None:
+        raise InputError(f"an output name must be one plain file name (no '/', '..', leading "
+                         f"dot or control characters); {name!r} {why}", where, key=key)
+    return name
+
+
+def slug(text: str) -> str:
+    """`text` made safe for a file name: runs of characters other than letters, digits and
+    `._+=-` become `_`, leading dots are dropped; long results keep a hash of the whole."""
+    s = _UNSAFE.sub("_", str(text)).lstrip(".") or "_"
+    if len(s) > 60:
+        s = s[:50] + "_" + hashlib.sha1(str(text).encode()).hexdigest()[:8]
+    return s
+
+
+def check_folder(path, option: str = "-o") -> Path:
+    """An output folder that exists (a writable folder) or can be created; nothing is
+    created (a probe file in an existing folder is removed at once)."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise InputError(f"{option}: expected a folder, but this is a file", path)
+    probe = path
+    while not probe.exists():  # the nearest existing ancestor must take a new folder
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if not probe.is_dir():
+        raise InputError(f"{option}: cannot create the folder: {probe} is a file", path)
+    try:
+        if probe == path:
+            fd, tmp = tempfile.mkstemp(dir=path, prefix=".jaxskin-probe-")
+            os.close(fd)
+            os.unlink(tmp)
+        else:
+            os.rmdir(tempfile.mkdtemp(dir=probe, prefix=".jaxskin-probe-"))
+    except OSError as e:
+        raise InputError(f"{option}: cannot write here ({e.strerror or e.__class__.__name__})",
+                         path) from None
+    return path
+
+
+def _same(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+class Outputs:
+    """The files a run will write into one folder, checked up front, and those written.
+
+    **Arguments:**
+
+    - `folder`: the output folder (checked with `check_folder`).
+    - `inputs`: every file the run reads.
+    """
+
+    def __init__(self, folder, inputs=(), option: str = "-o"):
+        self.folder = check_folder(folder, option)
+        self.option = option
+        self.inputs = [Path(p) for p in inputs if p is not None]
+        self.planned: dict[Path, str] = {}
+        self.written: list[Path] = []
+
+    def plan(self, filename: str, what: str = "") -> Path:
+        """Reserve `folder/filename`: one safe component, confined, unique, not an input."""
+        check_name(filename, key=None)
+        path = self.folder / filename
+        # One safe component cannot leave the folder; a link already there is replaced by
+        # the rename (atomic_write), never written through.
+        assert Path(os.path.abspath(path)).parent == Path(os.path.abspath(self.folder))
+        if path in self.planned:
+            raise InputError(f"two outputs are both named {filename!r} ({self.planned[path]} "
+                             f"and {what}); give the scenes distinct names")
+        for inp in self.inputs:
+            if path.resolve() == inp.resolve() or (path.exists() and _same(path, inp)):
+                raise InputError(f"the output {path} would overwrite this input of the run; "
+                                 f"choose another {self.option} or name", inp)
+        self.planned[path] = what or filename
+        return path
+
+    def done(self, path) -> None:
+        self.written.append(Path(path))
+
+    def summary(self) -> str:
+        n = len(self.written)
+        return f"{n} file(s) complete in {self.folder}/"

@@ -1,0 +1,87 @@
+"""Memory: what a render will need, against what this machine has, before it starts.
+
+`render_bytes` is a model fitted to peak resident sizes measured with `/usr/bin/time -v`
+on `jaxskin render` (2-core CPU, float32):
+
+| run | peak |
+|---|---|
+| hand, texture 1024², image 256² | 0.64 GB |
+| hand, texture 2048², image 256² | 1.23 GB |
+| hand, texture 4096², image 256² | 4.27 GB |
+| makeup (3 layers, 41 bands), texture 512², image 256² | 0.71 GB |
+| makeup, texture 1024², image 256² | 1.78 GB |
+| hand, texture 256², image 1024² × supersample 4 (4096² samples) | 4.19 GB |
+
+which give 164, 182 and 227 bytes per texel at 1024², 2048² and 4096² (Blinn /
+Lafortune; growing with the size, so the model takes 280), 5.5 more per texel, band and
+(layer + 2) for the cosmetics model (taken as 8: the face covers part of its texture),
+220 bytes per image sample, over 0.45 GB of JAX itself; the model gives 0.99-1.39x each
+row (tests/test_cli.py checks it against this table). A sweep batches the whole render
+(vmap), so its variable part counts once per value. The model errs high rather than low;
+it is a guard against runs that cannot fit, not a forecast.
+
+`fit_brdf_bytes` likewise, from `jaxskin fit-brdf` on the 4,000 shipped samples: 0.36 GB
+(3 lobes, 8 starts), 1.05 GB (3 lobes, 64 starts), 1.94 GB (6 lobes, 64 starts), about 100
+bytes per sample, channel, lobe parameter and start (the model takes 120: 1.08-1.28x).
+"""
+
+from __future__ import annotations
+
+import os
+
+from .io import InputError
+
+__all__ = ["available_bytes", "check_memory", "fit_brdf_bytes", "render_bytes"]
+
+BASE = 0.45e9
+PER_TEXEL = 280
+PER_TEXEL_BAND_LAYER = 8
+PER_SAMPLE = 220
+FIT_BASE = 0.35e9
+PER_BRDF_VALUE = 120
+
+
+def render_bytes(config, count: int = 1) -> float:
+    """Estimated peak bytes of rendering a `scene.SceneConfig` (`count` sweep values)."""
+    texels = config.texture.size ** 2
+    per_texel = PER_TEXEL
+    sp = config.spectral
+    if sp is not None:
+        bands = len(sp.grid.wavelengths)
+        per_texel += PER_TEXEL_BAND_LAYER * bands * (len(sp.layers) + 2)
+    width = config.image * config.supersample
+    height = (config.image_height or config.image) * config.supersample
+    return BASE + count * (texels * per_texel + width * height * PER_SAMPLE)
+
+
+def fit_brdf_bytes(samples: int, lobes: int, starts: int) -> float:
+    """Estimated peak bytes of fitting `lobes` Lafortune lobes (RGB) to `samples` samples
+    from `starts` starts at once (the Jacobians of every start are held together)."""
+    return FIT_BASE + PER_BRDF_VALUE * samples * 3 * (1 + 3 * lobes) * starts
+
+
+def available_bytes() -> tuple[float, str]:
+    """Memory available to a new allocation now, and where the figure comes from:
+    `MemAvailable` in /proc/meminfo, else free physical pages (os.sysconf)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024, "MemAvailable in /proc/meminfo"
+    except OSError:
+        pass
+    try:
+        pages = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        return float(pages), "free physical memory (sysconf)"
+    except (ValueError, OSError, AttributeError):
+        return float("inf"), "unknown"
+
+
+def check_memory(estimate: float, what: str, where=None,
+                 hint: str = "use a smaller texture.size, camera.size, camera.supersample or "
+                 "sweep") -> None:
+    """An `InputError` naming the estimate and the limit when `estimate` does not fit."""
+    limit, source = available_bytes()
+    if estimate > limit:
+        raise InputError(f"{what} needs about {estimate / 2**30:.1f} GiB of memory; "
+                         f"{limit / 2**30:.1f} GiB is available ({source}); {hint}", where)

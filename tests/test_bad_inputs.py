@@ -1,0 +1,343 @@
+"""The adversarial table: bad scenes, overrides, sweeps, meshes, layer images, polygons,
+materials, BRDF files, output paths and command lines.
+
+Each case builds its inputs in a fresh folder and runs `jaxskin` (in-process through
+`cli.main`; a few as real subprocesses) and asserts: exit code 2, exactly one line on stderr
+starting `jaxskin: error:`, no traceback, nothing written anywhere in the folder (the
+output folder included, and no file outside it), every input file byte for byte unchanged.
+The CSV readers' cases are in tests/test_measurements.py and tests/test_calibrate.py.
+"""
+
+import hashlib
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from jaxskin.cli import main
+
+ROOT = Path(__file__).resolve().parent.parent
+SMALL = ["-D", "texture.size=64", "-D", "camera.size=32"]
+LAYERED = """name = "m"
+[mesh]
+file = "face"
+projection = "uv"
+unit_mm = 10.0
+[material]
+model = "spectral"
+[[layer]]
+name = "blush"
+material = "{material}"
+{region}
+"""
+
+
+def write(tmp, name, content):
+    path = tmp / name
+    if isinstance(content, bytes):
+        path.write_bytes(content)
+    else:
+        path.write_text(content)
+    return str(path)
+
+
+def scene(tmp, text, *extra):
+    return ["render", write(tmp, "s.toml", text), "-o", str(tmp / "out"), *SMALL, *extra]
+
+
+def mesh_scene(tmp, obj):
+    write(tmp, "m.obj", obj)
+    return scene(tmp, '[mesh]\nfile = "m.obj"\n')
+
+
+def layered(tmp, material="blush_rose", region="", *extra):
+    return scene(tmp, LAYERED.format(material=material, region=region), *extra)
+
+
+def material(tmp, doc):
+    write(tmp, "mat.json", doc if isinstance(doc, str) else json.dumps(doc))
+    return layered(tmp, "mat.json")
+
+
+def good_material():
+    return json.loads((ROOT / "data" / "materials" / "blush_rose.json").read_text())
+
+
+def image(tmp, content=None, array=None, name="map.png"):
+    import imageio.v3 as iio
+
+    if array is not None:
+        iio.imwrite(tmp / name, array)
+    elif content is not None:
+        write(tmp, name, content)
+    return layered(tmp, region='image = "map.png"')
+
+
+def polygon(tmp, body):
+    return layered(tmp, region=f"[[layer.polygon]]\n{body}\n")
+
+
+def brdf(tmp, doc):
+    write(tmp, "b.json", doc if isinstance(doc, str) else json.dumps(doc))
+    return scene(tmp, '[material]\nmodel = "lafortune"\nbrdf = "b.json"\n')
+
+
+LOBE = {"Cxy": [-1.0, -1.0, -1.0], "Cz": [0.8, 0.7, 0.6], "n": [20.0, 20.0, 20.0]}
+
+
+def hand(tmp, *extra):
+    return ["render", "hand", "-o", str(tmp / "out"), *SMALL, *extra]
+
+
+def brdf_csv(tmp):
+    return write(tmp, "samples.csv", (ROOT / "data" / "brdf" / "skin_samples.csv").read_text())
+
+
+def measurement(tmp):
+    return write(tmp, "blush.csv",
+                 (ROOT / "data" / "measurements" / "blush_rose.csv").read_text())
+
+
+def read_only_folder(tmp):
+    if os.geteuid() == 0:
+        pytest.skip("root writes into a read-only folder; out-unwritable covers it (/proc)")
+    (tmp / "ro").mkdir()
+    os.chmod(tmp / "ro", 0o555)
+    return ["render", "hand", "-o", str(tmp / "ro" / "out"), *SMALL]
+
+
+def symlinked_output(tmp):
+    """out/m.png is a link to the scene's own layer map: writing it would overwrite an input."""
+    import imageio.v3 as iio
+
+    iio.imwrite(tmp / "map.png", np.full((8, 8), 128, np.uint8))
+    (tmp / "out").mkdir()
+    os.symlink(tmp / "map.png", tmp / "out" / "m.png")
+    return ["render", write(tmp, "s.toml", LAYERED.format(material="blush_rose",
+                                                         region='image = "map.png"')),
+            "-o", str(tmp / "out")]
+
+
+def output_is_input(tmp):
+    """A scene named like its own layer map, rendered into its own folder (the issue's case)."""
+    import imageio.v3 as iio
+
+    iio.imwrite(tmp / "m.png", np.full((8, 8), 128, np.uint8))
+    return ["render", write(tmp, "s.toml", LAYERED.format(material="blush_rose",
+                                                         region='image = "m.png"')),
+            "-o", str(tmp)]
+
+
+CASES = {
+    # --- TOML scenes
+    "toml-syntax": lambda t: scene(t, "name = \n"),
+    "toml-unknown-key": lambda t: scene(t, "[wrinkles]\nk_scal = 1.0\n"),
+    "toml-out-of-range": lambda t: scene(t, "[material]\nmelanin = 5.0\n"),
+    "toml-wrong-type": lambda t: scene(t, '[texture]\nsize = "big"\n'),
+    "toml-nan": lambda t: scene(t, "[light]\nambient = nan\n"),
+    "toml-inf": lambda t: scene(t, "[light]\nintensity = inf\n"),
+    "toml-huge-number": lambda t: scene(t, "[material]\nshininess = 1e308\n"),
+    "toml-nested-arrays": lambda t: scene(t, "x = " + "[" * 3000 + "]" * 3000 + "\n"),
+    "toml-nested-tables": lambda t: scene(t, ".".join(["a"] * 3000) + " = 1\n"),
+    "toml-not-utf8": lambda t: scene(t, b"\xff\xfe\x00garbage\x80\x81"),
+    "toml-zero-light": lambda t: scene(t, "[light]\ndirection = [0.0, 0.0, 0.0]\n"),
+    "toml-edit-vertex-missing": lambda t: scene(
+        t, "[[fields.edit]]\nvertex = 999999\nd1 = [1.0, 0.0, 0.0]\nd2 = [0.0, 1.0, 0.0]\n"),
+    "toml-edit-too-long": lambda t: scene(
+        t, "[[fields.edit]]\nvertex = 1\nd1 = [3.0, 0.0, 0.0]\nd2 = [0.0, 1.0, 0.0]\n"),
+    "toml-layer-without-spectral": lambda t: scene(
+        t, '[[layer]]\nname = "a"\nmaterial = "blush_rose"\n'),
+    "toml-uv-without-uvs": lambda t: scene(t, '[mesh]\nprojection = "uv"\n'),
+    "toml-missing-file": lambda t: ["render", str(t / "nope.toml"), "-o", str(t / "out")],
+    "name-parent": lambda t: scene(t, 'name = "../x"\n'),
+    "name-absolute": lambda t: scene(t, f'name = "{t / "abs"}"\n'),
+    "name-newline": lambda t: scene(t, 'name = "a\\nb"\n'),
+    "name-nul": lambda t: scene(t, 'name = "a\\u0000b"\n'),
+    "name-leading-dot": lambda t: scene(t, 'name = ".hidden"\n'),
+    "name-empty": lambda t: scene(t, 'name = ""\n'),
+    # --- -D and --sweep
+    "D-nan": lambda t: hand(t, "-D", "material.melanin=nan"),
+    "D-out-of-range": lambda t: hand(t, "-D", "material.melanin=5"),
+    "D-unknown-key": lambda t: hand(t, "-D", "nosuch.key=1"),
+    "D-no-equals": lambda t: hand(t, "-D", "material.melanin"),
+    "D-name-parent": lambda t: hand(t, "-D", "name=../escaped"),
+    "D-name-absolute": lambda t: hand(t, "-D", f"name={t / 'abs'}"),
+    "D-memory": lambda t: ["render", "hand", "-o", str(t / "out"), "-D", "texture.size=8192",
+                           "-D", "camera.size=8192", "-D", "camera.supersample=4"],
+    "sweep-nan": lambda t: hand(t, "--sweep", "material.melanin=0:nan:3"),
+    "sweep-inf": lambda t: hand(t, "--sweep", "material.melanin=0:inf:3"),
+    "sweep-out-of-range": lambda t: hand(t, "--sweep", "material.melanin=0:5:3"),
+    "sweep-zero-count": lambda t: hand(t, "--sweep", "material.melanin=0:1:0"),
+    "sweep-fraction-count": lambda t: hand(t, "--sweep", "material.melanin=0:1:2.5"),
+    "sweep-huge-count": lambda t: hand(t, "--sweep", "material.melanin=0:1:1000000"),
+    "sweep-unknown-key": lambda t: hand(t, "--sweep", "nosuch=0:1:3"),
+    "sweep-static-key": lambda t: hand(t, "--sweep", "texture.size=16:64:3"),
+    "sweep-malformed": lambda t: hand(t, "--sweep", "material.melanin=0:1"),
+    "sweep-two": lambda t: hand(t, "--sweep", "material.melanin=0:1:2", "--sweep",
+                                "material.blood=0:1:2"),
+    # --- meshes
+    "mesh-empty": lambda t: mesh_scene(t, ""),
+    "mesh-garbage": lambda t: mesh_scene(t, b"\x00\x01\x02garbage\xff" * 50),
+    "mesh-no-faces": lambda t: mesh_scene(t, "v 0 0 0\nv 1 0 0\nv 0 1 0\n"),
+    "mesh-nan-vertex": lambda t: mesh_scene(t, "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n"),
+    "mesh-degenerate": lambda t: mesh_scene(t, "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n"),
+    "mesh-missing": lambda t: scene(t, '[mesh]\nfile = "nope.obj"\n'),
+    # --- layer images
+    "image-missing": lambda t: layered(t, region='image = "nope.png"'),
+    "image-corrupt": lambda t: image(t, content=b"\x89PNG\r\n\x1a\n" + b"\x00" * 64),
+    "image-text": lambda t: image(t, content="not an image\n"),
+    "image-animated": lambda t: image(t, array=np.zeros((3, 8, 8, 4), np.uint8),
+                                      name="map.png"),
+    # --- polygons
+    "polygon-vertex-missing": lambda t: polygon(t, "vertices = [1, 2, 99999]"),
+    "polygon-two-points": lambda t: polygon(t, "points = [[0.1, 0.1], [0.2, 0.2]]"),
+    "polygon-nan-point": lambda t: polygon(t, "points = [[0.1, 0.1], [nan, 0.2], [0.3, 0.1]]"),
+    "polygon-both": lambda t: polygon(t, "points = [[0.1, 0.1], [0.2, 0.2], [0.3, 0.1]]\n"
+                                         "vertices = [1, 2, 3]"),
+    "polygon-negative-feather": lambda t: polygon(t, "vertices = [1, 2, 3]\nfeather = -1.0"),
+    # --- material JSON
+    "material-missing-key": lambda t: material(t, {k: v for k, v in good_material().items()
+                                                   if k != "K_per_mm"}),
+    "material-nan": lambda t: material(t, json.dumps(good_material()).replace(
+        '"S_per_mm": [', '"S_per_mm": [NaN, ', 1)),
+    "material-wrong-lengths": lambda t: material(t, {**good_material(), "K_per_mm": [1.0, 2.0]}),
+    "material-not-json": lambda t: material(t, "{not json"),
+    "material-negative": lambda t: material(t, {**good_material(), "K_per_mm": [
+        -1.0] * len(good_material()["K_per_mm"])}),
+    "material-nested": lambda t: material(t, "[" * 100000 + "]" * 100000),
+    "material-missing": lambda t: layered(t, "nope.json"),
+    # --- BRDF JSON
+    "brdf-all-zero": lambda t: brdf(t, {"model": "lafortune", "diffuse": [0, 0, 0], "lobes": [
+        {"Cxy": [0, 0, 0], "Cz": [0, 0, 0], "n": [1, 1, 1]}]}),
+    "brdf-nan": lambda t: brdf(t, '{"model": "lafortune", "diffuse": [NaN, 0.3, 0.3], '
+                                  f'"lobes": [{json.dumps(LOBE)}]}}'),
+    "brdf-missing-lobes": lambda t: brdf(t, {"model": "lafortune", "diffuse": [0.4, 0.3, 0.3]}),
+    "brdf-wrong-model": lambda t: brdf(t, {"model": "phong", "diffuse": [0.4, 0.3, 0.3],
+                                           "lobes": [LOBE]}),
+    "brdf-not-json": lambda t: brdf(t, "]"),
+    "brdf-missing": lambda t: scene(t, '[material]\nmodel = "lafortune"\nbrdf = "nope.json"\n'),
+    # --- a bad scene after good ones: nothing is written for the good ones either
+    "later-scene-bad-image": lambda t: ["render", "hand", "foot",
+                                        *image(t, content=b"\x89PNG\r\n\x1a\n")[1:]],
+    "later-scene-zero-brdf": lambda t: ["render", "arm", *brdf(t, {
+        "model": "lafortune", "diffuse": [0, 0, 0], "lobes": [
+            {"Cxy": [0, 0, 0], "Cz": [0, 0, 0], "n": [1, 1, 1]}]})[1:]],
+    # --- output paths
+    "out-is-file": lambda t: ["render", "hand", "-o", write(t, "afile", "x"), *SMALL],
+    "out-under-file": lambda t: ["render", "hand", "-o", str(Path(write(t, "afile", "x")) / "sub"),
+                                 *SMALL],
+    "out-unwritable": lambda t: ["render", "hand", "-o", "/proc/jaxskin-test-out", *SMALL],
+    "out-read-only": read_only_folder,
+    "out-is-input": output_is_input,
+    "out-link-to-input": symlinked_output,
+    "fit-brdf-memory": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "f.json"), "--lobes",
+                                  "16", "--starts", "1024"],
+    "fit-brdf-out-folder": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t)],
+    "fit-brdf-out-is-input": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "samples.csv")],
+    "fit-brdf-out-newline": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "a\nb.json")],
+    "fit-brdf-out-under-file": lambda t: ["fit-brdf", brdf_csv(t), "-o",
+                                          str(Path(write(t, "afile", "x")) / "fit.json")],
+    "calibrate-out-is-file": lambda t: ["calibrate", measurement(t), "-o", write(t, "afile", "x")],
+    # --- command lines
+    "cli-unknown-option": lambda t: hand(t, "--mapz"),
+    "cli-unknown-command": lambda t: ["paint", "hand"],
+    "cli-missing-output": lambda t: ["render", "hand"],
+    "cli-smooth-nan": lambda t: ["calibrate", measurement(t), "-o", str(t / "out"), "--smooth",
+                                 "nan"],
+    "cli-smooth-negative": lambda t: ["calibrate", measurement(t), "-o", str(t / "out"),
+                                      "--smooth", "-1"],
+    "cli-noise-inf": lambda t: ["calibrate", measurement(t), "-o", str(t / "out"), "--noise",
+                                "inf"],
+    "cli-thickness-zero": lambda t: ["calibrate", measurement(t), "-o", str(t / "out"),
+                                     "--thickness", "0"],
+    "cli-lobes-zero": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "f.json"), "--lobes",
+                                 "0"],
+    "cli-lobes-inf": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "f.json"), "--lobes",
+                                "inf"],
+    "cli-starts-negative": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "f.json"),
+                                      "--starts", "-3"],
+    "cli-seed-negative": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "f.json"), "--seed",
+                                    "-5"],
+}
+SUBPROCESS = {"toml-nested-tables", "D-name-parent", "cli-smooth-nan", "image-corrupt"}
+
+
+def snapshot(folder: Path) -> dict:
+    """Every file under `folder` (links not followed) with a hash of its bytes."""
+    out = {}
+    for dirpath, dirs, files in os.walk(folder):
+        for name in files + [d for d in dirs if os.path.islink(os.path.join(dirpath, d))]:
+            p = Path(dirpath, name)
+            out[str(p)] = (hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() and not
+                           p.is_symlink() else os.readlink(p) if p.is_symlink() else "")
+        out.update({str(Path(dirpath, d)): "dir" for d in dirs})
+    return out
+
+
+def run(argv, tmp, capsys, subprocess_run: bool):
+    if subprocess_run:
+        proc = subprocess.run([sys.executable, "-m", "jaxskin", *argv], capture_output=True,
+                              text=True, cwd=tmp, timeout=120)
+        return proc.returncode, proc.stderr
+    capsys.readouterr()
+    try:
+        code = main(argv)
+    except SystemExit as e:  # argparse
+        code = e.code
+    return code, capsys.readouterr().err
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_bad_input_is_one_line_exit_2_and_writes_nothing(case, tmp_path, capsys, monkeypatch):
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    argv = CASES[case](work)
+    before = snapshot(tmp_path)
+    code, err = run(argv, work, capsys, case in SUBPROCESS)
+    lines = err.splitlines()
+    assert code == 2, (code, err)
+    assert len(lines) == 1 and lines[0].startswith("jaxskin: error: "), err
+    assert "Traceback" not in err
+    assert snapshot(tmp_path) == before  # nothing written, nothing changed, inputs intact
+
+
+def test_the_table_is_large_enough():
+    assert len(CASES) >= 40
+
+
+def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
+        tmp_path, capsys, monkeypatch):
+    """A disk that fills up after the first image: exit 1, one line naming the file that is
+    complete, no partial file; `--debug` shows the traceback instead."""
+    import errno
+
+    from jaxskin import maps
+
+    real = maps.write_image
+    calls = []
+
+    def full_disk(image, path):
+        calls.append(path)
+        if len(calls) > 1:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real(image, path)
+
+    monkeypatch.setattr(maps, "write_image", full_disk)
+    out = tmp_path / "out"
+    argv = ["render", "hand", "foot", "-o", str(out), *SMALL]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("jaxskin: error: render failed unexpectedly")
+    assert "No space left on device" in err[0] and "hand_texture.size-64_camera.size-32.png" in \
+        err[0] and "--debug" in err[0]
+    assert sorted(p.name for p in out.iterdir()) == ["hand_texture.size-64_camera.size-32.png"]
+    calls.clear()
+    shutil.rmtree(out)
+    with pytest.raises(OSError, match="No space"):
+        main(["--debug", *argv])
