@@ -6,6 +6,7 @@ import os
 import platform
 import re
 import statistics
+import sys
 import time
 from pathlib import Path
 
@@ -95,3 +96,23 @@ def table(headers, rows) -> str:
     out = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
     out += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
     return "\n".join(out)
+
+
+def synthetic_measurement(rows: int, noise: float = 0.002, seed: int = 0):
+    """foundation_beige's true S, K on `rows` bands over 380–780 nm, two thin layers over a
+    black card, Gaussian noise σ = `noise`: a spectroradiometer export at its resolution."""
+    sys.path.insert(0, str(HERE.parent / "data"))
+    import make_measurements
+
+    from jaxskin.fitting.measurements import Measurement
+
+    wl = np.linspace(380.0, 780.0, rows)
+    S0, K0 = make_measurements.true_spectra("foundation_beige")
+    S, K = np.interp(wl, make_measurements.WL, S0), np.interp(wl, make_measurements.WL, K0)
+    Rg = np.full(rows, 0.04)
+    R, R_inf = make_measurements.simulate(S, K, [0.05, 0.15], Rg)
+    rng = np.random.default_rng(seed)
+    R = np.clip(R + rng.normal(0, noise, R.shape), 0, 1)
+    R_inf = np.clip(R_inf + rng.normal(0, noise, rows), 0, 1)
+    return Measurement(Path(f"synthetic_{rows}.csv"), f"synthetic_{rows}", wl,
+                       np.array([0.05, 0.15]), R, R_inf, Rg, ("R_0.05mm", "R_0.15mm"), 1)

@@ -23,9 +23,9 @@ GRID = np.linspace(0.0, 1.0, 5)  # melanin (columns) and blood (rows)
 
 def scene_image(name: str, size: int) -> np.ndarray:
     from jaxskin import render
-    from jaxskin.scene import load_scene
+    from jaxskin.scene import scene_at_width
 
-    scene = load_scene(name, [f"camera.size={size}"])
+    scene = scene_at_width(name, size)
     return np.clip(np.asarray(render.render(scene.config, scene.params)), 0.0, 1.0)
 
 

@@ -89,6 +89,15 @@ def cases(large: bool = False):
     for k in (0.5, 1e3):
         out.append((f"bump.bump_normals (n_z → 0, k_bump {k:g})",
                     lambda n, hh, kk=k: bump.bump_normals(n, hh, kk), [nmap, h]))
+    # The general form (cylindrical, uv): ∇s along n (a tangent seen edge-on) on alternate
+    # rows, n_z → 0, the seam's wrap, a huge k_bump.
+    tilt = np.random.default_rng(1).normal(size=(8, 8, 3))
+    g_s = np.where(np.arange(8)[:, None, None] % 2 == 0, nmap, [1.0, 0.0, 0.0]) + 1e-7 * tilt
+    g_t = np.tile([0.0, 1.0, 0.0], (8, 8, 1))
+    for k in (0.5, 1e3):
+        out.append((f"bump.frame_bump_normals (∇s ∥ n, n_z → 0, seam, k_bump {k:g})",
+                    lambda n, hh, a, b, kk=k: bump.frame_bump_normals(n, hh, kk, a, b, True),
+                    [nmap, h, g_s, g_t]))
     # Texture sizes: a furrowed height field over a sphere-like normal map.
     for n in (64, 4096) if large else (64,):
         y, x = (np.mgrid[0:n, 0:n] + 0.5) / n * 2 - 1
@@ -124,7 +133,7 @@ def cosmetics_cases(N, L, large=False):
     K/S 1e6, grazing light, n_z → 0), the skin blur (a point of light at a mesh edge, 64²
     to 2048²), melanin, the sRGB encoding at 0 and below, and a whole makeup render with
     empty cosmetic maps."""
-    from jaxskin import cosmetics, render, skin, spectral, sss
+    from jaxskin import cosmetics, formats, render, skin, spectral, sss
     from jaxskin.scene import load_scene
     from jaxskin.shading import layered
 
@@ -132,7 +141,7 @@ def cosmetics_cases(N, L, large=False):
     mats = [cosmetics.load_material(n, grid) for n in ("foundation_beige", "blush_rose",
                                                        "lipstick_red")]
     S0, K0 = np.stack([m.S for m in mats]), np.stack([m.K for m in mats])
-    skin_R = skin.nist_reflectance(12, grid)
+    skin_R = formats.nist_reflectance(12, grid)
     thick = np.array([0.0, 1e-6, 0.01, 10.0])
     X = np.stack([np.repeat(thick, len(N) // len(thick) + 1)[:len(N)]] * 3)
     X[1] = X[1][::-1]

@@ -7,7 +7,9 @@ in a T-pose, y up, facing +z, in metres. We keep the faces whose three vertices 
 box (each box holds one limb and nothing else), and turn it to suit the paper's projections:
 
 - foot: the right foot below the ankle (y < 0.10 m, x > 0), turned so that its top faces
-  the viewer (+z) and the toes point up (+y): planar projection, like Bando's fig. 6.2;
+  the viewer (+z) and the toes point up (+y): planar projection, like Bando's fig. 6.2.
+  The cut at the ankle is capped (`cap_holes`: a low dome over each boundary loop), so that
+  the open leg is not seen as a dark cavity (issue 14);
 - arm: the right arm from below the shoulder to the wrist (0.30 m < x < 0.70 m), turned so
   that its axis is the y axis through the origin: cylindrical projection, like fig. 6.3.
 """
@@ -29,13 +31,54 @@ def cut(body: trimesh.Trimesh, keep_vertex) -> trimesh.Trimesh:
     return body.submesh([faces], append=True)
 
 
+def cap_holes(m: trimesh.Trimesh, rings: int = 3, bulge: float = 0.35) -> trimesh.Trimesh:
+    """Close every boundary loop with a low dome: `rings` rings shrinking towards the loop's
+    centroid, raised along the loop's plane normal (away from the part) by `bulge` × the
+    loop's mean radius × (1 − r²), then a fan; wound like the faces beside it (a boundary
+    edge a → b of a face gives the cap's b → a → …). A flat fan would read as a cut."""
+    faces = np.asarray(m.faces)
+    directed = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    key = np.sort(directed, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    boundary = directed[counts[inverse.ravel()] == 1]  # (a, b) as the faces run
+    following = {int(a): int(b) for a, b in boundary}
+    vertices, new_faces = [np.asarray(m.vertices)], [faces]
+    count = len(m.vertices)
+    while following:
+        start = next(iter(following))
+        loop = [start]
+        while following[loop[-1]] != start:
+            loop.append(following.pop(loop[-1]))
+        following.pop(loop[-1])
+        outer = np.asarray(loop)
+        rim = m.vertices[outer]
+        centre = rim.mean(axis=0)
+        normal = np.linalg.svd(rim - centre)[2][2]
+        if normal @ (centre - m.vertices.mean(axis=0)) < 0:
+            normal = -normal
+        height = bulge * np.linalg.norm(rim - centre, axis=1).mean()
+        for k in range(1, rings + 1):
+            r = 1 - k / (rings + 1)
+            ring = centre + r * (rim - centre) + height * (1 - r * r) * normal
+            inner = count + np.arange(len(outer))
+            vertices.append(ring)
+            count += len(outer)
+            nxt_o, nxt_i = np.roll(outer, -1), np.roll(inner, -1)
+            new_faces += [np.stack([nxt_o, outer, inner], 1), np.stack([nxt_o, inner, nxt_i], 1)]
+            outer = inner
+        vertices.append((centre + height * normal)[None])
+        new_faces.append(np.stack([np.roll(outer, -1), outer, np.full(len(outer), count)], 1))
+        count += 1
+    return trimesh.Trimesh(np.concatenate(vertices), np.concatenate(new_faces), process=False)
+
+
 def foot(body):
     m = cut(body, lambda v: (v[:, 1] < 0.10) & (v[:, 0] > 0.0))
     v = m.vertices
     # (x, y, z) -> (-x, z, y): top of the foot (+y) to +z, toes (+z) to +y. A proper rotation.
     m.vertices = np.stack([-v[:, 0], v[:, 2], v[:, 1]], axis=1)
     m.vertices -= m.bounds.mean(axis=0)
-    return m
+    return cap_holes(m)  # after centring: the foot's own vertices stay where they were
 
 
 def arm(body):

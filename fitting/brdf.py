@@ -25,16 +25,19 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
-from jaxskin.io import InputError, atomic_write
+from jaxskin.formats import read_table
+from jaxskin.io import FitError, InputError, atomic_write
 from jaxskin.shading import lafortune
-
-from .table import read_table
 
 __all__ = ["BRDFFit", "BRDFSamples", "fit", "read_samples", "write_report"]
 
 ANGLES = ("theta_in_deg", "phi_in_deg", "theta_out_deg", "phi_out_deg")
 VECTORS = ("wi_x", "wi_y", "wi_z", "wo_x", "wo_y", "wo_z")
 RGB = ("R", "G", "B")
+# Beyond these a number is a typo or an overflow, not a measurement: a mirror-like lobe
+# peaks at ~1e4 1/sr, and weights are relative.
+MAX_BRDF = 1e6
+MAX_WEIGHT = 1e6
 _EXPECTED = ", ".join(ANGLES + RGB) + " (or " + ", ".join(VECTORS) + "), optional weight"
 
 
@@ -56,7 +59,7 @@ def _direction(theta_deg, phi_deg):
 
 def read_samples(path) -> BRDFSamples:
     """Read and check a BRDF sample CSV; `InputError` names the file, line and column."""
-    t = read_table(path, _EXPECTED)
+    t = read_table(path, lambda cell: cell in (*ANGLES, *VECTORS), _EXPECTED)
     names = set(t.header)
     unknown = [c for c in t.header if c not in {*ANGLES, *VECTORS, *RGB, "weight"}]
     if unknown:
@@ -103,13 +106,17 @@ def read_samples(path) -> BRDFSamples:
         wi, wo = vectors
     f = np.stack([t.column(c) for c in RGB], axis=-1)
     for k, c in enumerate(RGB):
-        bad = np.flatnonzero(f[:, k] < 0)
+        bad = np.flatnonzero((f[:, k] < 0) | (f[:, k] > MAX_BRDF))
         if bad.size:
-            raise t.error(f"BRDF values must be >= 0, got {f[bad[0], k]:g}", bad[0], c)
+            raise t.error(f"BRDF values must be in [0, {MAX_BRDF:g}] 1/sr, got "
+                          f"{f[bad[0], k]:g}", bad[0], c)
+        if not np.any(f[:, k] > 0):
+            raise t.error("every value is 0: there is nothing to fit", column=c)
     weight = t.column("weight") if "weight" in names else np.ones(len(f))
-    bad = np.flatnonzero(weight < 0)
+    bad = np.flatnonzero((weight < 0) | (weight > MAX_WEIGHT))
     if bad.size:
-        raise t.error(f"weights must be >= 0, got {weight[bad[0]]:g}", bad[0], "weight")
+        raise t.error(f"weights must be in [0, {MAX_WEIGHT:g}], got {weight[bad[0]]:g}",
+                      bad[0], "weight")
     if not np.any(weight > 0):
         raise t.error("every weight is 0", column="weight")
     return BRDFSamples(t.path, wi, wo, f, weight)
@@ -234,7 +241,8 @@ def fit(samples: BRDFSamples, lobes: int = 3, starts: int = 8, seed: int = 0,
             f64(scale)))
     loss = np.where(np.isfinite(loss) & np.all(np.isfinite(theta), axis=-1), loss, np.inf)
     if not np.all(np.isfinite(loss).any(axis=1)):
-        raise RuntimeError("every start failed for some channel; try more --starts")
+        raise FitError("every start failed for some channel; try more --starts",
+                       samples.path)
     best = np.argmin(loss, axis=1)
     chosen = theta[np.arange(3), best]  # (3, P)
     params = lafortune.Lafortune(
@@ -245,6 +253,9 @@ def fit(samples: BRDFSamples, lobes: int = 3, starts: int = 8, seed: int = 0,
                                           f64(samples.wi), f64(samples.wo)))
     w = samples.weight[:, None]
     rel = np.sqrt(np.sum(w * (model - samples.f) ** 2, axis=0) / np.sum(w * samples.f**2, axis=0))
+    if not all(np.all(np.isfinite(np.asarray(a))) for a in (*params, rel)):
+        raise FitError("the fit failed: a lobe parameter or the error is not finite",
+                       samples.path)
     return BRDFFit(params, rel, loss, best, ok, steps)
 
 

@@ -2,9 +2,13 @@
 
 Huang et al. 2013 §4: a thin layer over a background (R), an opaque layer (R∞) and the
 background alone (Rg). The closed form (eq. 6–7) gives a start where its domain holds;
-Levenberg–Marquardt (optimistix, float64) then fits log S and log K at every band at once,
-to every thin-layer thickness and to R∞ together, optionally with a smoothness prior across
-bands.
+Levenberg–Marquardt (float64) then fits log S and log K to every thin-layer thickness and to
+R∞ together, optionally with a smoothness prior across bands. The problem is separable per
+band apart from the prior: without it each band's two-parameter problem is solved on its own
+(vmapped over bands); with it the normal equations are block-tridiagonal (2×2 blocks) and are
+solved by block elimination in a scan. Time and memory are O(bands) either way.
+`solver="dense"` keeps the earlier solver (optimistix over all bands, a dense Jacobian: O(n²)
+memory) as a reference.
 
 Identifiability: where the thin layer is as good as opaque (|R − R∞| <= 3σ, σ the noise of
 one reading) or the background is as bright as the opaque layer (|Rg − R∞| <= 3σ), the band
@@ -24,13 +28,15 @@ import numpy as np
 import optimistix as optx
 
 from jaxskin import km
-from jaxskin.io import InputError
+from jaxskin.io import FitError, InputError
 
 from .measurements import Measurement
 
 __all__ = ["KMFit", "closed_form", "fit", "identifiable", "model_reflectance"]
 
 DEFAULT_NOISE = 0.002  # σ of one reflectance reading
+MAX_NOISE = 0.5  # σ beyond this is not a reflectance measurement
+MAX_SMOOTH = 1e6  # 1/W = 1e-6 per band: already a constant spectrum
 NOISE_SIGMAS = 3.0  # a difference counts when it exceeds this many σ
 
 
@@ -53,8 +59,10 @@ class KMFit:
     smooth: float
     noise: float
 
-    def to_json(self, measurement: Measurement) -> dict:
-        """The material file: what `jaxskin` reads for a cosmetic layer, plus the fit's record."""
+    def to_json(self, measurement: Measurement, extrapolate: str | None = None) -> dict:
+        """The material file: what `jaxskin` reads for a cosmetic layer, plus the fit's record.
+        `extrapolate` ("hold", "linear" or None) says how a renderer may extend S and K
+        beyond the measured wavelengths (`cosmetics.load_material`)."""
 
         def clean(a):
             return [None if not np.isfinite(v) else float(v) for v in np.asarray(a)]
@@ -67,11 +75,12 @@ class KMFit:
             "K_per_mm": clean(self.K_per_mm),
             "identifiable": [bool(v) for v in self.identifiable],
             "rmse": float(self.rmse),
+            **({"extrapolate": extrapolate} if extrapolate else {}),
             "fit": {
                 "source": measurement.path.name,
                 "thickness_mm": clean(measurement.thickness_mm),
                 "method": "closed form (Huang et al. 2013 eq. 6-7) then Levenberg-Marquardt "
-                "on log S, log K (optimistix, float64)",
+                "on log S, log K (float64; per band, or block-tridiagonal with the prior)",
                 "smooth": self.smooth,
                 "noise": self.noise,
                 "steps": int(self.steps),
@@ -130,14 +139,146 @@ def model_reflectance(logS, logK, X, Rg):
     return km.over(R0, T, Rg), km.r_inf(S, K)
 
 
-def _residuals(y, args):
-    logS, logK = y
+def _band_residuals(y, X, R, R_inf, Rg):
+    """One band's residuals `(m + 1,)`: the thin layers' model minus data, then R∞'s."""
+    S, K = jnp.exp(y[0]), jnp.exp(y[1])
+    R0, T = km.layer(S, K, X)
+    return jnp.append(km.over(R0, T, Rg) - R, km.r_inf(S, K) - R_inf)
+
+
+def _linearise(y, args):
+    """Residuals `r (n, m + 1)` and their Jacobian `J (n, m + 1, 2)` per band, at `y (n, 2)`
+    with S held where it is not identifiable (its Jacobian column is 0 there)."""
+    X, R, R_inf, Rg, _, ident, logS_fixed = args
+    y = y.at[:, 0].set(jnp.where(ident, y[:, 0], logS_fixed))
+
+    def one(yb, Rb, Rib, Rgb):
+        f = functools.partial(_band_residuals, X=X, R=Rb, R_inf=Rib, Rg=Rgb)
+        return f(yb), jax.jacfwd(f)(yb)
+
+    r, J = jax.vmap(one)(y, R, R_inf, Rg)
+    return y, r, J * jnp.stack([ident, jnp.ones_like(ident)], -1)[:, None, :]
+
+
+def _cost(y, args):
+    """½ (Σ r² + prior² Σ (Δ log S)² + prior² Σ (Δ log K)²): what `_solve` minimises."""
+    prior = args[4]
+    y, r, _ = _linearise(y, args)
+    return 0.5 * (jnp.sum(r * r) + prior**2 * jnp.sum(jnp.diff(y, axis=0) ** 2))
+
+
+def _normal_equations(y, args):
+    """At `y (n, 2)`: the cost (`_cost`), its gradient `g (n, 2)` and the data's Gauss–Newton
+    blocks `H (n, 2, 2)` = Jᵀ J per band (the prior's part is added by the solver)."""
+    prior, ident = args[4], args[5]
+    y_eff, r, J = _linearise(y, args)
+    diff = jnp.diff(y_eff, axis=0)
+    pad = jnp.zeros((1, 2), y.dtype)
+    g_prior = (jnp.concatenate([pad, diff]) - jnp.concatenate([diff, pad])) * jnp.stack(
+        [ident, jnp.ones_like(ident)], -1)
+    g = jnp.einsum("nri,nr->ni", J, r) + prior**2 * g_prior
+    H = jnp.einsum("nri,nrj->nij", J, J)
+    return 0.5 * (jnp.sum(r * r) + prior**2 * jnp.sum(diff**2)), g, H
+
+
+def block_tridiagonal_solve(D, off, b):
+    """Solve the symmetric block-tridiagonal system with 2×2 diagonal blocks `D (n, 2, 2)`,
+    diagonal 2×2 off-diagonal blocks `off (n - 1, 2)` (their diagonals) and `b (n, 2)`:
+    block Thomas elimination, O(n) time and memory (a scan). Stable without pivoting for a
+    positive-definite matrix (every Schur complement is then positive definite).
+
+    **Returns:** `x (n, 2)`.
+    """
+    zero = jnp.zeros((1, 2), D.dtype)
+    above, below = jnp.concatenate([off, zero]), jnp.concatenate([zero, off])
+
+    def forward(carry, block):
+        C_prev, d_prev = carry
+        Dj, up, low, bj = block
+        Dj = Dj - low[:, None] * C_prev
+        inv = _inverse2(Dj)
+        C, d = inv * up[None, :], inv @ (bj - low * d_prev)
+        return (C, d), (C, d)
+
+    init = (jnp.zeros((2, 2), D.dtype), jnp.zeros(2, D.dtype))
+    _, (C, d) = jax.lax.scan(forward, init, (D, above, below, b))
+
+    def backward(x_next, block):
+        Cj, dj = block
+        x = dj - Cj @ x_next
+        return x, x
+
+    _, x = jax.lax.scan(backward, jnp.zeros(2, D.dtype), (C, d), reverse=True)
+    return x
+
+
+def _inverse2(M):
+    a, b, c, d = M[0, 0], M[0, 1], M[1, 0], M[1, 1]
+    return jnp.array([[d, -b], [-c, a]]) / (a * d - b * c)
+
+
+def _solve_banded(y0, args, max_steps=256, rtol=1e-9, atol=1e-12):
+    """Levenberg–Marquardt on `y (n, 2)` = (log S, log K) per band, with the normal
+    equations solved block-tridiagonally: the data couple log S and log K within a band
+    (a 2×2 block), the prior only neighbouring bands' same variable. Damping μ by Nielsen's
+    rule (Madsen, Nielsen, Tingleff 2004, §3.2); stops when an accepted step moves no
+    variable by more than `atol + rtol |y|` and lowers the cost by less than
+    `atol + rtol · cost`, or such a step is rejected and was predicted to gain no more
+    (the cost at its rounding floor), or no decrease is predicted at all (all: converged);
+    when μ passes 1e30 (stuck: not converged); or after `max_steps`.
+
+    **Returns:** `(y, converged, steps)`.
+    """
+    prior, ident = args[4], args[5]
+    mask = jnp.stack([ident, jnp.ones_like(ident)], -1).astype(y0.dtype)  # free variables
+    links = mask[1:] * mask[:-1]  # the prior's neighbour terms on free variables
+    count = jnp.concatenate([links, jnp.zeros((1, 2), y0.dtype)]) + jnp.concatenate(
+        [jnp.zeros((1, 2), y0.dtype), links])
+
+    normal_equations = functools.partial(_normal_equations, args=args)
+
+    def step(state):
+        y, cost, g, H, mu, nu, k, done, ok = state
+        D = H + (prior**2 * count + mu)[:, :, None] * jnp.eye(2, dtype=y.dtype)
+        if y.shape[0] == 1:  # one band (the separable case): a 2×2 solve, no scan
+            delta = -(_inverse2(D[0]) @ g[0])[None]
+        else:
+            delta = block_tridiagonal_solve(D, -prior**2 * links, -g)
+        y_new = y + delta
+        cost_new, g_new, H_new = normal_equations(y_new)
+        predicted = 0.5 * jnp.sum(delta * (mu * delta - g))
+        rho = (cost - cost_new) / jnp.where(predicted > 0, predicted, 1.0)
+        accept = (predicted > 0) & (cost_new < cost) & jnp.isfinite(cost_new)
+        small_step = jnp.max(jnp.abs(delta)) <= atol + rtol * jnp.max(jnp.abs(y))
+        tiny = atol + rtol * cost
+        # Converged: an accepted step that is small and gains little; or a rejected step that
+        # is small and was predicted to gain little (the cost is at its rounding floor, as
+        # MINPACK's xtol test); or no decrease predicted at all. μ beyond 1e30 without
+        # either: stuck, not converged.
+        converged = jnp.where(accept, small_step & (cost - cost_new <= tiny),
+                              (small_step & (predicted <= tiny)) | (predicted <= 0))
+        stuck = ~accept & (mu > 1e30)
+        mu = jnp.where(accept, mu * jnp.maximum(1 / 3, 1 - (2 * rho - 1) ** 3), mu * nu)
+        nu = jnp.where(accept, 2.0, 2 * nu)
+        pick = lambda a, b: jnp.where(accept, a, b)  # noqa: E731
+        return (pick(y_new, y), pick(cost_new, cost), pick(g_new, g), pick(H_new, H), mu, nu,
+                k + 1, converged | stuck, converged)
+
+    cost, g, H = normal_equations(y0)
+    mu = 1e-3 * jnp.max(jnp.diagonal(H, axis1=1, axis2=2))
+    state = (y0, cost, g, H, jnp.maximum(mu, 1e-12), jnp.asarray(2.0, y0.dtype), 0, False,
+             False)
+    state = jax.lax.while_loop(lambda s: ~s[-2] & (s[-3] < max_steps), step, state)
+    return state[0], state[-1], state[-3]
+
+
+def _dense_residuals(y, args):
+    logS, logK = y[:, 0], y[:, 1]
     X, R, R_inf, Rg, prior, ident, logS_fixed = args
-    # Where S is not identifiable it is held (a zero Jacobian column), so it cannot drift.
     logS = jnp.where(ident, logS, logS_fixed)
     R_model, R_inf_model = model_reflectance(logS, logK, X, Rg)
     return (
-        (R_model - R).ravel(),
+        (R_model - R.T).ravel(),
         R_inf_model - R_inf,
         prior * jnp.diff(logS),
         prior * jnp.diff(logK),
@@ -145,14 +286,34 @@ def _residuals(y, args):
 
 
 @functools.partial(jax.jit, static_argnames=("max_steps",))
-def _solve(y0, args, max_steps=256):
+def _solve_dense(y0, args, max_steps=256):
+    """The reference: optimistix's Levenberg–Marquardt on every band at once (a dense
+    Jacobian, (m + 1) n × 2n: memory and time grow as n²; for checks at small n)."""
     solver = optx.LevenbergMarquardt(rtol=1e-9, atol=1e-12)
-    sol = optx.least_squares(_residuals, solver, y0, args, max_steps=max_steps, throw=False)
+    sol = optx.least_squares(_dense_residuals, solver, y0, args, max_steps=max_steps,
+                             throw=False)
     # Only arrays leave the jit (optimistix issue 63: a whole Solution does not vmap).
     return sol.value, sol.result == optx.RESULTS.successful, sol.stats["num_steps"]
 
 
-def fit(m: Measurement, smooth: float = 0.0, noise: float = DEFAULT_NOISE) -> KMFit:
+@functools.partial(jax.jit, static_argnames=("max_steps",))
+def _solve_coupled(y0, args, max_steps=256):
+    return _solve_banded(y0, args, max_steps)
+
+
+@functools.partial(jax.jit, static_argnames=("max_steps",))
+def _solve_separable(y0, args, max_steps=256):
+    """Without the prior every band is its own 2-parameter problem: `_solve_banded` on one
+    band, vmapped over the bands, each with its own damping and its own stopping test."""
+    X, R, R_inf, Rg, prior, ident, logS_fixed = args
+    one = lambda y, R, Ri, Rg, i, f: _solve_banded(  # noqa: E731
+        y[None], (X, R[None], Ri[None], Rg[None], prior, i[None], f[None]), max_steps)
+    y, ok, steps = jax.vmap(one)(y0, R, R_inf, Rg, ident, logS_fixed)
+    return y[:, 0], jnp.all(ok), jnp.max(steps)
+
+
+def fit(m: Measurement, smooth: float = 0.0, noise: float = DEFAULT_NOISE,
+        solver: str = "banded") -> KMFit:
     """Fit S(λ), K(λ) to one measurement.
 
     **Arguments:**
@@ -163,9 +324,16 @@ def fit(m: Measurement, smooth: float = 0.0, noise: float = DEFAULT_NOISE) -> KM
       posteriori fit. 0 (default) fits each band on its own; W = 20 allows ~5 % per band.
     - `noise`: σ of one reflectance reading; differences within 3σ count as equal when
       deciding which bands are identifiable.
+    - `solver`: `"banded"` (default): per band, vmapped, without the prior; with it, one
+      Levenberg–Marquardt whose normal equations are solved block-tridiagonally; O(n) time
+      and memory in the number of bands n. `"dense"`: the reference, optimistix's
+      Levenberg–Marquardt over all bands at once (O(n²) memory; for checks at small n).
 
-    **Returns:** a `KMFit`. **Raises:** `InputError` if no band is identifiable.
+    **Returns:** a `KMFit`. **Raises:** `InputError` if no band is identifiable;
+    `FitError` if the fit ends with a non-finite S, K or residual.
     """
+    if solver not in ("banded", "dense"):
+        raise ValueError(f"solver must be 'banded' or 'dense', got {solver!r}")
     ident = identifiable(m, noise)
     if not ident.any():
         raise InputError(
@@ -183,27 +351,37 @@ def fit(m: Measurement, smooth: float = 0.0, noise: float = DEFAULT_NOISE) -> KM
         logS0 = np.full_like(wl, -np.log(np.mean(m.thickness_mm)))
     ratio = np.asarray(km.ks_from_r_inf(np.clip(m.R_inf, 1e-4, 1 - 1e-6)))
     logK0 = np.where(valid, np.log(np.where(valid, K_cf, 1.0)), logS0 + np.log(ratio))
+    if solver == "dense":
+        solve = _solve_dense
+    else:
+        solve = _solve_coupled if smooth > 0 else _solve_separable
 
     with jax.enable_x64(True):
         f64 = functools.partial(jnp.asarray, dtype=jnp.float64)
-        data = (f64(m.thickness_mm), f64(m.R), f64(m.R_inf), f64(m.R_g), f64(smooth * noise),
+        data = (f64(m.thickness_mm), f64(m.R.T), f64(m.R_inf), f64(m.R_g), f64(smooth * noise),
                 jnp.asarray(ident))
-        (logS, logK), ok, steps = _solve((f64(logS0), f64(logK0)), (*data, f64(logS0)))
+        y, ok, steps = solve(f64(np.stack([logS0, logK0], -1)), (*data, f64(logS0)))
         if not ident.all():
             # S where it is not identifiable: from the fitted neighbours (linear in log S),
             # K/S kept; then fit again with S held there, so S, K and the fit agree.
-            logS_fill = np.interp(wl, wl[ident], np.asarray(logS)[ident])
-            y = (f64(logS_fill), f64(logS_fill) + logK - logS)
-            (logS, logK), ok, more = _solve(y, (*data, f64(logS_fill)))
+            logS, logK = np.asarray(y).T
+            logS_fill = np.interp(wl, wl[ident], logS[ident])
+            y0 = np.stack([logS_fill, logS_fill + logK - logS], -1)
+            y, ok, more = solve(f64(y0), (*data, f64(logS_fill)))
             steps = steps + more
-        logS, logK = (np.asarray(a) for a in (logS, logK))
+        logS, logK = np.asarray(y).T
         R_fit, R_inf_fit = (np.asarray(a) for a in model_reflectance(f64(logS), f64(logK),
                                                                       data[0], data[3]))
     residual = np.concatenate([(R_fit - m.R).ravel(), R_inf_fit - m.R_inf])
+    S, K = np.exp(logS), np.exp(logK)
+    bad = np.flatnonzero(~(np.isfinite(S) & np.isfinite(K) & (S > 0) & (K > 0)))
+    if bad.size or not np.all(np.isfinite(residual)):
+        where = f" at {wl[bad[0]]:g} nm" if bad.size else ""
+        raise FitError(f"the fit failed: S, K or the residual is not finite{where}",
+                       m.path, m.header_line)
     return KMFit(
-        name=m.name, wavelength_nm=wl, S_per_mm=np.exp(logS), K_per_mm=np.exp(logK),
+        name=m.name, wavelength_nm=wl, S_per_mm=S, K_per_mm=K,
         identifiable=ident, rmse=float(np.sqrt(np.mean(residual**2))), R_fit=R_fit,
         R_inf_fit=R_inf_fit, S_closed=S_cf, K_closed=K_cf, steps=int(steps),
         converged=bool(ok), smooth=float(smooth), noise=float(noise),
     )
-

@@ -28,13 +28,26 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxskin.formats import read_table
 from jaxskin.io import InputError
 
-from .table import read_table
-
-__all__ = ["Measurement", "read_measurement"]
+__all__ = ["Measurement", "is_wavelength_column", "read_measurement"]
 
 _THIN = re.compile(r"^(?:R|E)_(?P<x>[^m]+)mm$")
+# The first column: wavelength_nm (the format's name) or what instrument software writes:
+# "Wavelength", "Wavelength (nm)", "wavelength [µm]", "lambda", "wl", ...
+_WAVELENGTH = re.compile(
+    r"(?i)(?:wave\s*length|wl|lambda|λ)(?:\s*[_(\[]\s*(?P<unit>nm|um|µm|micron|microns)"
+    r"\s*[)\]]?)?")
+WAVELENGTH_RANGE_NM = (200.0, 3000.0)  # what a spectroradiometer can measure, generously
+MAX_THICKNESS_MM = 100.0  # a cosmetic layer is µm to a few mm; beyond this it is a typo
+MAX_RADIANCE = 1e30  # any unit of radiance or counts; beyond this it is an overflow
+PERCENT_MEDIAN = 1.5  # reflectances read as percent when their median is above this
+
+
+def is_wavelength_column(name: str) -> bool:
+    """Whether a header cell names the wavelength column (what starts a measurement's table)."""
+    return _WAVELENGTH.fullmatch(name.strip()) is not None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -43,7 +56,8 @@ class Measurement:
 
     **Fields:** `path`, `name`, `wavelength_nm (n,)`, `thickness_mm (m,)`, `R (m, n)` of the
     thin layers over the background, `R_inf (n,)`, `R_g (n,)`, `columns`: the CSV column
-    each thin layer came from, `header_line`: the header's line number in the file.
+    each thin layer came from, `header_line`: the header's line number in the file, `notes`:
+    what the reader inferred (µm wavelengths, percent reflectance), one line each.
     """
 
     path: Path
@@ -55,6 +69,7 @@ class Measurement:
     R_g: np.ndarray
     columns: tuple[str, ...]
     header_line: int
+    notes: tuple[str, ...] = ()
 
 
 def read_measurement(path, thickness_mm: float | None = None, percent: bool = False):
@@ -65,34 +80,33 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
     - `path`: the CSV file.
     - `thickness_mm`: thickness for a bare `R` column; overrides `# thickness_mm:`.
     - `percent`: reflectance columns are 0–100 instead of 0–1 (radiance columns unaffected).
+      Without it, reflectances whose median is above 1.5 are read as percent (and must then
+      lie in [0, 100]), with a note; otherwise anything above 1 is an error.
+
+    Wavelengths all under 10 are read as µm (× 1000, with a note); after that they must lie
+    in 200–3000 nm and increase.
 
     **Returns:** a `Measurement`. **Raises:** `InputError` on anything malformed.
     """
-    table = read_table(path, "wavelength_nm,R_<X>mm,...,R_inf,R_g", min_rows=2)
+    table = read_table(path, is_wavelength_column, "wavelength_nm,R_<X>mm,...,R_inf,R_g",
+                       min_rows=2)
     path, meta, header, header_line = table.path, table.meta, table.header, table.header_line
 
     comment_thickness = None
     if "thickness_mm" in meta:
         value, number = meta["thickness_mm"]
         comment_thickness = _positive(value, path, number, "thickness_mm")
-    if thickness_mm is not None and not (math.isfinite(thickness_mm) and thickness_mm > 0):
-        raise InputError(f"--thickness must be a positive number of mm, got {thickness_mm}", path)
+    if thickness_mm is not None and not (
+            math.isfinite(thickness_mm) and 0 < thickness_mm <= MAX_THICKNESS_MM):
+        raise InputError(f"--thickness must be a positive number of mm (at most "
+                         f"{MAX_THICKNESS_MM:g}), got {thickness_mm}", path)
     bare_thickness = thickness_mm if thickness_mm is not None else comment_thickness
 
     columns = _classify(header, path, header_line, bare_thickness)
     data, numbers = table.data, table.lines
 
-    wl = data[:, 0]
-    bad = np.flatnonzero(np.diff(wl) <= 0)
-    if bad.size:
-        raise InputError(
-            f"wavelengths must increase, got {wl[bad[0]]:g} then {wl[bad[0] + 1]:g}",
-            path, numbers[bad[0] + 1], header[0],
-        )
-    if wl[0] <= 0:
-        raise InputError("wavelengths must be positive nm", path, numbers[0], header[0])
-
-    reflectance = _reflectances(data, header, columns, path, numbers, percent)
+    wl, notes = _wavelengths_nm(data[:, 0], header[0], path, numbers)
+    reflectance = _reflectances(data, header, columns, path, numbers, percent, notes)
     thin = sorted((x, name) for name, (kind, x) in columns.items() if kind == "thin")
     R = np.stack([reflectance[name] for _, name in thin])
     R_inf, R_g = reflectance["inf"], reflectance["g"]
@@ -110,7 +124,38 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
     return Measurement(
         path=path, name=name, wavelength_nm=wl, thickness_mm=np.array([x for x, _ in thin]),
         R=R, R_inf=R_inf, R_g=R_g, columns=tuple(n for _, n in thin), header_line=header_line,
+        notes=tuple(notes),
     )
+
+
+def _wavelengths_nm(wl, column, path, numbers):
+    """The wavelength column in nm (µm when all under 10 or the header says so), checked."""
+    notes = []
+    unit = (_WAVELENGTH.fullmatch(column)["unit"] or "").lower()
+    micrometres = unit not in ("", "nm")
+    if not micrometres and np.all(wl < 10):
+        micrometres = True
+        notes.append(f"{path}: wavelengths are all under 10: read as µm (x 1000 to nm)")
+    if micrometres:
+        wl = wl * 1000.0
+    lo, hi = WAVELENGTH_RANGE_NM
+    bad = np.flatnonzero((wl < lo) | (wl > hi))
+    if bad.size:
+        shown = wl[bad[0]] / 1000 if micrometres else wl[bad[0]]
+        units = "µm" if micrometres else "nm"
+        raise InputError(
+            f"wavelength {shown:g} {units} is outside {lo:g}-{hi:g} nm (nm and µm mixed? "
+            f"give all in nm, or all in µm)", path, numbers[bad[0]], column)
+    bad = np.flatnonzero(np.diff(wl) <= 0)
+    if bad.size:
+        raise InputError(
+            f"wavelengths must increase, got {_shown(wl, bad[0], micrometres)} then "
+            f"{_shown(wl, bad[0] + 1, micrometres)}", path, numbers[bad[0] + 1], column)
+    return wl, notes
+
+
+def _shown(wl, i, micrometres):
+    return f"{wl[i] / 1000:g}" if micrometres else f"{wl[i]:g}"
 
 
 def _column_of(columns, role):
@@ -126,22 +171,20 @@ def _positive(value, path, line, column) -> float:
         x = float(value)
     except ValueError:
         x = math.nan
-    if not (math.isfinite(x) and x > 0):
-        raise InputError(f"thickness must be a positive number of mm, got {value!r}",
-                         path, line, column)
+    if not (math.isfinite(x) and 0 < x <= MAX_THICKNESS_MM):
+        raise InputError(f"thickness must be a positive number of mm (at most "
+                         f"{MAX_THICKNESS_MM:g}), got {value!r}", path, line, column)
     return x
 
 
 def _classify(header, path, line, bare_thickness):
     """Map each header name to (role, thickness); role is thin, inf, g or white."""
-    if header[0] != "wavelength_nm":
-        raise InputError("the first column must be 'wavelength_nm'", path, line, header[0])
     expected = "expected R_<X>mm, R, R_inf, R_g (or E_… and E_white)"
     columns: dict[str, tuple[str, float]] = {}
     seen: dict[tuple[str, float], str] = {}
     for name in header[1:]:
-        if name == "wavelength_nm":
-            raise InputError("column appears twice", path, line, name)
+        if is_wavelength_column(name):
+            raise InputError("a second wavelength column", path, line, name)
         short = "E_" + name[4:] if name.startswith("E_R_") else name
         if short in ("R_inf", "E_inf"):
             role = ("inf", 0.0)
@@ -175,9 +218,18 @@ def _classify(header, path, line, bare_thickness):
     return columns
 
 
-def _reflectances(data, header, columns, path, numbers, percent):
-    """Reflectance per role (thin columns by name), checked to lie in [0, 1]."""
+def _reflectances(data, header, columns, path, numbers, percent, notes):
+    """Reflectance per role (thin columns by name), checked to lie in [0, 1]. Reflectance
+    columns are read as percent when `percent`, or when their median is above 1.5 (a note is
+    added to `notes`)."""
     index = {name: i + 1 for i, name in enumerate(header[1:])}
+    for name in columns:
+        if _is_radiance(name):
+            values = data[:, index[name]]
+            bad = np.flatnonzero((values < 0) | (values > MAX_RADIANCE))
+            if bad.size:
+                raise InputError(f"radiance must be in [0, {MAX_RADIANCE:g}], got "
+                                 f"{values[bad[0]]:g}", path, numbers[bad[0]], name)
     white = None
     if "E_white" in columns:
         white = data[:, index["E_white"]]
@@ -185,25 +237,30 @@ def _reflectances(data, header, columns, path, numbers, percent):
         if bad.size:
             raise InputError(f"the white standard must be > 0, got {white[bad[0]]:g}",
                              path, numbers[bad[0]], "E_white")
+    plain = [index[n] for n in columns if not _is_radiance(n)]
+    if plain and not percent:
+        values = data[:, plain]
+        if np.median(values) > PERCENT_MEDIAN:  # then [0, 100] is checked below
+            percent = True
+            notes.append(f"{path}: reflectances have a median of {np.median(values):.3g}: read "
+                         "as percent (/ 100)")
     out = {}
     for name, (kind, _) in columns.items():
         if kind == "white":
             continue
         values = data[:, index[name]]
         if _is_radiance(name):
-            neg = np.flatnonzero(values < 0)
-            if neg.size:
-                raise InputError(f"radiance must be >= 0, got {values[neg[0]]:g}",
-                                 path, numbers[neg[0]], name)
             values = values / white
-            what = "R = E / E_white"
+            what, scale = "R = E / E_white must be in [0, 1]", 1.0
+        elif percent:
+            what, scale = "reflectance in percent must be in [0, 100]", 100.0
         else:
-            values = values / 100.0 if percent else values
-            what = "reflectance" + (" (percent / 100)" if percent else "")
+            what, scale = "reflectance must be in [0, 1]", 1.0
+        values = values / scale
         bad = np.flatnonzero((values < 0) | (values > 1))
         if bad.size:
             hint = "" if percent or _is_radiance(name) else " (percent data? use --percent)"
-            raise InputError(f"{what} must be in [0, 1], got {values[bad[0]]:g}{hint}",
+            raise InputError(f"{what}, got {values[bad[0]] * scale:g}{hint}",
                              path, numbers[bad[0]], name)
         out[name if kind == "thin" else kind] = values
     return out

@@ -1,16 +1,35 @@
-"""Bump-mapped normals in texture space (Bando 2001 §4.1, eq. 4.9–4.11).
+"""Bump-mapped normals in texture space (Bando 2001 §4.1, eq. 4.2 and 4.9–4.11).
+
+Blinn's bump mapping displaces the surface P(s, t) by k h along its unit normal n; to first
+order in k the normal of P + k h n is (eq. 4.2, with the paper's k_bump)
+
+    N' = N + k ∂h/∂s (n × P_t) + k ∂h/∂t (P_s × n),     N = P_s × P_t.
+
+Divided by N·n this is n − k (∂h/∂s ∇s + ∂h/∂t ∇t): the normal tilts against the surface
+gradient of h, where ∇s, ∇t (the surface gradients of the texture coordinates, the dual
+basis of P_s, P_t in the tangent plane) come from the projection and the mesh
+(`TextureMap.gradients`, interpolated per texel and made orthogonal to n here). That
+**general form** (`frame_bump_normals`) is what every projection uses except the planar
+one. Nothing divides: |n − k g| >= 1 for a unit n and tangential g, so it is finite at any
+angle, n_z → 0 included.
+
+**Planar projection: eq. 4.10 exactly** (`bump_normals`). There s, t are the object's x, y,
+so ∇s = (1, 0, 0) − n_x n and ∇t = (0, 1, 0) − n_y n, and the general form becomes
 
     N'' = n + k_bump ∂h/∂s (n × (0, n_z, −n_y)) + k_bump ∂h/∂t ((n_z, 0, −n_x) × n)
 
-with forward differences in texels (eq. 4.11; Δs = Δt = one texel, t pointing up, i.e. to
-the previous row), then normalised. This is eq. 4.10, the form the paper obtains after
-multiplying through by n_z: nothing divides by n_z, so it stays finite as n_z → 0.
+identically, since n × (0, n_z, −n_y) = n_x n − (1, 0, 0) and (n_z, 0, −n_x) × n =
+n_y n − (0, 1, 0) for |n| = 1 (tests/test_bump_frames.py checks it numerically). It is the
+paper's form after multiplying through by n_z; the sides of a planar projection (n_z → 0),
+where one texel spans a long stretch of surface, stretch the pattern: the paper's known
+limitation (figs. 6.1(f), 6.2(f)), kept as it is. With the cylindrical projection eq. 4.10
+would tilt normals along x whatever the angle round the axis, so furrows turned to ridges
+on the back; hence the general form there and for `uv`.
 
-n_z → 0 (the sides of a planar projection): there one texel spans a long stretch of
-surface, so the pattern is stretched there and the bump is weak or odd. That is the paper's
-known limitation (figs. 6.1(f), 6.2(f)); we keep eq. 4.10 exactly and do not hide it.
-Both perturbation terms are perpendicular to n, so |N''| >= 1 wherever |n| = 1, and the
-normalisation is safe; off the mesh (n = 0) a double `where` returns 0 with zero gradient.
+Derivatives of h are forward differences in texels (eq. 4.11; Δs = Δt = one texel, t up,
+i.e. to the previous row); with `wrap_s` (a cylinder) s is periodic, so the last column
+differences with the first. Off the mesh (n = 0) a double `where` returns 0 with zero
+gradient.
 """
 
 from __future__ import annotations
@@ -18,13 +37,17 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-__all__ = ["bump_normals", "height_gradient"]
+__all__ = ["bump_normals", "frame_bump_normals", "height_gradient"]
 
 
-def height_gradient(h: Float[ArrayLike, "H W"]) -> tuple[Array, Array]:
-    """(∂h/∂s, ∂h/∂t) by forward differences in texels (eq. 4.11); 0 on the last column/row."""
+def height_gradient(h: Float[ArrayLike, "H W"], wrap_s: bool = False) -> tuple[Array, Array]:
+    """(∂h/∂s, ∂h/∂t) by forward differences in texels (eq. 4.11); 0 on the last row, and on
+    the last column unless `wrap_s` (periodic s: it differences with the first column)."""
     h = jnp.asarray(h)
-    hs = jnp.pad(h[:, 1:] - h[:, :-1], ((0, 0), (0, 1)))
+    if wrap_s:
+        hs = jnp.roll(h, -1, axis=1) - h
+    else:
+        hs = jnp.pad(h[:, 1:] - h[:, :-1], ((0, 0), (0, 1)))
     ht = jnp.pad(h[:-1, :] - h[1:, :], ((1, 0), (0, 0)))  # t up: row r − 1 is t + Δt
     return hs, ht
 
@@ -32,17 +55,46 @@ def height_gradient(h: Float[ArrayLike, "H W"]) -> tuple[Array, Array]:
 def bump_normals(
     normals: Float[ArrayLike, "H W 3"], h: Float[ArrayLike, "H W"], k_bump
 ) -> Float[Array, "H W 3"]:
-    """Perturbed unit normals `(H, W, 3)` from the interpolated normal map and height field.
-
-    Differentiable in `normals`, `h` and `k_bump`.
-    """
+    """Eq. 4.10: perturbed unit normals `(H, W, 3)` for the **planar** projection, from the
+    interpolated normal map and the height field. Differentiable in all three."""
     n = jnp.asarray(normals)
     hs, ht = height_gradient(h)
     nx, ny, nz = n[..., 0], n[..., 1], n[..., 2]
     zero = jnp.zeros_like(nx)
     a = jnp.cross(n, jnp.stack([zero, nz, -ny], axis=-1))
     b = jnp.cross(jnp.stack([nz, zero, -nx], axis=-1), n)
-    N = n + k_bump * (hs[..., None] * a + ht[..., None] * b)
+    return _unit(n + k_bump * (hs[..., None] * a + ht[..., None] * b))
+
+
+def frame_bump_normals(
+    normals: Float[ArrayLike, "H W 3"], h: Float[ArrayLike, "H W"], k_bump,
+    grad_s: Float[ArrayLike, "H W 3"], grad_t: Float[ArrayLike, "H W 3"], wrap_s: bool = False,
+) -> Float[Array, "H W 3"]:
+    """The general form, n' = normalize(n − k (∂h/∂s ∇s' + ∂h/∂t ∇t')), for any projection.
+
+    **Arguments:**
+
+    - `normals (H, W, 3)`: the interpolated unit normal map (0 off the mesh).
+    - `h (H, W)`: the height field; `k_bump`: the paper's scale.
+    - `grad_s`, `grad_t (H, W, 3)`: the surface gradients of s and t per texel
+      (`TextureMap.gradients` interpolated); their parts along n are removed here (∇s').
+    - `wrap_s`: s is periodic (the cylindrical projection's seam).
+
+    **Returns:** unit normals `(H, W, 3)`, 0 off the mesh. Differentiable in every array.
+    """
+    n = jnp.asarray(normals)
+    hs, ht = height_gradient(h, wrap_s)
+
+    def tangential(g):
+        g = jnp.asarray(g, n.dtype)
+        return g - jnp.sum(g * n, axis=-1, keepdims=True) * n
+
+    g = hs[..., None] * tangential(grad_s) + ht[..., None] * tangential(grad_t)
+    return _unit(jnp.where(jnp.any(n != 0, axis=-1, keepdims=True), n - k_bump * g, 0.0))
+
+
+def _unit(N):
+    """N / |N|, 0 where N = 0 (double `where`: finite value and gradient)."""
     norm2 = jnp.sum(N * N, axis=-1, keepdims=True)
     ok = norm2 > 0
     return jnp.where(ok, N / jnp.sqrt(jnp.where(ok, norm2, 1.0)), 0.0)

@@ -31,7 +31,7 @@ import warnings
 from pathlib import Path
 
 from . import __version__
-from .io import InputError, atomic_write
+from .io import FitError, InputError
 from .outputs import Outputs, check_name, slug
 
 EXIT_FAILURE, EXIT_INPUT, EXIT_SIGINT, EXIT_SIGTERM = 1, 2, 130, 143
@@ -170,7 +170,7 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("files", nargs="+", metavar="FILE.csv", help="measurement CSVs")
     c.add_argument("-o", "--output", required=True, metavar="OUTDIR",
                    help="folder for <name>.json and <name>.png (created if missing)")
-    c.add_argument("--thickness", type=_number(above=0.0, hi=1000.0), metavar="MM",
+    c.add_argument("--thickness", type=_number(above=0.0, hi=100.0), metavar="MM",
                    help="thickness in mm of a bare 'R' column (overrides '# thickness_mm:')")
     c.add_argument("--percent", action="store_true",
                    help="reflectance columns are in percent (0–100) instead of 0–1")
@@ -182,6 +182,11 @@ def _parser() -> argparse.ArgumentParser:
                    help="standard deviation of one reflectance reading (default 0.002); a band "
                    "is identifiable when some thin layer and the background each differ from "
                    "R_inf by more than 3σ")
+    c.add_argument("--extrapolate", choices=("hold", "linear"), default=None,
+                   help="how the renderer may extend S, K beyond the measured wavelengths to "
+                   "its 380-780 nm grid: hold the end values, or continue log S, log K "
+                   "linearly; without it a material that does not cover the grid is refused "
+                   "at render time (calibrate warns)")
     c.add_argument("--no-report", action="store_true", help="write the JSON only, no PNG")
 
     r = sub.add_parser(
@@ -290,11 +295,21 @@ def _calibrate(args, run: _Run) -> int:
         paths.append((json_path, png_path))
     run.outputs.append(outputs)
 
-    import json
-
     from tqdm import tqdm
 
     from jaxskin.fitting.report import write_report
+    from jaxskin.formats import write_json
+    from jaxskin.spectral import Grid
+
+    grid = Grid().wavelengths
+    for m in measurements:
+        for note in m.notes:
+            print(f"jaxskin: note: {note}", file=sys.stderr)
+        wl = m.wavelength_nm
+        if args.extrapolate is None and (wl[0] > grid[0] or wl[-1] < grid[-1]):
+            print(f"jaxskin: warning: {m.path}: covers {wl[0]:g}-{wl[-1]:g} nm, not the "
+                  f"renderer's {grid[0]:g}-{grid[-1]:g} nm: the material will be refused at "
+                  "render time; pass --extrapolate hold|linear to allow it", file=sys.stderr)
 
     rows = []
     for m, (json_path, png_path) in tqdm(list(zip(measurements, paths, strict=True)),
@@ -302,9 +317,7 @@ def _calibrate(args, run: _Run) -> int:
         run.stage = f"fitting {m.name}"
         t0 = time.perf_counter()
         result = fit_km.fit(m, smooth=args.smooth, noise=noise)
-        with atomic_write(json_path, "w") as fh:
-            json.dump(result.to_json(m), fh, indent=1, allow_nan=False)
-            fh.write("\n")
+        write_json(result.to_json(m, extrapolate=args.extrapolate), json_path)
         outputs.done(json_path)
         if png_path is not None:
             write_report(m, result, png_path)
@@ -547,8 +560,8 @@ def _render(args, run: _Run) -> int:
 
 
 def _fit_brdf(args, run: _Run) -> int:
+    from jaxskin import formats
     from jaxskin.fitting import brdf
-    from jaxskin.shading import lafortune
 
     out = Path(args.output)
     if out.is_dir():
@@ -573,7 +586,7 @@ def _fit_brdf(args, run: _Run) -> int:
     result = brdf.fit(samples, lobes=args.lobes, starts=args.starts, seed=args.seed)
     seconds = time.perf_counter() - t0
     stats = result.stats()
-    lafortune.save(result.params, out, fit={"source": Path(args.file).name, **stats})
+    formats.write_lafortune(result.params, out, fit={"source": Path(args.file).name, **stats})
     outputs.done(out)
     if report is not None:
         brdf.write_report(samples, result, report)
@@ -603,6 +616,9 @@ def main(argv=None) -> int:
         except InputError as e:
             _say(f"jaxskin: error: {e}")
             return EXIT_INPUT
+        except FitError as e:  # valid input, a fit that failed: says so, nothing written for it
+            _say(f"jaxskin: error: {e}; {run.finished()}")
+            return EXIT_FAILURE
         except KeyboardInterrupt:
             _say(f"jaxskin: interrupted (SIGINT) while {run.stage}; {run.finished()}")
             return EXIT_SIGINT

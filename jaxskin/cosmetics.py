@@ -2,8 +2,8 @@
 
 - A material is a calibrated JSON (`jaxskin calibrate` output, or a shipped example by
   name): S(λ) and K(λ) per mm, resampled onto a `spectral.Grid` linearly in log S, log K.
-  Outside the measured range the end values are held (and `Material.extrapolated` says
-  which bands).
+  A material that does not cover the grid is refused unless its file says how to extend it
+  (`"extrapolate": "hold"` or `"linear"`); `Material.extrapolated` marks those bands.
 - A thickness map (mm per texel, texture space) comes from named regions drawn on the
   mesh's UVs — ellipses and polygons, with a feathered edge — or from a greyscale image
   (value × a thickness scale). UVs follow the OBJ convention: u right, v up.
@@ -14,19 +14,18 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
 
-from . import km
+from . import formats, km
 from .io import InputError, data_dir
 from .spectral import Grid
 
-__all__ = ["Material", "coverage", "ellipse_map", "image_map", "layers", "load_material",
-           "material_path", "polygon_map", "shipped_materials"]
+__all__ = ["Material", "check_material", "coverage", "ellipse_map", "extend", "image_map", "layers",
+           "load_material", "material_path", "on_grid", "polygon_map", "shipped_materials"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -56,39 +55,55 @@ def material_path(name_or_path, base=None) -> Path:
 
 
 def load_material(name_or_path, grid: Grid) -> Material:
-    """A calibrated material by file or by the name of a shipped example."""
+    """A calibrated material by file or by the name of a shipped example, on `grid`.
+
+    A material must cover the grid's wavelengths unless its file says how to extend it
+    (`"extrapolate": "hold"` or `"linear"`, what `jaxskin calibrate --extrapolate` writes);
+    otherwise `InputError` names the file and the range it covers.
+    """
     path = material_path(name_or_path)
-    try:
-        doc = json.loads(path.read_text())
-    except FileNotFoundError:
+    if not path.exists():
         raise InputError(f"no such material file (shipped: {', '.join(shipped_materials())})",
-                         path) from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise InputError(f"not a JSON file ({e.__class__.__name__})", path,
-                         getattr(e, "lineno", None)) from None
-    arrays = {}
-    for k in ("wavelength_nm", "S_per_mm", "K_per_mm"):
-        v = doc.get(k) if isinstance(doc, dict) else None
-        ok = isinstance(v, list) and len(v) >= 2 and all(
-            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-            for x in v)
-        if not ok:
-            raise InputError("expected a list of at least two finite numbers (a material "
-                             "written by jaxskin calibrate)", path, key=k)
-        arrays[k] = np.asarray(v, np.float64)
-    wl, S, K = arrays["wavelength_nm"], arrays["S_per_mm"], arrays["K_per_mm"]
-    if not (len(wl) == len(S) == len(K)):
-        raise InputError(f"wavelength_nm, S_per_mm and K_per_mm have lengths {len(wl)}, "
-                         f"{len(S)}, {len(K)}; expected equal", path, key="S_per_mm")
-    if np.any(np.diff(wl) <= 0):
-        raise InputError("wavelengths must increase", path, key="wavelength_nm")
-    for k, v in (("S_per_mm", S), ("K_per_mm", K)):
-        if np.any(v <= 0):
-            raise InputError("must be > 0 at every band", path, key=k)
-    g = grid.wavelengths
-    return Material(str(doc.get("name", path.stem)), grid,
-                    np.exp(np.interp(g, wl, np.log(S))), np.exp(np.interp(g, wl, np.log(K))),
-                    (g < wl[0]) | (g > wl[-1]))
+                         path)
+    f = formats.read_material(path)
+    return on_grid(f, grid)
+
+
+def check_material(path) -> None:
+    """Read a material file and check that it covers the render grid (380–780 nm at any
+    step) or says how to extend it; `InputError` otherwise. For checks before any work."""
+    on_grid(formats.read_material(path), Grid())
+
+
+def on_grid(f: formats.MaterialFile, grid: Grid) -> Material:
+    """A material file's S, K resampled onto `grid`, linearly in log S, log K; outside the
+    measured range as the file's `extrapolate` says, else an `InputError`."""
+    g, wl = grid.wavelengths, f.wavelength_nm
+    outside = (g < wl[0] - 1e-9) | (g > wl[-1] + 1e-9)
+    if outside.any() and f.extrapolate is None:
+        raise InputError(
+            f"material '{f.name}' covers {wl[0]:g}-{wl[-1]:g} nm, the render grid "
+            f"{g[0]:g}-{g[-1]:g} nm; add \"extrapolate\": \"hold\" or \"linear\" to the file "
+            "(or calibrate with --extrapolate) to extend it", f.path, key="wavelength_nm")
+    logS, logK = (extend(g, wl, np.log(v), f.extrapolate or "hold") for v in (f.S, f.K))
+    return Material(f.name, grid, np.exp(logS), np.exp(logK), outside)
+
+
+def extend(x, xp, fp, how: str = "hold", span: float = 20.0):
+    """`fp (n,)` at `xp` interpolated linearly to `x`; beyond `xp`'s ends held at the end
+    values (`how="hold"`) or continued along the least-squares line through the points
+    within `span` of each end (at least two; `how="linear"`)."""
+    out = np.interp(x, xp, fp)
+    if how == "linear":
+        for end, beyond in ((xp[0], x < xp[0]), (xp[-1], x > xp[-1])):
+            near = np.abs(xp - end) <= span
+            if near.sum() < 2:
+                near = np.zeros(len(xp), bool)
+                near[[0, 1] if end == xp[0] else [-2, -1]] = True
+            slope = np.polyfit(xp[near], fp[near], 1)[0]
+            value = np.interp(end, xp, fp)
+            out = np.where(beyond, value + slope * (x - end), out)
+    return out
 
 
 def _uv_grid(height: int, width: int):

@@ -13,7 +13,7 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["InputError", "atomic_write", "data_dir"]
+__all__ = ["FitError", "InputError", "atomic_write", "data_dir"]
 
 
 class InputError(ValueError):
@@ -32,13 +32,27 @@ class InputError(ValueError):
                  key=None):
         self.path, self.line, self.column, self.key = path, line, column, key
         self.message = message
-        where = "" if path is None else str(path)
-        if line is not None:
-            where += f":{line}"
-        named = f"column '{column}'" if column is not None else None
-        named = f"key '{key}'" if key is not None else named
-        parts = [p for p in (where, named) if p]
-        super().__init__(": ".join([*parts, message]))
+        super().__init__(_located(message, path, line, column, key))
+
+
+def _located(message, path=None, line=None, column=None, key=None) -> str:
+    """`file:line: column 'c': message` (or `key 'k'`), leaving out what is None."""
+    where = "" if path is None else str(path)
+    if line is not None:
+        where += f":{line}"
+    named = f"column '{column}'" if column is not None else None
+    named = f"key '{key}'" if key is not None else named
+    return ": ".join([*(p for p in (where, named) if p), message])
+
+
+class FitError(RuntimeError):
+    """A fit that failed on valid input (e.g. a non-finite result), one line like
+    `InputError`'s (same arguments); the CLI prints it and exits with code 1, not 2."""
+
+    def __init__(self, message: str, path=None, line: int | None = None, column=None,
+                 key=None):
+        self.path, self.line = path, line
+        super().__init__(_located(message, path, line, column, key))
 
 
 @contextlib.contextmanager

@@ -11,6 +11,13 @@
 
 Pixel coordinates put x to the right and y down (row 0 at the top = largest t). Texture
 vectors are in the paper's abstract units (|d| in [0, 2]), in that pixel frame.
+
+For bump mapping (`jaxskin.bump`) each map also gives the surface gradients of its texture
+coordinates, ∇s and ∇t (t up), in texels per nominal texel (`TextureMap.texel`, the map's
+texel size on the surface): about unit vectors along the texture axes where the map is not
+stretched. Planar: (1, 0, 0) and (0, 1, 0). Cylindrical: the 3D gradients of eq. 3.2,
+(r̄/r)(cos s, 0, −sin s) and (0, 1, 0). uv: per triangle from its positions and texture
+coordinates (rows of the map M with M [e1 e2] = [f1 f2]), area-averaged at the vertices.
 """
 
 from __future__ import annotations
@@ -44,6 +51,14 @@ class TextureMap:
     wrap_x: bool
     vector_map: np.ndarray
     keep_magnitude: bool = False
+    texel: float = 1.0  # the nominal texel size on the surface, mesh units
+    jacobian: np.ndarray | None = None  # (V, 2, 3) ∂(pixel x, y)/∂P; None: vector_map
+
+    def gradients(self) -> np.ndarray:
+        """Per vertex `(V, 2, 3)`: the surface gradients ∇s, ∇t of the texture coordinates
+        (t up), in texels per `texel` (dimensionless; unit length where undistorted)."""
+        J = self.vector_map if self.jacobian is None else self.jacobian
+        return J * np.array([1.0, -1.0])[None, :, None] * self.texel
 
     @functools.cached_property
     def raster(self) -> Raster:
@@ -103,7 +118,8 @@ def _planar(mesh: Mesh, size: int) -> TextureMap:
     xy = np.stack([(p[:, 0] - centre[0]) * scale + size / 2,
                    size / 2 - (p[:, 1] - centre[1]) * scale], axis=1)
     M = np.broadcast_to(np.array([[1.0, 0, 0], [0, -1.0, 0]]), (len(p), 2, 3))
-    return TextureMap("planar", mesh, size, size, xy, -p[:, 2], False, np.array(M))
+    return TextureMap("planar", mesh, size, size, xy, -p[:, 2], False, np.array(M),
+                      texel=1.0 / scale, jacobian=np.array(M) * scale)
 
 
 def _cylindrical(mesh: Mesh, size: int) -> TextureMap:
@@ -119,7 +135,11 @@ def _cylindrical(mesh: Mesh, size: int) -> TextureMap:
     # Rotate by −s about y, keep (x', y') with y down: x' = cos s dx − sin s dz.
     M = np.zeros((len(p), 2, 3))
     M[:, 0, 0], M[:, 0, 2], M[:, 1, 1] = c, -n, -1.0
-    return TextureMap("cylindrical", mesh, size, height, xy, -r, True, M)
+    # ∂(pixel)/∂P: ∇s = e_s / r (per radian, size / 2π pixels each), ∇y = e_y / texel.
+    J = M * np.stack([size / (2 * math.pi) / np.maximum(r, 1e-12 * texel),
+                      np.full_like(r, 1.0 / texel)], axis=1)[:, :, None]
+    return TextureMap("cylindrical", mesh, size, height, xy, -r, True, M, texel=texel,
+                      jacobian=J)
 
 
 def cylinder_to_xyz(s, t, r):
@@ -145,4 +165,5 @@ def _uv(mesh: Mesh, size: int) -> TextureMap:
         np.add.at(M, f[:, i], M_face * area[:, None, None])
         np.add.at(weight, f[:, i], area)
     M /= np.maximum(weight, 1e-300)[:, None, None]
-    return TextureMap("uv", mesh, size, size, xy, None, False, M, keep_magnitude=True)
+    tmap = TextureMap("uv", mesh, size, size, xy, None, False, M, keep_magnitude=True)
+    return dataclasses.replace(tmap, texel=tmap.texel_size())

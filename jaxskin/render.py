@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import cosmetics, skin, sss, texture
+from . import cosmetics, formats, skin, sss, texture
 from .raster import interpolate
 from .scene import SceneConfig
 from .shading import blinn, lafortune, layered
@@ -52,13 +52,14 @@ def prepare(config: SceneConfig) -> Prepared:
     if config.needs_furrows:
         arrays["h0"] = texture.furrows(config.texture)[0]
         arrays["noise"] = texture.noise(config.texture)
+        arrays.update(s.frame)  # the surface gradients for the general bump form
     if view.eye is not None:  # perspective: the view direction varies per texel
         arrays["positions"] = interpolate(s.mesh.vertices.astype(np.float32), s.mesh.faces,
                                           s.tmap.raster)
     sp, texel_mm = config.spectral, 0.0
     if sp is not None:
         grid = sp.grid
-        arrays["skin"] = jnp.asarray(skin.nist_reflectance(sp.subject, grid), jnp.float32)
+        arrays["skin"] = jnp.asarray(formats.nist_reflectance(sp.subject, grid), jnp.float32)
         texel_mm = sp.texel_mm or sp.unit_mm * s.tmap.texel_size()
         # The model shades the texels on the mesh only, as a list (the rest stay black).
         texels = np.flatnonzero(np.asarray(s.mask))
@@ -101,7 +102,9 @@ def _render(config: SceneConfig, params: dict, arrays: dict):
         return sample(texture_image, arrays["tex"], view_mask, p.view.wrap_x)
 
     if config.needs_furrows:
-        maps = texture.bumped(arrays["normals"], mask, arrays["h0"], arrays["noise"], params)
+        frame = {k: arrays[k] for k in ("grad_s", "grad_t") if k in arrays}
+        maps = texture.bumped(arrays["normals"], mask, arrays["h0"], arrays["noise"], params,
+                              frame, p.setup.tmap.wrap_x)
         height, normals = maps["height"], maps["normals"]
     else:
         height, normals = jnp.ones(mask.shape, jnp.float32), arrays["normals"]

@@ -105,7 +105,7 @@ from .projection import KINDS
 from .spectral import ILLUMINANTS, STEPS, Grid
 
 __all__ = ["BUILTIN_SCENES", "Scene", "SceneConfig", "TextureConfig", "builtin_scenes",
-           "load_scene"]
+           "load_scene", "scene_at_width"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -287,11 +287,12 @@ class Scene:
                 key = f"layer.{layer.name}.{k}"
                 out[key] = jnp.asarray(self.values[key], jnp.float32)
         if model == "lafortune":
+            from .formats import read_lafortune
             from .shading import lafortune
 
             brdf = self.values["material.brdf"]
             out["material.lafortune"] = (lafortune.skin() if brdf == "skin" else
-                                         lafortune.load(brdf))
+                                         read_lafortune(brdf))
         return out
 
 
@@ -300,6 +301,18 @@ BUILTIN_SCENES = ("hand", "foot", "arm", "face", "makeup")
 
 def builtin_scenes() -> dict[str, Path]:
     return {name: data_dir() / "scenes" / f"{name}.toml" for name in BUILTIN_SCENES}
+
+
+def scene_at_width(name_or_path, width: int, overrides=()) -> Scene:
+    """The scene with its image `width` pixels wide; a scene that sets `camera.height` (a
+    wide or tall frame) keeps its aspect, so small renders (tests, the gallery) frame it
+    as its default view does."""
+    scene = load_scene(name_or_path, overrides)
+    size, height = scene.values["camera.size"], scene.values["camera.height"]
+    extra = [f"camera.size={width}"]
+    if height:
+        extra.append(f"camera.height={max(16, round(height * width / size))}")
+    return load_scene(name_or_path, [*overrides, *extra])
 
 
 def load_scene(name_or_path, overrides=()) -> Scene:
@@ -486,6 +499,7 @@ def _layer(i, e, path, values) -> LayerSpec:
         names = ", ".join(cosmetics.shipped_materials())
         raise InputError(f"no material file {file} (shipped materials: {names})", path,
                          key=f"{where}.material")
+    cosmetics.check_material(file)  # readable and covering the render grid, before any work
     material = str(file)
     image = e.get("image")
     if image is not None:

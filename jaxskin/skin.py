@@ -14,52 +14,20 @@ light through it (in and out), with melanin's absorption spectrum μ_a ∝ λ^�
     R(λ) = R_NIST(λ) · exp(−melanin · (λ / 500 nm)^−3.33)
 
 so `melanin` is the added optical depth (both passes) at 500 nm; 0 gives the measurement
-exactly. It is differentiable, and a scene parameter (`skin.melanin`).
+exactly. It is differentiable, and a scene parameter (`skin.melanin`). The measured spectra
+are read by `formats.nist_spectrum` / `formats.nist_reflectance`; this module is arrays only.
 """
 
 from __future__ import annotations
 
-import functools
-
 import jax.numpy as jnp
-import numpy as np
 
-from .io import InputError, data_dir
 from .spectral import Grid
 
-__all__ = ["NIST_FILE", "SUBJECTS", "nist_reflectance", "nist_spectrum", "reflectance"]
+__all__ = ["reflectance"]
 
-NIST_FILE = "nist_skin_reflectance_M38597.csv"
-SUBJECTS = 100
 MELANIN_EXPONENT = -3.33
 MELANIN_REFERENCE_NM = 500.0
-
-
-@functools.cache
-def _nist_table() -> tuple[np.ndarray, np.ndarray]:
-    """Wavelengths (m,) and the subjects' mean reflectances (100, m)."""
-    path = data_dir() / "spectra" / NIST_FILE
-    wl, means = [], []
-    for line in path.read_text(encoding="latin-1").splitlines():
-        cells = line.split(",")
-        if cells and cells[0].strip().isdigit():
-            wl.append(float(cells[0]))
-            means.append([float(cells[1 + 4 * s + 3]) for s in range(SUBJECTS)])
-    return np.asarray(wl), np.asarray(means).T
-
-
-def nist_spectrum(subject: int) -> tuple[np.ndarray, np.ndarray]:
-    """Subject `subject` (1–100)'s mean reflectance as measured: `(wavelengths nm, R)`."""
-    if not 1 <= subject <= SUBJECTS:
-        raise InputError(f"NIST skin subject must be 1–{SUBJECTS}, got {subject}",
-                         key="skin.subject")
-    wl, means = _nist_table()
-    return wl, means[subject - 1]
-
-
-def nist_reflectance(subject: int, grid: Grid) -> np.ndarray:
-    """Subject `subject` (1–100)'s mean reflectance on `grid` (host array, float64)."""
-    return np.interp(grid.wavelengths, *nist_spectrum(subject))
 
 
 def reflectance(base, melanin, grid: Grid):

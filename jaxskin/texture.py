@@ -38,6 +38,14 @@ class TextureSetup:
     field2: jax.Array
     normals: jax.Array  # (H, W, 3) interpolated unit vertex normals (0 off the mesh)
     mask: jax.Array  # (H, W)
+    gradients: tuple | None = None  # (∇s, ∇t) (H, W, 3) each; None for planar (eq. 4.10)
+
+    @property
+    def frame(self) -> dict:
+        """What `bumped` needs of the surface frame besides the normals (arrays by name)."""
+        if self.gradients is None:
+            return {}
+        return {"grad_s": self.gradients[0], "grad_t": self.gradients[1]}
 
 
 @functools.lru_cache(maxsize=8)
@@ -61,10 +69,22 @@ def setup(config: TextureConfig) -> TextureSetup:
     raster = tmap.raster
     field1 = interpolate(tmap.vectors(d1).astype(np.float32), mesh.faces, raster)
     field2 = interpolate(tmap.vectors(d2).astype(np.float32), mesh.faces, raster)
+    n, gradients = surface_frame(tmap)
+    return TextureSetup(config, mesh, tmap, tuple(edits), d1, d2, field1, field2, n,
+                        jnp.asarray(raster.mask), gradients)
+
+
+def surface_frame(tmap: TextureMap):
+    """Per texel, the unit normal `(H, W, 3)` and, except for the planar projection (eq.
+    4.10 needs neither), the surface gradients (∇s, ∇t) of the texture coordinates
+    (`TextureMap.gradients`), interpolated from the vertices; 0 off the mesh."""
+    mesh, raster = tmap.mesh, tmap.raster
     n = interpolate(mesh.normals.astype(np.float32), mesh.faces, raster)
     n = n / jnp.maximum(jnp.linalg.norm(n, axis=-1, keepdims=True), 1e-12)
-    return TextureSetup(config, mesh, tmap, tuple(edits), d1, d2, field1, field2, n,
-                        jnp.asarray(raster.mask))
+    if tmap.kind == "planar":
+        return n, None
+    g = tmap.gradients().astype(np.float32)
+    return n, tuple(interpolate(g[:, i], mesh.faces, raster) for i in range(2))
 
 
 RECORDS = 4096
@@ -74,10 +94,14 @@ RECORDS = 4096
 def furrows(config: TextureConfig):
     """The furrow height field before noise, `(H, W)`, and the furrow records."""
     s = setup(config)
-    return wrinkles.height_field(
-        s.mask, s.field1, s.field2, jnp.asarray(s.tmap.centroids(), jnp.float32),
-        config.k_scale, jax.random.key(config.seed),
-        radius=wrinkles.window_radius(config.k_scale), records=RECORDS)
+    # The furrow program is an int32/float32 program, not differentiable: the same under
+    # a caller's float64 (jax.enable_x64), as in a gradient check of a wrinkled scene.
+    with jax.enable_x64(False):
+        return wrinkles.height_field(
+            s.mask, s.field1, s.field2, jnp.asarray(s.tmap.centroids(), jnp.float32),
+            config.k_scale, jax.random.key(config.seed),
+            radius=wrinkles.window_radius(config.k_scale), records=RECORDS,
+            wrap=s.tmap.wrap_x)
 
 
 def texture_maps(config: SceneConfig, params: dict) -> dict:
@@ -88,7 +112,7 @@ def texture_maps(config: SceneConfig, params: dict) -> dict:
     if not config.needs_furrows:
         return {"height": jnp.ones(s.mask.shape, jnp.float32), "normals": s.normals}
     h0, _ = furrows(tex)
-    return bumped(s.normals, s.mask, h0, noise(tex), params)
+    return bumped(s.normals, s.mask, h0, noise(tex), params, s.frame, s.tmap.wrap_x)
 
 
 @functools.lru_cache(maxsize=8)
@@ -98,7 +122,13 @@ def noise(config: TextureConfig):
                                 jax.random.key(config.seed))
 
 
-def bumped(normals, mask, h0, r, params) -> dict:
-    """Noise (step 9) and bump normals (eq. 4.10) on a furrow height field."""
+def bumped(normals, mask, h0, r, params, frame: dict, wrap_s: bool = False) -> dict:
+    """Noise (step 9) and bump normals on a furrow height field: eq. 4.10 when `frame` is
+    empty (planar), else the general form in the surface's frame (`TextureSetup.frame`);
+    `wrap_s` (static): s is periodic (a cylinder's texture is exactly one turn wide)."""
     h = wrinkles.add_noise(h0, mask, params["wrinkles.k_noise"], r)
-    return {"height": h, "normals": bump.bump_normals(normals, h, params["wrinkles.k_bump"])}
+    k = params["wrinkles.k_bump"]
+    if not frame:
+        return {"height": h, "normals": bump.bump_normals(normals, h, k)}
+    return {"height": h, "normals": bump.frame_bump_normals(
+        normals, h, k, frame["grad_s"], frame["grad_t"], wrap_s=wrap_s)}

@@ -21,7 +21,9 @@ Choices where the paper is open, made here:
   f_width, clipped to [0, 1]), so narrow furrows still leave a trace;
 - "other furrows" are the texels drawn by earlier furrows of the same pass (the two halves
   of one furrow do not stop each other); a step that meets one ends inside its groove;
-- seeds: a centroid or texel outside the mesh is skipped; scan order is row by row.
+- seeds: a centroid or texel outside the mesh is skipped; scan order is row by row;
+- with the cylindrical projection s is periodic: a furrow runs on across the seam (its
+  points are read and its windows drawn one turn over too), so the pattern has no cut.
 
 Deterministic for a given key. The whole field is one jitted program: an outer
 `lax.while_loop` over furrows (the next seed is found in O(H + W) from a count of unmarked
@@ -73,8 +75,9 @@ class FurrowRecord(NamedTuple):
     owner: jax.Array  # (H, W) the furrow that drew each texel (-1: none)
 
 
-@functools.partial(jax.jit, static_argnames=("radius", "records"))
-def height_field(mask, field1, field2, centroids, k_scale, key, radius: int, records: int = 0):
+@functools.partial(jax.jit, static_argnames=("radius", "records", "wrap"))
+def height_field(mask, field1, field2, centroids, k_scale, key, radius: int, records: int = 0,
+                 wrap: bool = False):
     """The wrinkle height field before noise (steps 1–8 of §3.3; `add_noise` is step 9).
 
     **Arguments:**
@@ -86,6 +89,8 @@ def height_field(mask, field1, field2, centroids, k_scale, key, radius: int, rec
     - `key`: a `jax.random` key.
     - `radius`: static window half-size, `window_radius(max k_scale)`.
     - `records`: how many furrows per pass to record in the returned `FurrowRecord`.
+    - `wrap`: x is periodic (a cylinder's texture, one turn wide): furrows cross the seam,
+      see and stop at the furrows beyond it, and are drawn on both sides of it.
 
     **Returns:** `(h (H, W) float32 in [0, 1] with 1 off the mesh, FurrowRecord)`.
     """
@@ -93,7 +98,7 @@ def height_field(mask, field1, field2, centroids, k_scale, key, radius: int, rec
     fields = jnp.stack([field1, field2]).astype(jnp.float32)
     keys = jnp.stack([jax.random.fold_in(key, 1), jax.random.fold_in(key, 2)])
     run = functools.partial(_pass, mask, centroids.astype(jnp.float32), k_scale,
-                            radius=radius, records=max(records, 1))
+                            radius=radius, records=max(records, 1), wrap=wrap)
     # Two passes one after the other, not vmapped: under vmap every window update becomes a
     # scatter that copies the whole image (measured 10x slower).
     (img1, rec1), (img2, rec2) = run(fields[0], keys[0]), run(fields[1], keys[1])
@@ -112,7 +117,7 @@ def add_noise(h, mask, k_noise, r):
     return jnp.where(mask, h - k_noise * r, h)
 
 
-def _pass(mask, centroids, k_scale, field, key, *, radius, records):
+def _pass(mask, centroids, k_scale, field, key, *, radius, records, wrap=False):
     H, W = mask.shape
     R = radius
     pad = R + _MAX_LENGTH + 2  # room for a window and a full step past the edge
@@ -157,6 +162,31 @@ def _pass(mask, centroids, k_scale, field, key, *, radius, records):
                           jnp.stack([col + 0.5, r + 0.5]).astype(jnp.float32))
         return c_any | t_any, idx, point
 
+    def paint(img, state, P, Q, shift, draw, width, depth, density, fid):
+        """Draw P–Q (moved `shift` texels along x) in the window around its midpoint."""
+        P, Q = P.at[0].add(shift), Q.at[0].add(shift)
+        c0 = jnp.floor((P + Q) / 2).astype(jnp.int32) - R  # window corner, unpadded
+        ys = (c0[1] + win).astype(jnp.float32) + 0.5
+        xs = (c0[0] + win).astype(jnp.float32) + 0.5
+        v = Q - P
+        tx, ty = xs[None, :] - P[0], ys[:, None] - P[1]
+        t = jnp.clip((tx * v[0] + ty * v[1]) / jnp.maximum(v @ v, 1e-12), 0.0, 1.0)
+        dist = jnp.hypot(tx - t * v[0], ty - t * v[1])
+        cover = jnp.clip(width / 2 + 0.5 - dist, 0.0, 1.0)
+        corner = (c0[1] + pad, c0[0] + pad)
+        size = (2 * R + 1, 2 * R + 1)
+        img_w = jax.lax.dynamic_slice(img, corner, size)
+        img_w = jnp.where(draw, jnp.minimum(img_w, 1.0 - depth * cover), img_w)
+        # Everything that reads `state` here feeds its in-place update below. (A reader that
+        # did not, a per-row count of free texels, made XLA copy the whole image each step.)
+        st_w = jax.lax.dynamic_slice(state, corner, size)
+        own_w, marked_w = _owner(st_w), _marked(st_w)
+        own_w = jnp.where(draw & (cover > 0) & (own_w < 0), fid, own_w)
+        mark = draw & (dist <= density / 2)
+        img = jax.lax.dynamic_update_slice(img, img_w, corner)
+        state = jax.lax.dynamic_update_slice(state, _pack(own_w, marked_w | mark), corner)
+        return img, state
+
     def step(carry):
         (P, n_limit, s, alive, img, state, length, reason, fid, sign, hkey, search) = carry
         ix = jnp.clip(jnp.floor(P[0]).astype(jnp.int32), 0, W - 1)
@@ -172,35 +202,21 @@ def _pass(mask, centroids, k_scale, field, key, *, radius, records):
         Q0 = P + f_len * direction
         pts = P + samples[:, None] * (Q0 - P)
         pi = jnp.floor(pts).astype(jnp.int32) + pad
-        on_mesh = inside[pi[:, 1], pi[:, 0]]
-        who = _owner(state[pi[:, 1], pi[:, 0]])
+        px = (pi[:, 0] - pad) % W + pad if wrap else pi[:, 0]  # read one turn over
+        on_mesh = inside[pi[:, 1], px]
+        who = _owner(state[pi[:, 1], px])
         hit_furrow = (who >= 0) & (who != fid)
         hit = ~on_mesh | hit_furrow
         any_hit = jnp.any(hit)
         k = jnp.argmax(hit)
         Q = jnp.where(any_hit, pts[k], Q0)
-        # Draw P–Q in the window around its midpoint.
-        c0 = jnp.floor((P + Q) / 2).astype(jnp.int32) - R  # window corner, unpadded
-        ys = (c0[1] + win).astype(jnp.float32) + 0.5
-        xs = (c0[0] + win).astype(jnp.float32) + 0.5
-        v = Q - P
-        tx, ty = xs[None, :] - P[0], ys[:, None] - P[1]
-        t = jnp.clip((tx * v[0] + ty * v[1]) / jnp.maximum(v @ v, 1e-12), 0.0, 1.0)
-        dist = jnp.hypot(tx - t * v[0], ty - t * v[1])
-        cover = jnp.clip(width / 2 + 0.5 - dist, 0.0, 1.0)
-        corner = (c0[1] + pad, c0[0] + pad)
-        size = (2 * R + 1, 2 * R + 1)
         draw = alive & ~zero
-        img_w = jax.lax.dynamic_slice(img, corner, size)
-        img_w = jnp.where(draw, jnp.minimum(img_w, 1.0 - depth * cover), img_w)
-        # Everything that reads `state` here feeds its in-place update below. (A reader that
-        # did not, a per-row count of free texels, made XLA copy the whole image each step.)
-        st_w = jax.lax.dynamic_slice(state, corner, size)
-        own_w, marked_w = _owner(st_w), _marked(st_w)
-        own_w = jnp.where(draw & (cover > 0) & (own_w < 0), fid, own_w)
-        mark = draw & (dist <= density / 2)
-        img = jax.lax.dynamic_update_slice(img, img_w, corner)
-        state = jax.lax.dynamic_update_slice(state, _pack(own_w, marked_w | mark), corner)
+        img, state = paint(img, state, P, Q, 0, draw, width, depth, density, fid)
+        if wrap:  # the part of the window past the seam, drawn again one turn over
+            c0 = jnp.floor((P[0] + Q[0]) / 2).astype(jnp.int32) - R
+            shift = jnp.where(c0 < 0, W, jnp.where(c0 + 2 * R + 1 > W, -W, 0))
+            img, state = paint(img, state, P, Q, shift, draw & (shift != 0), width, depth,
+                               density, fid)
         stop = zero | any_hit | (n_limit == 0)
         new_reason = jnp.where(zero, END_ZERO, jnp.where(
             any_hit, jnp.where(hit_furrow[k], END_FURROW, END_BORDER), END_LIMIT))
@@ -210,6 +226,8 @@ def _pass(mask, centroids, k_scale, field, key, *, radius, records):
         last = alive & (stop | (s + 1 >= MAX_STEPS)) & is_second
         found, nidx, npoint = jax.lax.cond(last, lambda: next_seed(state, cursor),
                                            lambda: (found, nidx, npoint))
+        v = Q - P
+        Q = Q.at[0].set(jnp.mod(Q[0], W)) if wrap else Q
         return (jnp.where(draw, Q, P), jnp.minimum(n_limit, limit) - 1, s + 1, alive & ~stop,
                 img, state, length + jnp.where(draw, jnp.linalg.norm(v), 0.0),
                 jnp.where(alive & stop, new_reason, reason), fid, sign, hkey,

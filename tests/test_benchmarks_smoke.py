@@ -63,3 +63,12 @@ def test_bench_makeup_colour_difference():
     b = a.copy()
     b[0, 0] = [1.0, 0.0, 0.0] if a[0, 0, 1] > 0.5 else [0.0, 1.0, 0.0]
     assert bench_makeup.delta_e(a, b, mask).max() > 10 and callable(bench_makeup.main)
+
+
+def test_bench_km_calibration_scaling_inputs_and_table():
+    m = bench_km.synthetic_measurement(21)
+    assert m.R.shape == (2, 21) and m.wavelength_nm[0] == 380 and m.wavelength_nm[-1] == 780
+    text = bench_km.scaling_section([(21, 0.0, 0.01, 0.5, 3, True), (21, 20.0, 0.01, None, 4,
+                                                                      True)],
+                                    {0.0: (400.0, 420.0, 5.0, (3.0, 500.0))}, 1.0)
+    assert "| 21 | 0 | 0.010 | 0.500 | 50.0 | 3 | True |" in text

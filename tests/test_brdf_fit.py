@@ -11,6 +11,7 @@ import pytest
 from conftest import check_grads_scaled
 
 from jaxskin.fitting import brdf
+from jaxskin.formats import read_lafortune
 from jaxskin.io import InputError
 from jaxskin.shading import lafortune
 
@@ -70,14 +71,16 @@ BAD = [
     ("missing B", HEADER.replace(",B", "") + "30,0,40,180,0.2,0.1\n", 1, None, "missing column B"),
     ("theta > 90", HEADER + "95,0,40,180,0.2,0.1,0.1\n", 2, "theta_in_deg", "[0, 90]"),
     ("phi", HEADER + "30,400,40,180,0.2,0.1,0.1\n", 2, "phi_in_deg", "[-360, 360]"),
-    ("negative value", HEADER + ROW + "30,0,40,180,0.2,-0.1,0.1\n", 3, "G", ">= 0"),
+    ("negative value", HEADER + ROW + "30,0,40,180,0.2,-0.1,0.1\n", 3, "G", "in [0, 1e+06]"),
+    ("absurd value", HEADER + ROW + "30,0,40,180,1e308,0.1,0.1\n", 3, "R", "in [0, 1e+06]"),
+    ("all zero", HEADER + ROW.replace("0.1,0.1", "0,0.1"), 1, "G", "every value is 0"),
     ("non-finite", HEADER + "30,0,40,180,0.2,inf,0.1\n", 2, "G", "finite"),
     ("not a number", HEADER + "30,0,forty,180,0.2,0.1,0.1\n", 2, "theta_out_deg", "a number"),
     ("unknown column", HEADER.replace("R,", "Red,") + ROW, 1, "Red", "unknown column"),
     ("both forms", HEADER.replace("\n", ",wi_x\n") + ROW.replace("\n", ",0\n"), 1, None, "not both"),
     ("not unit", "wi_x,wi_y,wi_z,wo_x,wo_y,wo_z,R,G,B\n0,0,0.5,0,0,1,0.1,0.1,0.1\n", 2, "wi_x", "unit"),
     ("below", "wi_x,wi_y,wi_z,wo_x,wo_y,wo_z,R,G,B\n0,0,1,0,0,-1,0.1,0.1,0.1\n", 2, "wo_z", "below"),
-    ("negative weight", HEADER.replace("\n", ",weight\n") + ROW.replace("\n", ",-1\n"), 2, "weight", ">= 0"),
+    ("negative weight", HEADER.replace("\n", ",weight\n") + ROW.replace("\n", ",-1\n"), 2, "weight", "in [0,"),
 ]
 
 
@@ -104,7 +107,7 @@ def test_cli_writes_a_material_the_renderer_reads(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "jaxskin.cli", "fit-brdf", str(SAMPLES), "-o",
                            str(out), "--lobes", "2", "--starts", "4"], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
-    params = lafortune.load(out)
+    params = read_lafortune(out)
     assert params.n.shape == (2, 3)
     doc = json.loads(out.read_text())
     assert len(doc["fit"]["relative_rms_error"]) == 3
@@ -118,3 +121,23 @@ def test_cli_bad_input_exit_2_one_line(tmp_path):
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
     assert not (tmp_path / "x.json").exists()
+
+
+def test_cli_a_fit_that_fails_exits_1_with_one_line(tmp_path, capsys, monkeypatch):
+    """Every start ending in NaN (forced here) is a failed fit: exit 1, one line, no JSON."""
+    from jaxskin.cli import main
+
+    real = brdf._solve_all
+
+    def broken(*args, **kwargs):
+        theta, loss, ok, steps = real(*args, **kwargs)
+        return theta, loss * np.nan, ok, steps
+
+    monkeypatch.setattr(brdf, "_solve_all", broken)
+    src = write(tmp_path, HEADER + "".join(f"{t},0,{t + 5},180,0.2,0.1,0.1\n"
+                                           for t in range(0, 80, 5)))
+    out = tmp_path / "out" / "fit.json"
+    assert main(["fit-brdf", str(src), "-o", str(out), "--lobes", "1", "--starts", "1"]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"jaxskin: error: {src}: every start failed")
+    assert not out.exists()

@@ -116,6 +116,10 @@ BAD_MATERIALS = [
     ({"wavelength_nm": [500, 400], "S_per_mm": [1, 2], "K_per_mm": [1, 1]}, "wavelength_nm",
      "increase"),
     ({"wavelength_nm": [400, 500], "S_per_mm": [1, 0], "K_per_mm": [1, 1]}, "S_per_mm", "> 0"),
+    ({"wavelength_nm": [400, 700], "S_per_mm": [1, 2], "K_per_mm": [1, 1]}, "wavelength_nm",
+     "covers 400-700 nm, the render grid 380-780 nm"),
+    ({"wavelength_nm": [380, 780], "S_per_mm": [1, 2], "K_per_mm": [1, 1],
+      "extrapolate": "spline"}, "extrapolate", "\"hold\" or \"linear\""),
 ]
 
 
@@ -126,6 +130,34 @@ def test_bad_materials_name_the_key(tmp_path, doc, key, words):
     with pytest.raises(InputError) as info:
         cosmetics.load_material(path, spectral.Grid(step=20))
     assert str(info.value).startswith(f"{path}: key '{key}'") and words in str(info.value)
+
+
+def test_nan_in_a_material_file_is_refused(tmp_path):
+    path = tmp_path / "m.json"
+    path.write_text('{"wavelength_nm": [380, 780], "S_per_mm": [NaN, 1], "K_per_mm": [1, 1]}')
+    with pytest.raises(InputError, match="NaN is not a JSON number"):
+        cosmetics.load_material(path, spectral.Grid(step=20))
+
+
+@pytest.mark.parametrize("how", ["hold", "linear"])
+def test_extrapolation_only_when_the_file_says_how(tmp_path, how):
+    """log S linear in λ over 400–700 nm: "linear" continues it exactly to 380 and 780 nm
+    (the analytic line), "hold" keeps the end values; the extended bands are marked."""
+    wl = np.arange(400.0, 701.0, 5.0)
+    S, K = np.exp(0.004 * (wl - 500)), np.exp(-0.002 * (wl - 500))
+    doc = {"wavelength_nm": wl.tolist(), "S_per_mm": S.tolist(), "K_per_mm": K.tolist(),
+           "extrapolate": how}
+    path = tmp_path / "m.json"
+    path.write_text(json.dumps(doc))
+    grid = spectral.Grid(step=20)
+    m = cosmetics.load_material(path, grid)
+    g = grid.wavelengths
+    np.testing.assert_array_equal(m.extrapolated, (g < 400) | (g > 700))
+    if how == "linear":
+        np.testing.assert_allclose(m.S, np.exp(0.004 * (g - 500)), rtol=1e-12)
+        np.testing.assert_allclose(m.K, np.exp(-0.002 * (g - 500)), rtol=1e-12)
+    else:
+        assert m.S[0] == pytest.approx(S[0]) and m.S[-1] == pytest.approx(S[-1])
 
 
 def test_region_and_image_maps(tmp_path):

@@ -21,7 +21,7 @@ import pytest
 
 from jaxskin import render
 from jaxskin.maps import write_image
-from jaxskin.scene import BUILTIN_SCENES, load_scene
+from jaxskin.scene import BUILTIN_SCENES, scene_at_width
 
 GOLDEN = Path(__file__).resolve().parent / "golden"
 SIZE = 128  # image pixels across; the scenes' own textures, fields and materials are kept
@@ -41,7 +41,7 @@ def _to_lab(rgb8: np.ndarray) -> np.ndarray:
 
 
 def _render(name: str) -> np.ndarray:
-    scene = load_scene(name, [f"camera.size={SIZE}"])
+    scene = scene_at_width(name, SIZE)
     image = np.asarray(render.render(scene.config, scene.params))
     return np.round(np.clip(image, 0.0, 1.0) * 255).astype(np.uint8)
 

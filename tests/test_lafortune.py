@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from conftest import check_grads_scaled
 
+from jaxskin.formats import read_lafortune, write_lafortune
 from jaxskin.io import InputError
 from jaxskin.shading import lafortune as L
 
@@ -64,10 +65,20 @@ def test_gradients_wrt_lobes_and_directions(x64, name, u, v, n_scale):
     assert bool(jnp.all(jnp.isfinite(f(*args)))) and bool(jnp.all(f(*args) >= 0))
 
 
+def test_no_nan_or_infinity_is_ever_written_or_read(tmp_path):
+    p = L.skin()._replace(diffuse=jnp.asarray([0.1, float("nan"), 0.2]))
+    with pytest.raises(ValueError, match="not JSON compliant"):
+        write_lafortune(p, tmp_path / "nan.json")
+    assert not list(tmp_path.iterdir())  # nothing left behind, not even a temporary
+    (tmp_path / "inf.json").write_text('{"model": "lafortune", "diffuse": [Infinity, 0, 0]}')
+    with pytest.raises(InputError, match="Infinity is not a JSON number"):
+        read_lafortune(tmp_path / "inf.json")
+
+
 def test_json_round_trip(tmp_path):
     p = L.skin()
-    L.save(p, tmp_path / "skin.json", fit={"note": "x"})
-    q = L.load(tmp_path / "skin.json")
+    write_lafortune(p, tmp_path / "skin.json", fit={"note": "x"})
+    q = read_lafortune(tmp_path / "skin.json")
     for a, b in zip(p, q, strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-7)
     assert json.loads((tmp_path / "skin.json").read_text())["fit"] == {"note": "x"}
@@ -92,5 +103,5 @@ def test_bad_material_names_the_key(tmp_path, doc, key):
     path = tmp_path / "bad.json"
     path.write_text(json.dumps(doc))
     with pytest.raises(InputError) as info:
-        L.load(path)
+        read_lafortune(path)
     assert str(info.value).startswith(f"{path}: key '{key}'")

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from conftest import check_grads_scaled
 
-from jaxskin import km, render, skin, spectral, sss
-from jaxskin.io import InputError
+from jaxskin import formats, km, render, skin, spectral, sss
+from jaxskin.io import InputError, data_dir
 from jaxskin.mesh import Mesh
 from jaxskin.projection import project
 from jaxskin.scene import load_scene
@@ -41,7 +41,7 @@ def test_no_blur_is_the_exact_spectral_over_plus_highlights(x64, three_materials
     grid, S, K = three_materials
     N, X = _flat((2, 3), [0.01, 0.03, 0.02])
     X[1, 0, 0] = 0.0
-    skin_R = skin.nist_reflectance(12, grid)
+    skin_R = formats.nist_reflectance(12, grid)
     L, V = unit([0.3, 0.2, 1.0]), unit([0.0, 0.0, 1.0])
     out = layered.radiance(grid, jnp.asarray(N), L, V, 0.25, 0.9, skin_R, 0.3, 0.0, S, K,
                            jnp.asarray(X), np.full(3, 0.3), np.zeros(3))
@@ -62,7 +62,7 @@ def test_uniform_light_and_layers_make_the_blur_a_no_op(x64, three_materials):
     grid, S, K = three_materials
     N, X = _flat((24, 24), [0.01, 0.02, 0.03])
     args = (grid, jnp.asarray(N), unit([0.2, 0.1, 1.0]), unit([0, 0, 1.0]), 0.3, 0.8,
-            skin.nist_reflectance(40, grid), 0.3, 0.18, S, K, jnp.asarray(X),
+            formats.nist_reflectance(40, grid), 0.3, 0.18, S, K, jnp.asarray(X),
             np.full(3, 0.3), np.full(3, 0.1))
     exact = layered.radiance(*args)
     blurred = layered.radiance(*args, blur=lambda c: sss.blur(c, 0.5))
@@ -105,7 +105,8 @@ def test_zero_thickness_gives_exactly_the_no_makeup_image(sss_on):
 
 
 def test_what_a_scene_does_not_need_is_not_traced(monkeypatch):
-    """No layers: no KM; sss.enabled = false: no blur; the face runs no furrows."""
+    """No layers: no KM; sss.enabled = false: no blur. (The face's skin microstructure runs
+    furrows, and none with wrinkles.enabled = false: tests/test_face_wrinkles.py.)"""
     calls = {"km": 0, "blur": 0}
     layer, blur = km.layer, sss.blur
 
@@ -127,7 +128,7 @@ def test_what_a_scene_does_not_need_is_not_traced(monkeypatch):
         jax.make_jaxpr(lambda p, sc=sc: render._render(sc.config, p, render.prepare(
             sc.config).arrays))(sc.params)
         assert calls == expected, (name, overrides, calls)
-        assert not sc.config.needs_furrows
+        assert sc.config.needs_furrows
 
 
 def _float64(tree):
@@ -191,7 +192,7 @@ def test_texel_size_from_the_mesh_scale_and_uv_area():
 
 def test_melanin_darkens_most_in_the_blue():
     grid = spectral.Grid(10)
-    base = skin.nist_reflectance(12, grid)
+    base = formats.nist_reflectance(12, grid)
     assert np.array_equal(np.asarray(skin.reflectance(base.astype(np.float32), 0.0, grid)),
                           base.astype(np.float32))
     ratio = np.asarray(skin.reflectance(base, 1.0, grid)) / base
@@ -203,11 +204,11 @@ def test_melanin_darkens_most_in_the_blue():
 def test_nist_spectrum_is_the_subjects_mean():
     """Subject 1's mean at 400 nm, read from the CSV by hand (the 'Average' column)."""
     grid = spectral.Grid(10)
-    with open(skin.data_dir() / "spectra" / skin.NIST_FILE, encoding="latin-1") as fh:
+    with open(data_dir() / "spectra" / formats.NIST_FILE, encoding="latin-1") as fh:
         row = next(line for line in fh if line.startswith("400,"))
     cells = row.split(",")
-    assert skin.nist_reflectance(1, grid)[2] == pytest.approx(float(cells[4]))
-    assert skin.nist_reflectance(100, grid)[2] == pytest.approx(float(cells[400]))
+    assert formats.nist_reflectance(1, grid)[2] == pytest.approx(float(cells[4]))
+    assert formats.nist_reflectance(100, grid)[2] == pytest.approx(float(cells[400]))
 
 
 def test_makeup_scene_renders_the_paper_figure(tmp_path):

@@ -101,7 +101,8 @@ BAD = [
         "R_g equals R_inf",
     ),
     ("duplicate column", lambda t: t.replace("R_0.15mm", "R_0.05mm"), 2, "R_0.05mm", "twice"),
-    ("first column", lambda t: t.replace("wavelength_nm", "lambda"), 2, "lambda", "wavelength_nm"),
+    ("no wavelength column", lambda t: t.replace("wavelength_nm", "nm"), None, None,
+     "no header row"),
     ("bare R without thickness", lambda t: t.replace("R_0.15mm", "R"), 2, "R", "thickness"),
     (
         "bad thickness comment",
@@ -122,7 +123,7 @@ def test_bad_input_names_file_line_and_column(tmp_path, what, breaker, line, col
         read_measurement(path)
     message = str(info.value)
     assert "\n" not in message
-    assert message.startswith(f"{path}:{line}"), message
+    assert message.startswith(f"{path}:{line}:" if line else f"{path}: "), message
     if column is not None:
         assert f"column '{column}'" in message, message
     assert words in message, message
@@ -133,3 +134,70 @@ def test_missing_file_and_bad_flag(tmp_path):
         read_measurement(tmp_path / "nope.csv")
     with pytest.raises(InputError, match="--thickness"):
         read_measurement(write(tmp_path, GOOD), thickness_mm=-1.0)
+
+
+# ------------------------------------------------------------------ as instruments write them
+
+WL = [400, 410, 420]
+TABLE = [[0.30, 0.40, 0.45, 0.04], [0.31, 0.41, 0.46, 0.04], [0.32, 0.42, 0.47, 0.04]]
+
+
+def _export(header, sep=",", preamble="", scale_wl=1.0, scale_r=1.0, quote=False, eol="\n",
+            trailing=""):
+    q = (lambda s: f'"{s}"') if quote else (lambda s: s)
+    lines = [sep.join(q(h) for h in header) + trailing]
+    for w, r in zip(WL, TABLE, strict=True):
+        lines.append(sep.join([f"{w * scale_wl:g}", *(f"{v * scale_r:g}" for v in r)]) + trailing)
+    return preamble + eol.join(lines) + eol
+
+
+NAMES = ["R_0.05mm", "R_0.15mm", "R_inf", "R_g"]
+STYLES = {
+    # ASD ViewSpecPro-style text export: free-text preamble, `key: value` lines, tabs.
+    "tab, free-text preamble": _export(
+        ["Wavelength", *NAMES], "\t",
+        "Spectrum file: foundation_00001.asd\nInstrument: FieldSpec 4 Hi-Res NG\n"
+        "Integration time: 136 ms\nForeoptic: contact probe\n\n"),
+    # European spreadsheet export: semicolons, every field quoted, CRLF, a UTF-8 BOM.
+    "semicolon, quoted, CRLF, BOM": "\ufeff" + _export(["wavelength_nm", *NAMES], ";",
+                                                       quote=True, eol="\r\n"),
+    # `key,value` metadata rows before the header (Ocean/Avantes-style CSV), a trailing comma.
+    "key,value preamble, trailing comma": _export(
+        ["Wavelength (nm)", *NAMES], ",",
+        "Date,2026-11-29\nOperator,lab 3\nIntegration Time (ms),100\n", trailing=","),
+    "µm with the unit in the header": _export(["wavelength [µm]", *NAMES], scale_wl=1e-3),
+}
+
+
+@pytest.mark.parametrize("style", STYLES)
+def test_instrument_exports_read_like_the_plain_format(tmp_path, style):
+    plain = read_measurement(write(tmp_path, _export(["wavelength_nm", *NAMES]), "plain.csv"))
+    path = tmp_path / "export.csv"
+    path.write_bytes(STYLES[style].encode("utf-8"))
+    m = read_measurement(path)
+    np.testing.assert_allclose(m.wavelength_nm, plain.wavelength_nm, rtol=1e-12)
+    for a in ("R", "R_inf", "R_g", "thickness_mm"):
+        np.testing.assert_array_equal(getattr(m, a), getattr(plain, a))
+    assert m.notes == ()  # nothing inferred: the header said the unit
+
+
+def test_micrometres_and_percent_are_detected_with_a_note(tmp_path):
+    plain = read_measurement(write(tmp_path, _export(["wavelength_nm", *NAMES]), "plain.csv"))
+    m = read_measurement(write(tmp_path, _export(["wavelength", *NAMES], scale_wl=1e-3,
+                                                 scale_r=100.0)))
+    np.testing.assert_allclose(m.wavelength_nm, plain.wavelength_nm, rtol=1e-12)
+    np.testing.assert_allclose(m.R_inf, plain.R_inf, rtol=1e-12)
+    assert len(m.notes) == 2
+    assert "read as µm" in m.notes[0] and "read as percent" in m.notes[1]
+    # --percent forces it; a fraction file is left alone.
+    assert read_measurement(write(tmp_path, _export(["wavelength_nm", *NAMES]))).notes == ()
+
+
+def test_dark_percent_data_is_not_guessed(tmp_path):
+    """Median 1.2 %: as fractions it would be > 1 in places; ambiguous, so an error that
+    points at --percent rather than a guess."""
+    text = "wavelength_nm,R_0.1mm,R_inf,R_g\n400,1.0,1.2,4.0\n410,1.1,1.3,0.5\n420,0.9,1.2,0.5\n"
+    with pytest.raises(InputError, match="use --percent"):
+        read_measurement(write(tmp_path, text))
+    m = read_measurement(write(tmp_path, text), percent=True)
+    np.testing.assert_allclose(m.R_inf, [0.012, 0.013, 0.012])

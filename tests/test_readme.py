@@ -82,10 +82,11 @@ def test_readme_shell_examples_run(tmp_path):
     comes later), the example measurements as foundation.csv and lipstick.csv, the BRDF
     samples at data/brdf/. The benchmark scripts take minutes: for those lines the script is
     imported and must have `main` (tests/test_benchmarks_smoke.py runs their parts)."""
+    from jaxskin.formats import write_lafortune
     from jaxskin.shading import lafortune
 
     (tmp_path / "my_scene.toml").write_text(fenced("toml")[0])
-    lafortune.save(lafortune.skin(), tmp_path / "out" / "skin_fit.json")
+    write_lafortune(lafortune.skin(), tmp_path / "out" / "skin_fit.json")
     for src, dst in (("foundation_beige", "foundation"), ("lipstick_red", "lipstick")):
         shutil.copy(ROOT / "data" / "measurements" / f"{src}.csv", tmp_path / f"{dst}.csv")
     (tmp_path / "data").mkdir()

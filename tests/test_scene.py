@@ -141,12 +141,13 @@ def test_render_bad_scene_exit_2_and_nothing_written(tmp_path):
 
 
 def test_paths_from_the_file_and_from_the_command_line(tmp_path, monkeypatch):
+    from jaxskin.formats import write_lafortune
     from jaxskin.shading import lafortune
 
     (tmp_path / "scenes").mkdir()
     (tmp_path / "fits").mkdir()
-    lafortune.save(lafortune.skin(), tmp_path / "scenes" / "mine.json")
-    lafortune.save(lafortune.skin(), tmp_path / "fits" / "other.json")
+    write_lafortune(lafortune.skin(), tmp_path / "scenes" / "mine.json")
+    write_lafortune(lafortune.skin(), tmp_path / "fits" / "other.json")
     scene = tmp_path / "scenes" / "s.toml"
     scene.write_text(GOOD + '\n[material]\nmodel = "lafortune"\nbrdf = "mine.json"\n')
     assert load_scene(scene).values["material.brdf"] == str(tmp_path / "scenes" / "mine.json")

@@ -12,24 +12,22 @@ Material files (what `jaxskin fit-brdf` writes):
     {"model": "lafortune", "diffuse": [r, g, b],
      "lobes": [{"Cxy": [r, g, b], "Cz": [r, g, b], "n": [r, g, b]}, ...]}
 
-`diffuse` is ρd; the model divides it by π.
+`diffuse` is ρd; the model divides it by π. `formats.read_lafortune` / `write_lafortune` read
+and write them; this module converts dictionaries and computes (arrays only).
 """
 
 from __future__ import annotations
 
-import json
 import math
-from pathlib import Path
 from typing import NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ..io import InputError, atomic_write
+from ..io import InputError
 
-__all__ = ["Lafortune", "brdf", "from_json", "load", "positive_power", "save", "shade", "skin",
-           "to_json"]
+__all__ = ["Lafortune", "brdf", "from_json", "positive_power", "shade", "skin", "to_json"]
 
 
 class Lafortune(NamedTuple):
@@ -142,23 +140,3 @@ def from_json(doc, source="<json>", dtype=jnp.float32) -> Lafortune:
                              key=f"lobes[{i}].n")
     a = lambda x: jnp.asarray(x, dtype)  # noqa: E731
     return Lafortune(a(diffuse), a(Cxy), a(Cz), a(n))
-
-
-def load(path, dtype=jnp.float32) -> Lafortune:
-    """Read a Lafortune material file (the format `jaxskin fit-brdf` writes)."""
-    path = Path(path)
-    try:
-        doc = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError("no such file", path) from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        line = getattr(e, "lineno", None)
-        raise InputError(f"not a JSON file ({e.__class__.__name__})", path, line) from None
-    return from_json(doc, path, dtype)
-
-
-def save(p: Lafortune, path, **extra) -> None:
-    """Write `p` (and `extra` keys) as a material file, atomically."""
-    with atomic_write(path, "w") as fh:
-        json.dump(to_json(p, **extra), fh, indent=1)
-        fh.write("\n")

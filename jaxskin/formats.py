@@ -1,0 +1,330 @@
+"""File formats: the I/O layer between files and the pure array code.
+
+Everything that reads or writes a data file lives here (or in `io.py`, which holds the error
+type, atomic writes and the data folder): CSV tables as instruments export them, JSON
+documents, the NIST skin spectra, Lafortune BRDF files and calibrated materials. The optics
+modules (`km`, `skin`, `shading`) take and return arrays only.
+
+CSV tables (`read_table`) are read as spectroradiometer software writes them:
+
+- the delimiter is a comma, a tab or a semicolon (the one that splits the header into the
+  most cells), fields may be quoted (`"R_inf"`), a UTF-8 byte-order mark is ignored;
+- numbers use a decimal point: `0,45` (a decimal comma) is refused with a one-line error;
+- a preamble before the header is skipped: free text, `key: value` or `key,value` lines;
+  `# key: value` comments before the header are kept as metadata (`Table.meta`);
+- the header is the first row whose first cell names the first column (e.g. `wavelength_nm`);
+- after it, blank lines and `#` lines are skipped; a trailing empty cell (a delimiter at the
+  end of every row) is dropped.
+
+Every problem is an `InputError` naming the file, the line and the column.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import functools
+import json
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+
+from .io import InputError, atomic_write, data_dir
+
+__all__ = ["MaterialFile", "Table", "nist_reflectance", "nist_spectrum", "read_json",
+           "read_lafortune", "read_material", "read_table", "read_text", "write_json",
+           "write_lafortune"]
+
+DELIMITERS = (",", "\t", ";")
+MAX_BYTES = 256 * 2**20  # a spectrum at 0.01 nm with 50 columns is ~40 MB
+_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+_DECIMAL_COMMA = re.compile(r"[+-]?\d+,\d+")
+_NAMES = {"\t": "tab", ",": "comma", ";": "semicolon"}
+
+
+@dataclasses.dataclass(frozen=True)
+class Table:
+    """`header` names, `data (rows, columns)` floats, `lines` (file line of each row),
+    `header_line`, `meta` ({key: (value, line)} from `# key: value` before the header),
+    `delimiter`."""
+
+    path: Path
+    header: list[str]
+    header_line: int
+    data: np.ndarray
+    lines: list[int]
+    meta: dict[str, tuple[str, int]]
+    delimiter: str = ","
+
+    def column(self, name: str) -> np.ndarray:
+        return self.data[:, self.header.index(name)]
+
+    def error(self, message: str, row: int | None = None, column: str | None = None):
+        """An `InputError` at data row `row` (or the header when None) and `column`."""
+        line = self.header_line if row is None else self.lines[row]
+        return InputError(message, self.path, line, column)
+
+
+def read_text(path) -> str:
+    """A text file's contents (UTF-8, a byte-order mark dropped); `InputError` if it is not
+    one: missing, unreadable, binary, not UTF-8 or larger than `MAX_BYTES`."""
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        if size > MAX_BYTES:
+            raise InputError(f"{size / 2**20:.0f} MiB is larger than the {MAX_BYTES >> 20} MiB "
+                             "a table may be", path)
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise InputError("no such file", path) from None
+    except IsADirectoryError:
+        raise InputError("is a folder, expected a file", path) from None
+    except OSError as e:
+        raise InputError(f"cannot read ({e.strerror or e.__class__.__name__})", path) from None
+    if b"\0" in raw:
+        line = raw[:raw.index(b"\0")].count(b"\n") + 1
+        raise InputError("a binary file (a NUL byte), expected UTF-8 text", path, line)
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = raw[:e.start].count(b"\n") + 1
+        raise InputError(f"not UTF-8 text (byte 0x{raw[e.start]:02x})", path, line) from None
+
+
+def _split(line: str, delimiter: str) -> list[str]:
+    cells = next(csv.reader([line], delimiter=delimiter, skipinitialspace=True), [])
+    cells = [c.strip() for c in cells]
+    while len(cells) > 1 and cells[-1] == "":
+        cells.pop()
+    return cells
+
+
+def read_table(path, first_column, expected_header: str, min_rows: int = 1) -> Table:
+    """Read a numeric CSV table.
+
+    **Arguments:**
+
+    - `path`: the file.
+    - `first_column`: a function telling whether a cell names the first column: the header
+      is the first row whose first cell it accepts.
+    - `expected_header`: shown when no header is found.
+    - `min_rows`: the fewest data rows accepted.
+
+    **Returns:** a `Table`. **Raises:** `InputError` on anything malformed.
+    """
+    path = Path(path)
+    text = read_text(path)
+    lines = text.splitlines()
+    meta: dict[str, tuple[str, int]] = {}
+    header = delimiter = None
+    header_line = 0
+    try:
+        for number, raw in enumerate(lines, start=1):
+            line = raw.strip()
+            if not line:
+                continue
+            if line.startswith("#"):
+                if ":" in line:
+                    key, value = line[1:].split(":", 1)
+                    meta.setdefault(key.strip().lower(), (value.strip(), number))
+                continue
+            split = {d: _split(line, d) for d in DELIMITERS}
+            found = [d for d in DELIMITERS if first_column(split[d][0])]
+            if found:
+                delimiter = max(found, key=lambda d: len(split[d]))
+                header, header_line = split[delimiter], number
+                break
+    except csv.Error as e:
+        raise InputError(f"not CSV ({e})", path, number) from None
+    if header is None:
+        raise InputError(f"no header row; expected a row '{expected_header}' (comma, tab or "
+                         "semicolon separated) after any preamble", path)
+    for i, name in enumerate(header):
+        if name == "":
+            raise InputError(f"header cell {i + 1} is empty", path, header_line)
+        if name in header[:i]:
+            raise InputError("column appears twice", path, header_line, name)
+
+    rows, numbers = [], []
+    for number, raw in enumerate(lines[header_line:], start=header_line + 1):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        try:
+            cells = _split(line, delimiter)
+        except csv.Error as e:
+            raise InputError(f"not CSV ({e})", path, number) from None
+        if len(cells) != len(header):
+            others = [_NAMES[d] for d in DELIMITERS if d != delimiter and d in line]
+            hint = (f" (the header is {_NAMES[delimiter]}-separated; this row has "
+                    f"{' and '.join(others)}s)") if others else ""
+            raise InputError(f"{len(cells)} cells where the header has {len(header)}{hint}",
+                             path, number)
+        values = []
+        for c, cell in enumerate(cells):
+            values.append(_number(cell, path, number, header[c]))
+        rows.append(values)
+        numbers.append(number)
+    if len(rows) < min_rows:
+        rows_ = "row" if min_rows == 1 else "rows"
+        raise InputError(f"needs at least {min_rows} data {rows_}, found {len(rows)}", path,
+                         header_line)
+    data = np.asarray(rows, np.float64).reshape(len(rows), len(header))
+    return Table(path, header, header_line, data, numbers, meta, delimiter)
+
+
+def _number(cell: str, path, line: int, column: str) -> float:
+    """A cell as a finite float, or an `InputError` saying what was expected."""
+    if not _NUMBER.fullmatch(cell):
+        shown = cell if len(cell) <= 40 else cell[:37] + "..."
+        if _DECIMAL_COMMA.fullmatch(cell):
+            raise InputError(f"expected a number with a decimal point, got {shown!r} (decimal "
+                             "commas are not read; export with '.' as the decimal mark)",
+                             path, line, column)
+        if cell.lower().lstrip("+-") in ("nan", "inf", "infinity"):
+            raise InputError(f"expected a finite number, got {shown!r}", path, line, column)
+        raise InputError(f"expected a number, got {shown!r}", path, line, column)
+    value = float(cell)
+    if not math.isfinite(value):
+        raise InputError(f"expected a finite number, got {cell!r}", path, line, column)
+    return value
+
+
+# ---------------------------------------------------------------- JSON
+
+
+def read_json(path, what: str):
+    """A JSON document; `InputError` (with the line) if missing or malformed. `what` names
+    the kind of file in the messages (e.g. 'material file')."""
+    path = Path(path)
+    text = read_text(path)
+    try:
+        return json.loads(text, parse_constant=_no_constant)
+    except json.JSONDecodeError as e:
+        raise InputError(f"not a JSON {what} ({e.msg})", path, e.lineno) from None
+    except ValueError as e:  # NaN, Infinity
+        raise InputError(f"not a JSON {what} ({e})", path) from None
+    except RecursionError:
+        raise InputError(f"not a JSON {what} (nested too deeply)", path) from None
+
+
+def _no_constant(name):
+    raise ValueError(f"{name} is not a JSON number")
+
+
+def write_json(doc, path) -> None:
+    """Write `doc` as indented JSON, atomically; a NaN or infinity anywhere is a `ValueError`
+    (a bug: callers check their numbers first), so no file ever holds one."""
+    text = json.dumps(doc, indent=1, allow_nan=False)
+    with atomic_write(path, "w") as fh:
+        fh.write(text + "\n")
+
+
+# ---------------------------------------------------------------- Lafortune BRDF files
+
+
+def read_lafortune(path, dtype=None):
+    """A Lafortune material file (what `jaxskin fit-brdf` writes) as `lafortune.Lafortune`
+    (float32 unless `dtype`); `InputError` names the key that is wrong."""
+    import jax.numpy as jnp
+
+    from .shading import lafortune
+
+    return lafortune.from_json(read_json(path, "BRDF file"), Path(path),
+                               jnp.float32 if dtype is None else dtype)
+
+
+def write_lafortune(p, path, **extra) -> None:
+    """Write Lafortune lobes `p` (and `extra` keys, e.g. fit statistics) as a material file."""
+    from .shading import lafortune
+
+    write_json(lafortune.to_json(p, **extra), path)
+
+
+# ---------------------------------------------------------------- the NIST skin spectra
+
+NIST_FILE = "nist_skin_reflectance_M38597.csv"
+NIST_SUBJECTS = 100
+
+
+@functools.cache
+def _nist_table() -> tuple[np.ndarray, np.ndarray]:
+    """Wavelengths (m,) and the subjects' mean reflectances (100, m), from the shipped CSV
+    (four columns per subject: three readings and their mean)."""
+    path = data_dir() / "spectra" / NIST_FILE
+    wl, means = [], []
+    for line in path.read_text(encoding="latin-1").splitlines():
+        cells = line.split(",")
+        if cells and cells[0].strip().isdigit():
+            wl.append(float(cells[0]))
+            means.append([float(cells[1 + 4 * s + 3]) for s in range(NIST_SUBJECTS)])
+    return np.asarray(wl), np.asarray(means).T
+
+
+def nist_spectrum(subject: int) -> tuple[np.ndarray, np.ndarray]:
+    """NIST subject `subject` (1–100)'s mean forearm reflectance as measured:
+    `(wavelengths nm, R)` (Cooksey, Allen, Tsai 2017; see `skin`)."""
+    if not 1 <= subject <= NIST_SUBJECTS:
+        raise InputError(f"NIST skin subject must be 1–{NIST_SUBJECTS}, got {subject}",
+                         key="skin.subject")
+    wl, means = _nist_table()
+    return wl, means[subject - 1]
+
+
+def nist_reflectance(subject: int, grid) -> np.ndarray:
+    """Subject `subject`'s mean reflectance on `grid` (a `spectral.Grid`; host float64)."""
+    return np.interp(grid.wavelengths, *nist_spectrum(subject))
+
+
+# ---------------------------------------------------------------- calibrated materials
+
+EXTRAPOLATE = ("hold", "linear")
+
+
+@dataclasses.dataclass(frozen=True)
+class MaterialFile:
+    """A calibrated material as stored: `S`, `K (n,)` per mm at `wavelength_nm (n,)`, and
+    how it may be extended beyond them (`extrapolate`: "hold", "linear" or None)."""
+
+    path: Path
+    name: str
+    wavelength_nm: np.ndarray
+    S: np.ndarray
+    K: np.ndarray
+    extrapolate: str | None
+
+
+def read_material(path) -> MaterialFile:
+    """Read and check a material JSON (what `jaxskin calibrate` writes)."""
+    path = Path(path)
+    doc = read_json(path, "material file")
+    if not isinstance(doc, dict):
+        raise InputError("expected a JSON object (a material written by jaxskin calibrate)",
+                         path)
+    arrays = {}
+    for k in ("wavelength_nm", "S_per_mm", "K_per_mm"):
+        v = doc.get(k)
+        ok = isinstance(v, list) and len(v) >= 2 and all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+            for x in v)
+        if not ok:
+            raise InputError("expected a list of at least two finite numbers (a material "
+                             "written by jaxskin calibrate)", path, key=k)
+        arrays[k] = np.asarray(v, np.float64)
+    wl, S, K = arrays["wavelength_nm"], arrays["S_per_mm"], arrays["K_per_mm"]
+    if not (len(wl) == len(S) == len(K)):
+        raise InputError(f"wavelength_nm, S_per_mm and K_per_mm have lengths {len(wl)}, "
+                         f"{len(S)}, {len(K)}; expected equal", path, key="S_per_mm")
+    if np.any(np.diff(wl) <= 0):
+        raise InputError("wavelengths must increase", path, key="wavelength_nm")
+    for k, v in (("S_per_mm", S), ("K_per_mm", K)):
+        if np.any(v <= 0):
+            raise InputError("must be > 0 at every band", path, key=k)
+    extrapolate = doc.get("extrapolate")
+    if extrapolate is not None and extrapolate not in EXTRAPOLATE:
+        raise InputError(f"expected \"hold\" or \"linear\", got {extrapolate!r}", path,
+                         key="extrapolate")
+    name = doc.get("name", path.stem)
+    return MaterialFile(path, str(name), wl, S, K, extrapolate)

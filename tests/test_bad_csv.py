@@ -1,0 +1,125 @@
+"""Bad CSV inputs, through the command line: each one exits 2 with exactly one line
+`jaxskin: error: FILE[:LINE]: ...` on stderr, no traceback, nothing written under -o, and the
+input file left as it was."""
+
+import numpy as np
+import pytest
+
+from jaxskin.cli import main
+
+HEADER = "wavelength_nm,R_0.05mm,R_0.15mm,R_inf,R_g\n"
+ROWS = [(400, 0.30, 0.40, 0.45, 0.04), (410, 0.31, 0.41, 0.46, 0.04),
+        (420, 0.32, 0.42, 0.47, 0.04)]
+
+
+def rows(rows=ROWS, sep=","):
+    return "".join(sep.join(f"{v:g}" for v in r) + "\n" for r in rows)
+
+
+GOOD = "# name: good\n" + HEADER + rows()
+RADIANCE = "wavelength_nm,E_0.1mm,E_inf,E_g,E_white\n400,1,2,0.2,4\n410,1.5,3,0.3,6\n"
+BRDF = "theta_in_deg,phi_in_deg,theta_out_deg,phi_out_deg,R,G,B\n"
+BRDF_ROW = "30,0,40,180,0.2,0.1,0.1\n"
+
+# (id, file contents (str or bytes), line named or None, column named or None, words)
+CASES = [
+    ("empty file", "", None, None, "no header row"),
+    ("blank lines only", "\n\n  \n", None, None, "no header row"),
+    ("header only", HEADER, 1, None, "needs at least 2 data rows"),
+    ("one data row", HEADER + rows(ROWS[:1]), 1, None, "needs at least 2 data rows"),
+    ("binary garbage", bytes(np.random.default_rng(0).integers(0, 256, 4096, np.uint8)), 2,
+     None, "binary"),
+    ("latin-1 µ", GOOD.replace("# name: good", "# unit: \xb5m").encode("latin-1"), 1, None,
+     "not UTF-8"),
+    ("UTF-16 with a BOM", GOOD.encode("utf-16"), 1, None, "binary"),
+    ("mixed delimiters", GOOD.replace("0.31,0.41,0.46,0.04", "0.31;0.41;0.46;0.04"), 4, None,
+     "semicolons"),
+    ("ragged row, short", GOOD.replace("0.41,0.46", "0.41"), 4, None, "4 cells where"),
+    ("ragged row, long", GOOD.replace("0.41,0.46", "0.41,0.46,0.5"), 4, None, "6 cells where"),
+    ("NaN cell", GOOD.replace("0.41", "NaN"), 4, "R_0.15mm", "finite"),
+    ("inf cell", GOOD.replace("0.46", "-inf"), 4, "R_inf", "finite"),
+    ("1e308 reflectance", GOOD.replace("0.46", "1e308"), 4, "R_inf", "[0, 1]"),
+    ("1e308 wavelength", GOOD.replace("420,", "1e308,"), 5, "wavelength_nm", "outside"),
+    ("overflowing exponent", GOOD.replace("0.41", "1e999"), 4, "R_0.15mm", "finite"),
+    ("text cell", GOOD.replace("0.41", "n/a"), 4, "R_0.15mm", "expected a number"),
+    ("decimal comma", ("wavelength_nm;R_0.05mm;R_0.15mm;R_inf;R_g\n"
+                       + rows(sep=";").replace(".", ",")), 2, "R_0.05mm", "decimal comma"),
+    ("negative reflectance", GOOD.replace("0.04\n410", "-0.01\n410"), 3, "R_g", "[0, 1]"),
+    ("reflectance over 100 %", HEADER + "400,30,40,145,4\n410,31,41,46,4\n", 2, "R_inf",
+     "in percent must be in [0, 100], got 145"),
+    ("reflectance just over 1", GOOD.replace("0.46", "1.2"), 4, "R_inf", "--percent"),
+    ("decreasing wavelengths", GOOD.replace("420,", "405,"), 5, "wavelength_nm", "increase"),
+    ("duplicate wavelength", GOOD.replace("420,", "410,"), 5, "wavelength_nm", "increase"),
+    ("µm and nm mixed", GOOD.replace("400,", "0.4,").replace("410,", "0.41,"), 3,
+     "wavelength_nm", "nm and µm mixed"),
+    ("header says µm, values nm", GOOD.replace("wavelength_nm", "wavelength_um"), 3,
+     "wavelength_um", "outside"),
+    ("zero wavelength", GOOD.replace("400,", "0,"), 3, "wavelength_nm", "outside"),
+    ("missing R_inf", HEADER.replace(",R_inf", "") + "400,0.3,0.4,0.04\n410,0.3,0.4,0.04\n",
+     1, None, "missing column R_inf"),
+    ("missing R_g", HEADER.replace(",R_g", "") + "400,0.3,0.4,0.45\n410,0.3,0.4,0.45\n", 1,
+     None, "missing column R_g"),
+    ("thickness 0", GOOD.replace("R_0.05mm", "R_0mm"), 2, "R_0mm", "positive"),
+    ("thickness negative", GOOD.replace("R_0.05mm", "R_-0.05mm"), 2, "R_-0.05mm", "positive"),
+    ("thickness huge", GOOD.replace("R_0.05mm", "R_1e9mm"), 2, "R_1e9mm", "at most 100"),
+    ("thickness comment not a number", "# thickness_mm: thin\n" + GOOD, 1, "thickness_mm",
+     "positive"),
+    ("E columns without E_white", RADIANCE.replace(",E_white", "").replace(",4\n", "\n")
+     .replace(",6\n", "\n"), 1, "E_0.1mm", "E_white"),
+    ("E_white zero", RADIANCE.replace(",4\n", ",0\n"), 2, "E_white", "> 0"),
+    ("radiance 1e308", RADIANCE.replace("1.5,", "1e308,"), 3, "E_0.1mm", "radiance"),
+    ("preamble without a header", "Spectrometer: ASD FieldSpec\nIntegration,100\nSome text\n",
+     None, None, "no header row"),
+    ("a 10 MB line", GOOD + "1," * 5_000_000 + "\n", 6, None, "cells where the header"),
+    ("duplicate column", GOOD.replace("R_0.15mm", "R_0.05mm"), 2, "R_0.05mm", "twice"),
+    ("unknown column", GOOD.replace("R_g", "R_ground"), 2, "R_ground", "unknown column"),
+    ("empty header cell", GOOD.replace(",R_inf,", ",,"), 2, None, "header cell 4 is empty"),
+    ("R_g equals R_inf", GOOD.replace("0.45,0.04", "0.45,0.45").replace("0.46,0.04", "0.46,0.46")
+     .replace("0.47,0.04", "0.47,0.47"), 2, "R_g", "R_g equals R_inf"),
+    ("a name that is a path", GOOD.replace("# name: good", "# name: ../escape"), 1, None,
+     "names files"),
+]
+
+BRDF_CASES = [
+    ("BRDF 1e308", BRDF + BRDF_ROW * 12 + "30,0,40,180,1e308,0.1,0.1\n", 14, "R", "[0, 1e+06]"),
+    ("BRDF all zero", BRDF + "30,0,40,180,0,0,0\n" * 12, 1, "R", "every value is 0"),
+    ("BRDF NaN", BRDF + BRDF_ROW * 12 + "30,0,40,180,nan,0.1,0.1\n", 14, "R", "finite"),
+    ("BRDF no header", BRDF_ROW * 12, None, None, "no header row"),
+]
+
+
+def _run(tmp_path, capsys, contents, command):
+    path = tmp_path / "in.csv"
+    if isinstance(contents, str):
+        contents = contents.encode("utf-8")
+    path.write_bytes(contents)
+    out = tmp_path / "out"
+    target = [str(out)] if command == "calibrate" else [str(out / "fit.json")]
+    rc = main([command, str(path), "-o", *target])
+    err = capsys.readouterr().err
+    assert path.read_bytes() == contents, "the input was changed"
+    assert not out.exists(), "something was written"
+    return path, rc, err
+
+
+@pytest.mark.parametrize("contents, line, column, words",
+                         [c[1:] for c in CASES] + [c[1:] for c in BRDF_CASES],
+                         ids=[c[0] for c in CASES] + [c[0] for c in BRDF_CASES])
+def test_bad_csv_is_one_line_exit_2_nothing_written(tmp_path, capsys, contents, line, column,
+                                                     words):
+    command = "fit-brdf" if isinstance(contents, str) and contents.count("phi_") else "calibrate"
+    path, rc, err = _run(tmp_path, capsys, contents, command)
+    assert rc == 2, err
+    lines = err.splitlines()
+    assert len(lines) == 1, err
+    assert "Traceback" not in err
+    where = f"jaxskin: error: {path}:{line}: " if line else f"jaxskin: error: {path}: "
+    assert lines[0].startswith(where), lines[0]
+    if column is not None:
+        assert f"column '{column}'" in lines[0], lines[0]
+    assert words in lines[0], lines[0]
+    assert len(lines[0]) < 400  # one readable line, even for a 10 MB input line
+
+
+def test_table_has_at_least_25_cases():
+    assert len(CASES) + len(BRDF_CASES) >= 25
