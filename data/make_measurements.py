@@ -76,7 +76,7 @@ def mass_tone(source: str) -> np.ndarray:
     if kind == "cc":
         return _chart(args[0])
     if kind == "nist":
-        from jaxskin.skin import nist_spectrum
+        from jaxskin.formats import nist_spectrum
 
         return np.interp(WL, *nist_spectrum(int(args[0])))
     if kind == "tint":  # share c of a chart colour in the chart's white, by K/S

@@ -23,7 +23,8 @@ from __future__ import annotations
 import colour
 import numpy as np
 
-from jaxskin.skin import SUBJECTS, nist_spectrum
+from jaxskin.formats import NIST_SUBJECTS as SUBJECTS
+from jaxskin.formats import nist_spectrum
 
 WL = np.arange(380.0, 781.0, 5.0)
 TABLE_5_1 = {"r_base": (0.97, 0.87, 0.67), "a_blood": (0.00, 0.24, 0.24)}

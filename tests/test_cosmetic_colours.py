@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from jaxskin import cosmetics, km, render, spectral
+from jaxskin.formats import nist_spectrum
 from jaxskin.scene import load_scene
-from jaxskin.skin import nist_spectrum
 
 GRID = spectral.Grid(step=10)
 D65 = colour.SDS_ILLUMINANTS["D65"]

@@ -8,9 +8,10 @@ import pytest
 from conftest import check_grads_scaled
 
 from jaxskin import render
+from jaxskin.formats import NIST_SUBJECTS as SUBJECTS
+from jaxskin.formats import nist_spectrum
 from jaxskin.scene import load_scene
 from jaxskin.shading import blinn, lafortune
-from jaxskin.skin import SUBJECTS, nist_spectrum
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])  # linear sRGB → Y (IEC 61966-2-1)
 
