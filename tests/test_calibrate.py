@@ -276,7 +276,7 @@ def test_without_the_prior_each_band_is_its_own_problem():
     """Corrupting one band's data leaves every other band's S and K bit for bit the same;
     with the prior its neighbours move (so the check can fail)."""
     S, K = make_measurements.true_spectra("foundation_beige")
-    m = synthetic(S, K, [0.05, 0.15], BLACK, noise=0.002, seed=11)
+    m = synthetic(S, K, FOUNDATION_MM, BLACK, noise=0.002, seed=11)
     R = m.R.copy()
     R[:, 40] = np.clip(R[:, 40] * 0.8, 0, 1)
     bent = dataclasses.replace(m, R=R)
@@ -323,7 +323,7 @@ def test_gradient_and_stationarity_against_the_dense_residuals(smooth):
     import jax.numpy as jnp
 
     S, K = make_measurements.true_spectra("lipstick_red")
-    m = synthetic(S, K, [0.1, 0.3], BLACK, noise=0.001, seed=7)  # unidentifiable bands too
+    m = synthetic(S, K, LIPSTICK_MM, BLACK, noise=0.001, seed=7)  # unidentifiable bands too
     ident = fkm.identifiable(m, 0.001)
     assert not ident.all() and ident.any()
     r = fkm.fit(m, smooth=smooth, noise=0.001)
@@ -354,17 +354,18 @@ def test_ten_thousand_bands(smooth):
     wl = np.linspace(380.0, 780.0, 10_001)
     S0, K0 = make_measurements.true_spectra("foundation_beige")
     S, K = np.interp(wl, WL, S0), np.interp(wl, WL, K0)
-    m = dataclasses.replace(synthetic(S0, K0, [0.05, 0.15], BLACK), wavelength_nm=wl,
+    m = dataclasses.replace(synthetic(S0, K0, FOUNDATION_MM, BLACK), wavelength_nm=wl,
                             R_g=np.full_like(wl, 0.04),
-                            R=make_measurements.simulate(S, K, [0.05, 0.15], 0.04)[0],
-                            R_inf=make_measurements.simulate(S, K, [0.05, 0.15], 0.04)[1])
+                            R=make_measurements.simulate(S, K, FOUNDATION_MM, 0.04)[0],
+                            R_inf=make_measurements.simulate(S, K, FOUNDATION_MM, 0.04)[1])
     fkm.fit(m, smooth=smooth)  # compiles
     t0 = time.perf_counter()
     r = fkm.fit(m, smooth=smooth)
     assert time.perf_counter() - t0 < 10.0
     assert r.converged and r.identifiable.all()
-    # Measured: 1.5e-9 without the prior; 6.8e-5 with it (the prior pulls a little).
-    tol = 1e-8 if smooth == 0 else 5e-4
+    # Measured on the 3 and 10 µm beige films: under 1e-8 without the prior; 1.2e-3 with it
+    # (the prior pulls a little, most at the blue end where K/S is steepest).
+    tol = 1e-8 if smooth == 0 else 5e-3
     assert np.max(np.abs(r.S_per_mm / S - 1)) < tol
 
 
@@ -409,7 +410,7 @@ def test_render_refuses_a_material_that_does_not_cover_the_grid(tmp_path, capsys
     doc = {"wavelength_nm": [400, 550, 700], "S_per_mm": [5, 5, 5], "K_per_mm": [1, 1, 1]}
     (tmp_path / "narrow.json").write_text(json.dumps(doc))
     scene = (ROOT / "data" / "scenes" / "makeup.toml").read_text().replace(
-        'material = "foundation_beige"', 'material = "narrow.json"', 1)
+        'material = "foundation_light"', 'material = "narrow.json"', 1)
     (tmp_path / "s.toml").write_text(scene)
     out = tmp_path / "out"
     assert main(["render", str(tmp_path / "s.toml"), "-o", str(out)]) == 2
