@@ -27,23 +27,40 @@ def test_profile_weights_conserve_energy(method):
     mask = np.zeros((48, 64), bool)
     mask[8:40, 5:60] = True
     out = np.asarray(sss.blur(const, 0.25, mask, method=method))
-    np.testing.assert_allclose(out[mask], 1.0, atol=1e-5)  # no darkening at the mesh's edge
+    # No darkening at the mesh's edge: measured 0 (float32), allowed 10 ulp.
+    np.testing.assert_allclose(out[mask], 1.0, atol=1e-6)
     assert np.all(out[~mask] == 0)
 
 
-@pytest.mark.parametrize("method, tolerance", [("fft", 1e-5), ("separable", 2e-4)])
-def test_blur_matches_the_numpy_reference(method, tolerance):
-    """FFT: the same sampled profile, float32 rounding only. Separable: the 3σ cut
-    (measured 7e-5). Both away from the border, where `blur` renormalises by the blurred
-    mask and the reference does not."""
+def _direct_blur(E, texel, pixels):
+    """An independent reference at `pixels (k, 2)`: a direct sum over the kernel window
+    (not an FFT), with the profile built here from the published constants
+    (test_references.py), each Gaussian sampled on the texel grid to 4σ of the widest and
+    normalised there, as sss.py documents. **Returns:** `(k, 3)`, and the kernel radius."""
+    from test_references import VARIANCES, WEIGHTS
+
+    r = int(np.ceil(4 * np.sqrt(VARIANCES[-1]) / texel))
+    y, x = np.mgrid[-r:r + 1, -r:r + 1] * texel
+    g = np.exp(-(x * x + y * y)[..., None] / (2 * VARIANCES))
+    kernel = (g / g.sum(axis=(0, 1))) @ WEIGHTS.T  # (2r + 1, 2r + 1, 3), symmetric
+    return np.array([(E[i - r:i + r + 1, j - r:j + r + 1] * kernel).sum(axis=(0, 1))
+                     for i, j in pixels]), r
+
+
+@pytest.mark.parametrize("method, tolerance", [("fft", 6e-6), ("separable", 7e-4)])
+def test_blur_matches_a_direct_sum(method, tolerance):
+    """At 40 texels away from the border (where `blur` renormalises by the blurred mask).
+    FFT: float32 rounding only (measured 5.2e-7). Separable: the 3σ cut (measured 6.8e-5)."""
     rng = np.random.default_rng(0)
-    E = rng.uniform(0, 1, (128, 128, 3))
+    n = 128
+    E = rng.uniform(0, 1, (n, n, 3))
     for texel in (0.3, 0.6):
         a = np.asarray(sss.blur(jnp.asarray(E, jnp.float32), texel, method=method))
-        b = sss.blur_fft(E, texel)
-        r = sss.kernel_radius(sss.VARIANCES_MM2[-1], texel, 4.0)
-        inner = (slice(r, 128 - r), slice(r, 128 - r))
-        assert np.abs(a - b)[inner].max() < tolerance, (method, texel)
+        r = int(np.ceil(4 * np.sqrt(7.41) / texel))
+        pixels = rng.integers(r, n - r, (40, 2))
+        b, _ = _direct_blur(E, texel, pixels)
+        err = np.abs(a[pixels[:, 0], pixels[:, 1]] - b).max()
+        assert err < tolerance, (method, texel, err)
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -66,15 +83,13 @@ def test_blur_gradients(x64, method):
 # ------------------------------------------------------------------ Kelemen
 
 
-def test_kelemen_by_hand_and_reciprocity(x64):
+def test_kelemen_at_normal_incidence_by_hand(x64):
+    """L = V = N: tan α = 0, P_H = 1/m², F = F0, |L + V|² = 4. (Off-normal, where Fresnel and
+    cos⁴α matter: test_references.py. Reciprocity is not tested: the formula is symmetric in
+    L and V by construction.)"""
     z = jnp.array([0.0, 0.0, 1.0])
-    # L = V = N: tan α = 0, P_H = 1/m², F = F0, |L + V|² = 4.
     np.testing.assert_allclose(kelemen.specular(z, z, z, 0.3, 0.18), 0.18 / 0.09 * 0.028 / 4,
-                               rtol=1e-12)
-    L, V = jnp.array([0.3, 0.1, 0.95]), jnp.array([-0.2, 0.4, 0.9])
-    L, V = L / jnp.linalg.norm(L), V / jnp.linalg.norm(V)
-    f = lambda a, b: kelemen.specular(z, a, b, 0.35, 1.0) / jnp.dot(z, a)  # noqa: E731
-    np.testing.assert_allclose(f(L, V), f(V, L), rtol=1e-12)
+                               rtol=1e-15)  # measured 0
 
 
 @pytest.mark.parametrize("case", ["ordinary", "grazing half vector", "rough", "smooth"])

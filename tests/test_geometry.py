@@ -47,7 +47,7 @@ def test_interpolation_of_a_linear_attribute_is_exact():
     got = interpolate(jnp.asarray(xy, jnp.float32), faces, r)
     ii, jj = np.nonzero(r.mask)
     np.testing.assert_allclose(np.asarray(got)[ii, jj], np.stack([jj + 0.5, ii + 0.5], 1),
-                               atol=1e-4)
+                               atol=1e-5)  # float32: measured 9.5e-7
 
 
 def test_cylindrical_projection_round_trips():

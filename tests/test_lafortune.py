@@ -18,18 +18,17 @@ def direction(theta_deg, phi_deg):
     return np.array([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)])
 
 
-def test_reciprocity_and_the_published_values(x64):
+def test_the_published_values_at_the_normal(x64):
+    """By hand, lobes written out from constants.md: normal incidence and exitance.
+    (Off-normal: test_references.py. Reciprocity is not tested: every term is a product
+    ux vx, uy vy, uz vz, symmetric by construction.)"""
     p = L.skin(jnp.float64)
-    rng = np.random.default_rng(0)
-    for _ in range(20):
-        u, v = direction(*rng.uniform([0, 0], [89, 360])), direction(*rng.uniform([0, 0], [89, 360]))
-        np.testing.assert_allclose(L.brdf(p, u, v), L.brdf(p, v, u), rtol=1e-14)
-    # By hand, lobes written out from constants.md: normal incidence and exitance.
     u = v = np.array([0.0, 0.0, 1.0])
     diffuse = np.array([0.428425, 0.301341, 0.331054]) / np.pi
     lobe1 = np.array([0.380123, 0.410559, 0.437367]) ** np.array([3.685044, 4.266495, 4.539742])
     lobe2 = np.array([0.857998, 0.703913, 0.573625]) ** np.array([64.208486, 63.919687, 43.809866])
-    np.testing.assert_allclose(L.brdf(p, u, v), diffuse + lobe1 + lobe2, rtol=1e-12)
+    np.testing.assert_allclose(L.brdf(p, u, v), diffuse + lobe1 + lobe2,
+                               rtol=2e-15)  # measured 2.2e-16
 
 
 def test_negative_base_is_clamped_to_zero_not_nan(x64):

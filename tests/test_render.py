@@ -97,11 +97,12 @@ def test_render_gradients_wrt_material_light_and_bump(small_hand):
     grads = jax.grad(loss)(sub)
     for k in keys:
         assert bool(jnp.all(jnp.isfinite(grads[k]))) and float(jnp.abs(grads[k]).sum()) > 0, k
-    # Gradient against central differences in melanin (float32 render: loose tolerance).
+    # Gradient against central differences in melanin (float32 render): measured 4.2e-6
+    # with eq. 5.7's colours, 3.5e-4 with the sRGB-encoded renders of branch `look`.
     h = 1e-2
     plus = loss({**sub, "material.melanin": sub["material.melanin"] + h})
     minus = loss({**sub, "material.melanin": sub["material.melanin"] - h})
-    np.testing.assert_allclose(grads["material.melanin"], (plus - minus) / (2 * h), rtol=2e-2)
+    np.testing.assert_allclose(grads["material.melanin"], (plus - minus) / (2 * h), rtol=4e-3)
 
 
 def test_view_sampling_gradient(x64):

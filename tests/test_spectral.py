@@ -28,7 +28,7 @@ def test_xyz_agrees_with_colour_sd_to_xyz(x64, patch, step, illuminant):
         / 100.0
     )
     got = np.asarray(spectral.to_xyz(jnp.asarray(values), grid))
-    np.testing.assert_allclose(got, expected, rtol=1e-3)
+    np.testing.assert_allclose(got, expected, rtol=6e-15)  # measured 6.3e-16
 
 
 @pytest.mark.parametrize("illuminant", spectral.ILLUMINANTS)
@@ -36,7 +36,7 @@ def test_perfect_white_is_rgb_white(illuminant):
     grid = spectral.Grid(step=10, illuminant=illuminant)
     rgb = spectral.to_rgb(jnp.ones(len(grid)), grid)
     assert rgb.dtype == jnp.float32
-    np.testing.assert_allclose(rgb, 1.0, rtol=1e-6)
+    np.testing.assert_allclose(rgb, 1.0, rtol=1e-6)  # float32: measured 3.6e-7
 
 
 def test_dark_skin_srgb_matches_colour(x64):
@@ -45,7 +45,9 @@ def test_dark_skin_srgb_matches_colour(x64):
     values = sd.copy().align(colour.SpectralShape(380, 780, 5)).values
     XYZ = colour.sd_to_XYZ(sd, CMFS, colour.SDS_ILLUMINANTS["D65"]) / 100
     expected = colour.XYZ_to_RGB(XYZ, "sRGB", apply_cctf_encoding=False)
-    np.testing.assert_allclose(spectral.to_rgb(jnp.asarray(values), grid), expected, atol=2e-3)
+    # Measured 1.9e-5: jaxskin scales each channel so a perfect white is exactly 1 (a change
+    # below 2e-4; the exact pipeline, white scaling included: test_references.py).
+    np.testing.assert_allclose(spectral.to_rgb(jnp.asarray(values), grid), expected, atol=2e-4)
 
 
 def test_conversion_is_one_matmul_under_jit_and_differentiable(x64):
