@@ -15,8 +15,6 @@ import sys
 import time
 from pathlib import Path
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
@@ -32,23 +30,11 @@ def scene_image(name: str, size: int) -> np.ndarray:
 
 
 def skin_grid(size: int) -> np.ndarray:
-    """(blood, melanin, size, size, 3): the Blinn hand over the GRID values of both."""
-    from jaxskin import render
-    from jaxskin.scene import load_scene
+    """(blood, melanin, size, size, 3): the Blinn hand over the GRID values of both
+    (`jaxskin.skin_grid`, the README's grid, here with the wrinkles)."""
+    from jaxskin.skin_grid import skin_grid as grid
 
-    scene = load_scene("hand", [f"camera.size={size}", "material.model=blinn"])
-    config, params = scene.config, scene.params
-    arrays = render.prepare(config).arrays
-
-    @jax.jit
-    def row(blood, melanins, arrays):
-        def one(m):
-            return render.render_prepared(
-                config, {**params, "material.melanin": m, "material.blood": blood}, arrays)
-        return jax.vmap(one)(melanins)
-
-    rows = [row(jnp.float32(b), jnp.asarray(GRID, jnp.float32), arrays) for b in GRID]
-    return np.clip(np.stack([np.asarray(r) for r in rows]), 0.0, 1.0)
+    return np.clip(grid(GRID, GRID, size=size, overrides=["view.mode=wrinkles"]), 0.0, 1.0)
 
 
 def contact_sheet(scenes: dict[str, np.ndarray], grid: np.ndarray, path: Path) -> None:

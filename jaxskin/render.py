@@ -40,8 +40,8 @@ from .scene import SceneConfig
 from .shading import blinn, lafortune, layered
 from .view import View, coverage, downsample, make_view, pad_index, sample
 
-__all__ = ["OUTPUTS", "Prepared", "albedo", "decode_srgb", "encode_srgb", "prepare", "render",
-           "render_prepared", "render_rgba"]
+__all__ = ["OUTPUTS", "Prepared", "albedo", "decode_srgb", "encode_srgb", "expose", "prepare",
+           "render", "render_prepared", "render_rgba"]
 
 OUTPUTS = ("display", "rgba", "linear_rgba")
 SHADOW_MAX = 2048  # texels across the shadow map, at most
@@ -114,8 +114,9 @@ def _visibility(config: SceneConfig, s: texture.TextureSetup, view: View):
 
 def render(config: SceneConfig, params: dict, output: str = "display"):
     """The image of a scene, float32. `output`: `"display"` `(H, W, 3)` display values
-    (clip to [0, 1]) over a black background; `"rgba"` `(H, W, 4)` display colour with
-    straight alpha = the mesh's coverage of each pixel (PNG's convention); `"linear_rgba"`
+    (clip to [0, 1]) over a black background: the linear image of any material model ×
+    2^`camera.exposure`, sRGB-encoded (the height mode: the height itself); `"rgba"`
+    `(H, W, 4)` display colour with straight alpha = the mesh's coverage of each pixel (PNG's convention); `"linear_rgba"`
     linear light premultiplied by alpha (OpenEXR's convention).
 
     With shadows, a concrete `light.direction` in `params` that differs from the static
@@ -171,7 +172,6 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
         colour = jnp.repeat(to_view(height[..., None]), 3, axis=-1)
     elif config.spectral is not None:
         colour = to_view(_cosmetics_texture(config, p, params, arrays, normals))
-        return _finish(colour, view_mask, k, output, linear=True)
     else:
         # Shade where the camera looks: the bumped normal map sampled into the view (fewer
         # samples than texels), in the object's frame (L and V turned by Rᵀ instead of
@@ -197,22 +197,39 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
         else:
             colour = lafortune.shade(params["material.lafortune"], N, L, V, ambient, light)
         colour = jnp.where(view_mask[..., None], colour, 0.0)
-    return _finish(colour, view_mask, k, output, linear=False)
+    if config.mode == "height":
+        return _finish(colour, view_mask, k, output, None)
+    # Every material model gives linear sRGB on one scale (`shading.blinn`'s docstring):
+    # averaged in linear light, exposed, then encoded.
+    return _finish(colour, view_mask, k, output, params["camera.exposure"])
 
 
-def _finish(samples, view_mask, k: int, output: str, linear: bool):
-    """Samples `(k H, k W, 3)` (black off the mesh) → the pixels `render` returns.
-    `linear`: the samples are linear light (the cosmetics model), averaged in linear light
-    and encoded; else display values (Blinn, Lafortune, height: the paper's colours),
-    averaged as they are, and decoded for a linear output."""
+def expose(linear, stops):
+    """The camera's exposure: `linear` × 2^`stops` (linear light, before encoding)."""
+    return linear * jnp.exp2(jnp.asarray(stops, jnp.result_type(linear)))
+
+
+def _finish(samples, view_mask, k: int, output: str, stops):
+    """Samples `(k H, k W, 3)` (black off the mesh) → the pixels `render` returns. With
+    `stops` (the exposure) the samples are linear light: averaged, exposed and encoded;
+    `None` (the height mode): display values, averaged as they are (decoded for a linear
+    output)."""
+    linear = stops is not None
+    if linear:
+        def exposed(image):
+            return expose(image, stops)
+    else:
+        def exposed(image):
+            return image
     if output == "display":
-        mean = downsample(samples, k)
+        mean = exposed(downsample(samples, k))
         return encode_srgb(mean) if linear else mean
     alpha = coverage(view_mask, k)[..., None]
     if output == "linear_rgba":
-        mean = downsample(samples if linear else decode_srgb(samples), k)
+        mean = exposed(downsample(samples, k)) if linear else downsample(
+            decode_srgb(samples), k)
         return jnp.concatenate([mean, alpha], axis=-1)
-    mean = downsample(samples, k)
+    mean = exposed(downsample(samples, k))
     covered = alpha > 0
     straight = jnp.where(covered, mean / jnp.where(covered, alpha, 1.0), 0.0)
     return jnp.concatenate([encode_srgb(straight) if linear else straight, alpha], axis=-1)
@@ -284,13 +301,14 @@ def decode_srgb(display):
 
 
 def albedo(config: SceneConfig, params: dict):
-    """The diffuse colour a glTF export carries: `(3,)` for Blinn (r_diffuse) and Lafortune
-    (ρd); for the cosmetics model the texture `(H, W, 3)` of the layers over the skin
-    (spectral, no SSS, no highlight), sRGB-encoded."""
+    """The diffuse colour a glTF export carries, sRGB-encoded (glTF's base colour): `(3,)`
+    for Blinn (the skin albedo) and Lafortune (ρd); for the cosmetics model the texture
+    `(H, W, 3)` of the layers over the skin (spectral, no SSS, no highlight)."""
     if config.material == "blinn":
-        return blinn.skin_colour(params["material.melanin"], params["material.blood"])
+        return encode_srgb(blinn.skin_colour(params["material.melanin"],
+                                             params["material.blood"]))
     if config.material == "lafortune":
-        return params["material.lafortune"].diffuse
+        return encode_srgb(params["material.lafortune"].diffuse)
     p = prepare(config)
     arrays = p.arrays
     flat = {**params, "light.ambient": jnp.float32(1.0), "light.intensity": jnp.float32(0.0)}

@@ -10,12 +10,16 @@ on `jaxskin render` (2-core CPU, float32):
 | hand, texture 4096², image 256² | 4.27 GB |
 | makeup (3 layers, 41 bands), texture 512², image 256² | 0.71 GB |
 | makeup, texture 1024², image 256² | 1.78 GB |
+| makeup (4 layers, 41 bands), texture 512² / 1024², image 256² | 0.68 / 1.78 GB |
+| the same at 81 bands (5 nm), 1024² | 1.76 GB |
+| face (no layers, 41 bands), 1024² | 0.83 GB |
 | hand, texture 256², image 1024² × supersample 4 (4096² samples) | 4.19 GB |
 
 which give 164, 182 and 227 bytes per texel at 1024², 2048² and 4096² (Blinn /
-Lafortune; growing with the size, so the model takes 280), 5.5 more per texel, band and
-(layer + 2) for the cosmetics model (taken as 8: the face covers part of its texture),
-220 bytes per image sample, over 0.45 GB of JAX itself; the model gives 0.99-1.39x each
+Lafortune; growing with the size, so the model takes 280); the cosmetics model adds a
+fixed amount per texel, 1640 bytes with layers and 200 without (its spectral work runs in
+chunks: the peak did not grow from 3 to 4 layers nor from 41 to 81 bands),
+220 bytes per image sample, over 0.45 GB of JAX itself; the model gives 0.99-1.42x each
 row (tests/test_cli.py checks it against this table). A sweep batches the whole render
 (vmap), so its variable part counts once per value. The model errs high rather than low;
 it is a guard against runs that cannot fit, not a forecast.
@@ -35,7 +39,7 @@ __all__ = ["available_bytes", "check_memory", "fit_brdf_bytes", "render_bytes"]
 
 BASE = 0.45e9
 PER_TEXEL = 280
-PER_TEXEL_BAND_LAYER = 8
+COSMETICS_PER_TEXEL = (200, 1640)  # bare skin, with layers
 PER_SAMPLE = 220
 FIT_BASE = 0.35e9
 PER_BRDF_VALUE = 120
@@ -47,8 +51,7 @@ def render_bytes(config, count: int = 1) -> float:
     per_texel = PER_TEXEL
     sp = config.spectral
     if sp is not None:
-        bands = len(sp.grid.wavelengths)
-        per_texel += PER_TEXEL_BAND_LAYER * bands * (len(sp.layers) + 2)
+        per_texel += COSMETICS_PER_TEXEL[bool(sp.layers)]
     width = config.image * config.supersample
     height = (config.image_height or config.image) * config.supersample
     return BASE + count * (texels * per_texel + width * height * PER_SAMPLE)

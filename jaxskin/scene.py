@@ -15,18 +15,21 @@ k_bump = 0.5                       # 0–1
 seed = 0
 [material]
 model = "blinn"                    # blinn | lafortune
-melanin = 0.2                      # Blinn (eq. 5.7): melanin, blood 0–1; specular 0–1;
+melanin = 0.2                      # Blinn: melanin, blood 0–1 (shading.blinn); specular 0–1;
 blood = 0.5                        #   shininess 0–10000
 specular = 0.2
 shininess = 100.0
 brdf = "skin"                      # Lafortune: the preset, or a JSON from jaxskin fit-brdf
 [light]
 direction = [0.0, 0.0, 1.0]        # toward the light, camera space (parallel light)
-ambient = 0.3                      # I_ambient
-intensity = 0.7                    # I_light
+ambient = 0.3                      # I_ambient: irradiance reaching every point
+intensity = 0.7                    # I_light: the light's irradiance at normal incidence
+                                   #   (units: a white matte surface facing the light shows
+                                   #   ambient + intensity, linear, before the exposure)
 shadows = false                    # a shadow map from the light (static: the direction above)
 [camera]
 projection = "orthographic"        # orthographic | perspective
+exposure = 0.0                     # stops: the linear image × 2^exposure, then sRGB
 size = 512                         # image pixels across
 height = 0                         # image pixels high; 0: square
 supersample = 2                    # 1–4 samples per pixel per axis (2: antialiased)
@@ -142,6 +145,7 @@ SCHEMA: dict[str, _Key] = {
     "camera.height": _Key(int, 0, 0, 8192),
     "camera.supersample": _Key(int, 2, 1, 4),
     "camera.fov": _Key(float, 30.0, 1.0, 120.0),
+    "camera.exposure": _Key(float, 0.0, -20.0, 20.0, param=True),
     "camera.rotate": _Key("vec3", (0.0, 0.0, 0.0)),
     "view.mode": _Key(str, "wrinkles", choices=("wrinkles", "overview", "height")),
     "skin.subject": _Key(int, 1, 1, 100),

@@ -3,7 +3,7 @@
 The skin under the cosmetics is a measured spectrum, the NIST reference set of human skin
 reflectance (Cooksey, Allen, Tsai, J. Res. NIST 122:26, 2017; 100 subjects, inner forearm,
 diffuse reflectance factor), subject `subject`'s mean of three readings. We use measured
-spectra rather than Bando's melanin/blood RGB model (eq. 5.7) because the KM layering is
+spectra rather than the melanin/blood RGB model (`shading.blinn`) because the KM layering is
 spectral: an RGB skin colour has no spectrum to put under a cosmetic, and a made-up one
 would put the error where the cosmetics scientist looks.
 

@@ -20,6 +20,8 @@ sys.path.insert(0, str(ROOT / "data"))
 import make_measurements  # noqa: E402  (the example generator, with its true S and K)
 
 WL = np.arange(380.0, 781.0, 5.0)
+FOUNDATION_MM = list(make_measurements.PRODUCTS["foundation_beige"][2])  # 3 and 10 µm
+LIPSTICK_MM = list(make_measurements.PRODUCTS["lipstick_red"][2])  # 3 and 10 µm
 
 
 def synthetic(S, K, thicknesses, Rg, noise=0.0, seed=0, name="synthetic"):
@@ -57,7 +59,7 @@ WHITE = np.full_like(WL, 0.88)
 @pytest.mark.parametrize("background", ["black", "white"])
 def test_noiseless_closed_form_and_lm_agree_with_the_truth(background):
     S, K = make_measurements.true_spectra("foundation_beige")
-    m = synthetic(S, K, [0.05, 0.15], BLACK if background == "black" else WHITE)
+    m = synthetic(S, K, FOUNDATION_MM, BLACK if background == "black" else WHITE)
     S_cf, K_cf = fkm.closed_form(m)
     np.testing.assert_allclose(S_cf, S, rtol=1e-6)
     np.testing.assert_allclose(K_cf, K, rtol=1e-6)
@@ -69,15 +71,17 @@ def test_noiseless_closed_form_and_lm_agree_with_the_truth(background):
 
 
 def test_noisy_round_trip_recovers_s_and_k_and_beats_the_closed_form():
-    """σ = 0.001 reflectance noise: S and K within 10 % (median 3 %) on every band; the LM fit
-    reproduces the data at the noise level and never worse than the closed form."""
+    """σ = 0.001 reflectance noise: S and K within 15 % (median 3 %) on every band; the LM fit
+    reproduces the data at the noise level and never worse than the closed form. Measured
+    (seed 3): max 8.8 % (S) and 9.8 % (K), at the blue end where K/S is largest; median
+    0.5 % and 0.9 %."""
     S, K = make_measurements.true_spectra("foundation_beige")
-    m = synthetic(S, K, [0.05, 0.15], BLACK, noise=0.001, seed=3)
+    m = synthetic(S, K, FOUNDATION_MM, BLACK, noise=0.001, seed=3)
     r = fkm.fit(m, noise=0.001)
     assert r.converged and r.identifiable.all()
     for got, true in ((r.S_per_mm, S), (r.K_per_mm, K)):
         err = np.abs(got / true - 1)
-        assert err.max() < 0.10 and np.median(err) < 0.03, (err.max(), np.median(err))
+        assert err.max() < 0.15 and np.median(err) < 0.03, (err.max(), np.median(err))
     assert 0.0005 < r.rmse < 0.0015
     S_cf, K_cf = fkm.closed_form(m)
     ok = np.isfinite(S_cf)
@@ -86,16 +90,18 @@ def test_noisy_round_trip_recovers_s_and_k_and_beats_the_closed_form():
 
 def test_smoothing_prior_reduces_roughness_without_losing_the_fit():
     S, K = make_measurements.true_spectra("foundation_beige")
-    m = synthetic(S, K, [0.05, 0.15], BLACK, noise=0.002, seed=5)
+    m = synthetic(S, K, FOUNDATION_MM, BLACK, noise=0.002, seed=5)
 
     def roughness(x):
         return np.sum(np.diff(np.log(x)) ** 2)
 
-    # Measured (seeds 5, 6): W = 50 halves the roughness, K's median error falls from
-    # 1.4-1.6 % to 0.8 %, the rmse rises from 1.1e-3 to 1.4e-3.
-    plain, smooth = fkm.fit(m), fkm.fit(m, smooth=50.0)
+    # Measured (seeds 5, 6) on the 3 and 10 µm beige films: W = 20 cuts the roughness of
+    # log S to 0.34 / 0.18 and of log K to 0.79 / 0.72 of the plain fit's (K is steep at the
+    # blue end), K's median error falls from 1.8-2.1 % to 1.3-1.5 %, the rmse rises from
+    # 1.07e-3 to 1.24-1.28e-3 (W = 50 smooths more but costs 1.7x the rmse).
+    plain, smooth = fkm.fit(m), fkm.fit(m, smooth=20.0)
     assert roughness(smooth.S_per_mm) < 0.6 * roughness(plain.S_per_mm)
-    assert roughness(smooth.K_per_mm) < 0.8 * roughness(plain.K_per_mm)  # K is steep: 0.69
+    assert roughness(smooth.K_per_mm) < 0.85 * roughness(plain.K_per_mm)
     assert smooth.rmse < 1.5 * plain.rmse
     err_plain = np.median(np.abs(plain.K_per_mm / K - 1))
     err_smooth = np.median(np.abs(smooth.K_per_mm / K - 1))
@@ -104,7 +110,7 @@ def test_smoothing_prior_reduces_roughness_without_losing_the_fit():
 
 def test_opaque_bands_are_flagged_filled_from_neighbours_and_keep_r_inf():
     S, K = make_measurements.true_spectra("lipstick_red")
-    m = synthetic(S, K, [0.1, 0.3], BLACK, noise=0.001, seed=7)
+    m = synthetic(S, K, LIPSTICK_MM, BLACK, noise=0.001, seed=7)
     r = fkm.fit(m, noise=0.001)
     assert r.converged
     assert np.all(np.isfinite(r.S_per_mm)) and np.all(np.isfinite(r.K_per_mm))
@@ -172,7 +178,11 @@ def test_cli_writes_material_and_report(tmp_path, capsys):
 def test_cli_bad_file_writes_nothing_and_exits_2(tmp_path):
     good = ROOT / "data" / "measurements" / "foundation_beige.csv"
     bad = tmp_path / "bad.csv"
-    bad.write_text(good.read_text().replace("0.4638", "x"))
+    lines = good.read_text().splitlines(keepends=True)
+    header = next(i for i, line in enumerate(lines) if line.startswith("wavelength_nm"))
+    cells = lines[header + 1].split(",")
+    lines[header + 1] = ",".join([cells[0], cells[1], "x", *cells[3:]])  # R at 10 µm
+    bad.write_text("".join(lines))
     out = tmp_path / "out"
     proc = subprocess.run(
         [sys.executable, "-m", "jaxskin.cli", "calibrate", str(good), str(bad), "-o", str(out)],
@@ -182,7 +192,7 @@ def test_cli_bad_file_writes_nothing_and_exits_2(tmp_path):
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in proc.stderr
-    assert lines[0].startswith(f"jaxskin: error: {bad}:4: column 'R_0.15mm'")
+    assert lines[0].startswith(f"jaxskin: error: {bad}:{header + 2}: column 'R_0.01mm'")
     assert not out.exists()
 
 
@@ -211,9 +221,9 @@ def test_cli_instrument_export_coverage_and_extrapolation(tmp_path, capsys):
     S0, K0 = make_measurements.true_spectra("foundation_beige")
     S, K = np.interp(wl, WL, S0), np.interp(wl, WL, K0)
     Rg = np.full_like(wl, 0.04)
-    R, R_inf = make_measurements.simulate(S, K, [0.05, 0.15], Rg)
+    R, R_inf = make_measurements.simulate(S, K, FOUNDATION_MM, Rg)
     lines = ["Instrument: FieldSpec 4", "Integration time: 136 ms", "",
-             "Wavelength\tR_0.05mm\tR_0.15mm\tR_inf\tR_g"]
+             "Wavelength\t" + "\t".join(f"R_{x:g}mm" for x in FOUNDATION_MM) + "\tR_inf\tR_g"]
     lines += ["\t".join(f"{v:.6g}" for v in (w / 1000, *(100 * R[:, i]), 100 * R_inf[i],
                                               100 * Rg[i])) for i, w in enumerate(wl)]
     src = tmp_path / "export.csv"
@@ -235,7 +245,8 @@ def test_cli_instrument_export_coverage_and_extrapolation(tmp_path, capsys):
     assert doc["extrapolate"] == "linear" and doc["wavelength_nm"][0] == 400
     m = cosmetics.load_material(tmp_path / "b" / "export.json", grid)
     assert m.extrapolated.sum() == 10  # 380, 390 and 710, ..., 780
-    # The fit itself, from 6-digit µm/percent text: the true S (measured: within 3.3e-6).
+    # The fit itself, from 6-digit µm/percent text: the true S (measured: within 1.2e-5 on
+    # the 3 and 10 µm films).
     assert np.max(np.abs(np.asarray(doc["S_per_mm"]) / S - 1)) < 3e-5
 
 
@@ -265,7 +276,7 @@ def test_without_the_prior_each_band_is_its_own_problem():
     """Corrupting one band's data leaves every other band's S and K bit for bit the same;
     with the prior its neighbours move (so the check can fail)."""
     S, K = make_measurements.true_spectra("foundation_beige")
-    m = synthetic(S, K, [0.05, 0.15], BLACK, noise=0.002, seed=11)
+    m = synthetic(S, K, FOUNDATION_MM, BLACK, noise=0.002, seed=11)
     R = m.R.copy()
     R[:, 40] = np.clip(R[:, 40] * 0.8, 0, 1)
     bent = dataclasses.replace(m, R=R)
@@ -312,7 +323,7 @@ def test_gradient_and_stationarity_against_the_dense_residuals(smooth):
     import jax.numpy as jnp
 
     S, K = make_measurements.true_spectra("lipstick_red")
-    m = synthetic(S, K, [0.1, 0.3], BLACK, noise=0.001, seed=7)  # unidentifiable bands too
+    m = synthetic(S, K, LIPSTICK_MM, BLACK, noise=0.001, seed=7)  # unidentifiable bands too
     ident = fkm.identifiable(m, 0.001)
     assert not ident.all() and ident.any()
     r = fkm.fit(m, smooth=smooth, noise=0.001)
@@ -343,17 +354,18 @@ def test_ten_thousand_bands(smooth):
     wl = np.linspace(380.0, 780.0, 10_001)
     S0, K0 = make_measurements.true_spectra("foundation_beige")
     S, K = np.interp(wl, WL, S0), np.interp(wl, WL, K0)
-    m = dataclasses.replace(synthetic(S0, K0, [0.05, 0.15], BLACK), wavelength_nm=wl,
+    m = dataclasses.replace(synthetic(S0, K0, FOUNDATION_MM, BLACK), wavelength_nm=wl,
                             R_g=np.full_like(wl, 0.04),
-                            R=make_measurements.simulate(S, K, [0.05, 0.15], 0.04)[0],
-                            R_inf=make_measurements.simulate(S, K, [0.05, 0.15], 0.04)[1])
+                            R=make_measurements.simulate(S, K, FOUNDATION_MM, 0.04)[0],
+                            R_inf=make_measurements.simulate(S, K, FOUNDATION_MM, 0.04)[1])
     fkm.fit(m, smooth=smooth)  # compiles
     t0 = time.perf_counter()
     r = fkm.fit(m, smooth=smooth)
     assert time.perf_counter() - t0 < 10.0
     assert r.converged and r.identifiable.all()
-    # Measured: 1.5e-9 without the prior; 6.8e-5 with it (the prior pulls a little).
-    tol = 1e-8 if smooth == 0 else 5e-4
+    # Measured on the 3 and 10 µm beige films: under 1e-8 without the prior; 1.2e-3 with it
+    # (the prior pulls a little, most at the blue end where K/S is steepest).
+    tol = 1e-8 if smooth == 0 else 5e-3
     assert np.max(np.abs(r.S_per_mm / S - 1)) < tol
 
 
@@ -398,7 +410,7 @@ def test_render_refuses_a_material_that_does_not_cover_the_grid(tmp_path, capsys
     doc = {"wavelength_nm": [400, 550, 700], "S_per_mm": [5, 5, 5], "K_per_mm": [1, 1, 1]}
     (tmp_path / "narrow.json").write_text(json.dumps(doc))
     scene = (ROOT / "data" / "scenes" / "makeup.toml").read_text().replace(
-        'material = "foundation_beige"', 'material = "narrow.json"', 1)
+        'material = "foundation_light"', 'material = "narrow.json"', 1)
     (tmp_path / "s.toml").write_text(scene)
     out = tmp_path / "out"
     assert main(["render", str(tmp_path / "s.toml"), "-o", str(out)]) == 2

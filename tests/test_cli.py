@@ -166,13 +166,14 @@ def test_wheel_installs_and_renders_from_an_empty_folder(tmp_path):
 
 
 # Peak resident bytes of `jaxskin render` measured with /usr/bin/time -v (the table in
-# jaxskin/resources.py); the model must stay within 0.9-1.5x of each (it gave 0.99-1.39x).
+# jaxskin/resources.py); the model must stay within 0.9-1.5x of each (it gives 0.99-1.42x).
 MEASURED_PEAKS = [
     ("hand", ["texture.size=1024", "camera.size=256"], 0.636e9),
     ("hand", ["texture.size=2048", "camera.size=256"], 1.228e9),
     ("hand", ["texture.size=4096", "camera.size=256"], 4.275e9),
-    ("makeup", ["texture.size=512", "camera.size=256"], 0.710e9),
-    ("makeup", ["texture.size=1024", "camera.size=256"], 1.780e9),
+    ("makeup", ["texture.size=512", "camera.size=256"], 0.683e9),  # 4 layers
+    ("makeup", ["texture.size=1024", "camera.size=256"], 1.776e9),
+    ("face", ["texture.size=1024", "camera.size=256"], 0.826e9),
     ("hand", ["texture.size=256", "camera.size=1024", "camera.supersample=4"], 4.194e9),
 ]
 

@@ -93,7 +93,7 @@ def test_highlights_bottom_to_top(x64, three_materials):
 
 @pytest.mark.parametrize("sss_on", ["true", "false"])
 def test_zero_thickness_gives_exactly_the_no_makeup_image(sss_on):
-    zero = [f"layer.{n}.thickness_mm=0" for n in ("foundation", "blush", "lipstick")]
+    zero = [f"layer.{layer.name}.thickness_mm=0" for layer in load_scene("makeup").layers]
     common = [*SMALL, f"sss.enabled={sss_on}"]
     made_up = load_scene("makeup", common + zero)
     bare = load_scene("face", common)

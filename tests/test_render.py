@@ -23,11 +23,11 @@ def unit(v):
 
 def test_blinn_flat_plane_by_hand():
     """Light = view = (0, 0, 1) on a flat plane: cos θ = cos γ = 1, so by eq. 4.12 with the
-    paper's defaults c = 0.3 r + 0.7 r + 0.7 × 0.2 = r + 0.14."""
+    paper's defaults c = 0.3 r + 0.7 r + 0.7 × 0.2 = r + 0.14 (r, the skin albedo, is
+    checked on its own in tests/test_skin_colour.py)."""
     z = np.array([0.0, 0.0, 1.0])
     c = blinn.shade(z, z, z, 0.2, 0.5, 0.2, 100.0)
-    r = np.array([0.97, 0.87, 0.67]) - 0.2 * np.array([0.69, 0.71, 0.90]) - 0.5 * np.array(
-        [0.0, 0.24, 0.24])
+    r = np.asarray(blinn.skin_colour(0.2, 0.5))
     np.testing.assert_allclose(c, r + 0.14, rtol=1e-6)
     # Light from the side (60°): cos θ = 0.5, H halfway: cos γ = cos 30°.
     L = unit([np.sin(np.pi / 3), 0, 0.5])
@@ -46,7 +46,8 @@ def test_lafortune_shade_matches_the_brdf_in_the_local_frame(x64):
     b = np.cross(N, t)
     local = lambda w: np.array([w @ t, w @ b, w @ N])  # noqa: E731
     f = lafortune.brdf(p, local(L), local(V))
-    expected = 0.3 * np.asarray(p.diffuse) + 0.7 * np.asarray(f) * (N @ L)
+    # Eq. 4.16 on Blinn's scale: π f, so that f = ρd/π gives ρd cos θ (shading.lafortune).
+    expected = 0.3 * np.asarray(p.diffuse) + np.pi * 0.7 * np.asarray(f) * (N @ L)
     np.testing.assert_allclose(lafortune.shade(p, N, L, V), expected, rtol=1e-12)
 
 
@@ -196,14 +197,17 @@ def test_output_files_get_ordinary_permissions(tmp_path):
 
 def test_perspective_and_supersampling_render():
     """Perspective renders; 2×2 supersampling gives edge pixels partial coverage: darker
-    than any covered pixel of the aliased render (ambient alone is ~0.3 r)."""
+    than any covered pixel of the aliased render (ambient alone is ~0.3 r), in linear light
+    (the images are sRGB-encoded)."""
     base = ["texture.size=96", "camera.size=40", "camera.projection=perspective",
             "camera.rotate=[20.0, 0.0, 0.0]"]
     images = {}
     for k in (1, 2):
         sc = load_scene("foot", [*base, f"camera.supersample={k}"])
-        images[k] = np.asarray(render.render(sc.config, sc.params))
-        assert images[k].shape == (40, 40, 3) and np.all(np.isfinite(images[k]))
+        display = np.asarray(render.render(sc.config, sc.params), np.float64)
+        assert display.shape == (40, 40, 3) and np.all(np.isfinite(display))
+        images[k] = np.where(display > 0.04045, ((display + 0.055) / 1.055) ** 2.4,
+                             display / 12.92)
     covered = images[1].sum(-1) > 0
     assert 0.05 < covered.mean() < 0.9
     darkest_aliased = images[1].sum(-1)[covered].min()

@@ -66,9 +66,14 @@ def positive_power(base, n):
 
 
 def shade(p: Lafortune, N, L, V, ambient=0.3, light=0.7):
-    """Bando 2001 eq. 4.16: c = I_ambient ρd + I_light f(L, V) cos θ, in the local frame of
-    the (bumped) normal N. Isotropic lobes need no tangent frame: uz vz = (N·L)(N·V) and
-    ux vx + uy vy = L·V − (N·L)(N·V). The ambient reflectance is ρd (the paper's D).
+    """Bando 2001 eq. 4.16 on Blinn's scale: c = I_ambient ρd + π f(L, V) I_light cos θ,
+    in the local frame of the (bumped) normal N. The paper writes I_light f cos θ; with
+    f in 1/sr that is a factor π darker than Blinn's I_light r cos θ for the same albedo
+    (f = ρd/π for a Lambertian surface), so we multiply by π: linear sRGB in the units of
+    `blinn` (a white Lambertian facing the light gives I_ambient + I_light), and with the
+    lobes off and ρd = r the two models agree exactly. Isotropic lobes need no tangent
+    frame: uz vz = (N·L)(N·V) and ux vx + uy vy = L·V − (N·L)(N·V). The ambient
+    reflectance is ρd (the paper's D).
 
     **Arguments:** `N (..., 3)` unit normals, `L`, `V` unit vectors to light and viewer
     (broadcastable), `ambient`, `light`: I_ambient and I_light. **Returns:** `(..., 3)`.
@@ -77,7 +82,7 @@ def shade(p: Lafortune, N, L, V, ambient=0.3, light=0.7):
     cos_v = jnp.sum(N * V, axis=-1)
     zz = cos_l * cos_v
     f = _evaluate(p, jnp.sum(L * V, axis=-1) - zz, zz)
-    return ambient * p.diffuse + light * f * jnp.maximum(cos_l, 0.0)[..., None]
+    return ambient * p.diffuse + (math.pi * light) * f * jnp.maximum(cos_l, 0.0)[..., None]
 
 
 def skin(dtype=jnp.float32) -> Lafortune:
