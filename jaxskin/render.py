@@ -116,8 +116,9 @@ def render(config: SceneConfig, params: dict, output: str = "display"):
     """The image of a scene, float32. `output`: `"display"` `(H, W, 3)` display values
     (clip to [0, 1]) over a black background: the linear image of any material model ×
     2^`camera.exposure`, sRGB-encoded (the height mode: the height itself); `"rgba"`
-    `(H, W, 4)` display colour with straight alpha = the mesh's coverage of each pixel (PNG's convention); `"linear_rgba"`
-    linear light premultiplied by alpha (OpenEXR's convention).
+    `(H, W, 4)` display colour with straight alpha = the mesh's coverage of each pixel
+    (PNG's convention); `"linear_rgba"` linear light (exposed) premultiplied by alpha
+    (OpenEXR's convention).
 
     With shadows, a concrete `light.direction` in `params` that differs from the static
     configuration's gets its own shadow map (made here, outside any trace); a traced one
