@@ -67,6 +67,29 @@ def test_shadow_edge_of_a_floating_square_where_geometry_puts_it(size):
     assert not shadowed[np.asarray(tmap.raster.mask) & ~on_floor].any()  # the occluder: lit
 
 
+def test_a_close_occluder_casts_a_shadow_that_touches_it():
+    """The bias must not lift a shadow off its occluder (peter-panning): the same square
+    0.06 above the floor. By hand: a floor point is shadowed when x + t ∈ [-0.2, 0.2] with
+    0.5 t = 0.06, so x ∈ [-0.32, 0.08]; the floor sees x ∈ [-0.32, -0.2] of it (5.5 texels
+    at 96), where the occluder lies 0.12 |(1, 0, 0.5)| = 0.134 toward the light. The bias
+    there is (1.5 + tan 63.4°) shadow texels = 0.038 (a shadow texel is 1/92 here), a
+    quarter of the gap; ten times it (0.18) lights the whole strip."""
+    size = 96
+    mesh = _mesh([FLOOR, _grid(-0.2, 0.2, -0.2, 0.2, 0.06, 2)])
+    tmap = project("planar", mesh, size)
+    smap = shadow.shadow_map(mesh.vertices, mesh.faces, LIGHT, 2 * size)
+    lit = shadow.visibility(mesh.vertices, mesh.faces, mesh.normals, tmap.raster, smap)
+    scale = (tmap.xy[1, 0] - tmap.xy[0, 0]) / (mesh.vertices[1, 0] - mesh.vertices[0, 0])
+    j, i = np.meshgrid(np.arange(size) + 0.5, np.arange(size) + 0.5, indexing="xy")
+    x, y = (j - size / 2) / scale, (size / 2 - i) / scale
+    on_floor = np.asarray(tmap.raster.mask) & ~((np.abs(x) < 0.2) & (np.abs(y) < 0.2))
+    outside = np.maximum(np.maximum(-0.32 - x, x - 0.08), np.maximum(-0.2 - y, y - 0.2)) * scale
+    deep = on_floor & (outside < -1)
+    assert deep.sum() > 50  # the strip between the occluder's edge and the shadow's
+    assert (lit[deep] < 0.5).all()
+    assert not (lit[on_floor & (outside > 1)] < 0.5).any()
+
+
 def test_a_convex_body_does_not_shadow_itself():
     """A sphere: every point facing the light is lit (bias enough against acne), every
     point facing away is behind the lit side."""
