@@ -13,10 +13,11 @@ test selection with pytest, and restores the file; a mutant is killed when the s
 fails. Before the mutants, every selection must pass on the unchanged copy. The kill rate
 and the survivors are printed and written to the `mutation` section of RESULTS.md.
 
-Not in the list yet, because other work is rewriting that code: Blinn's skin colour
-(eq. 5.7), the bump-normal formula and texture-space frames, the light scale and exposure
-of the Blinn and Lafortune renders, shadows, the shipped materials' numbers. Add mutants
-for them once those changes are merged.
+Since the merge of the rewritten look (Blinn's skin colour in optical density, bump
+normals in the surface frame, one radiometric scale, exposure, shadows, texture padding)
+the list covers that code too: ids starting `blinn-`, `bump-`, `scale-`, `shadow-`, `pad-`.
+Not in the list yet: the shipped materials' and cosmetics' colour targets (data/materials),
+whose numbers are data rather than one line of code.
 """
 
 from __future__ import annotations
@@ -43,6 +44,10 @@ class Mutant(NamedTuple):
 
 REF = "tests/test_references.py"
 GRAD = "tests/test_gradients.py"
+RAD = "tests/test_radiometry.py"
+BUMP = "tests/test_bump_frames.py"
+SHADOW = "tests/test_shadow.py"
+VIEW = "tests/test_view.py"
 
 
 def _k(path, expr):
@@ -198,6 +203,80 @@ MUTANTS = [
            'jnp.einsum("hwk,hwkc->hwc", bary, values)',
            'jnp.einsum("hwk,hwkc->hwc", bary[..., ::-1], values)',
            _k("tests/test_geometry.py", "linear_attribute")),
+    # ---- Blinn's skin colour in optical density (shading/blinn.py, data/make_skin_colour.py)
+    Mutant("blinn-melanin-red-density-1.56-to-1.0", "jaxskin/shading/blinn.py",
+           "A_MELANIN = (1.5581,", "A_MELANIN = (1.0,", _k(RAD, "published_data")),
+    Mutant("blinn-blood-green-density-dropped", "jaxskin/shading/blinn.py",
+           "A_BLOOD = (0.0000, 0.2759,", "A_BLOOD = (0.0000, 0.0,", _k(RAD, "published_data")),
+    Mutant("blinn-blood-brightens", "jaxskin/shading/blinn.py",
+           "a_m - blood[..., None] * a_b)", "a_m + blood[..., None] * a_b)",
+           _k(RAD, "published_data")),
+    # ---- bump normals in the surface frame (bump.py, projection.py, texture.py) and eq. 4.10
+    Mutant("bump-general-form-tilts-toward-gradient", "jaxskin/bump.py",
+           "n - k_bump * g, 0.0))", "n + k_bump * g, 0.0))", _k(BUMP, "cylindrical_bump")),
+    Mutant("bump-t-down-not-up", "jaxskin/bump.py",
+           "ht = jnp.pad(h[:-1, :] - h[1:, :],", "ht = jnp.pad(h[1:, :] - h[:-1, :],",
+           _k(BUMP, "cylindrical_bump")),
+    Mutant("bump-eq-4.10-second-cross-reversed", "jaxskin/bump.py",
+           "b = jnp.cross(jnp.stack([nz, zero, -nx], axis=-1), n)",
+           "b = jnp.cross(n, jnp.stack([nz, zero, -nx], axis=-1))",
+           _k(BUMP, "planar_gradients")),
+    Mutant("bump-seam-not-wrapped-in-height-gradient", "jaxskin/bump.py",
+           "    if wrap_s:\n        hs = jnp.roll", "    if False:\n        hs = jnp.roll",
+           _k(BUMP, "cylindrical_bump")),
+    Mutant("bump-gradients-t-sign-not-flipped", "jaxskin/projection.py",
+           "return J * np.array([1.0, -1.0])[None, :, None]",
+           "return J * np.array([1.0, 1.0])[None, :, None]", _k(BUMP, "cylindrical_bump")),
+    Mutant("bump-cylindrical-ds-dz-sign", "jaxskin/projection.py",
+           "M[:, 0, 0], M[:, 0, 2], M[:, 1, 1] = c, -n, -1.0",
+           "M[:, 0, 0], M[:, 0, 2], M[:, 1, 1] = c, n, -1.0", _k(BUMP, "cylindrical_bump")),
+    Mutant("bump-render-seam-wrap-off", "jaxskin/texture.py",
+           "frame[\"grad_t\"], wrap_s=wrap_s)}", "frame[\"grad_t\"], wrap_s=False)}",
+           _k(BUMP, "all_round")),
+    Mutant("bump-furrows-read-not-wrapped-at-seam", "jaxskin/wrinkles.py",
+           "px = (pi[:, 0] - pad) % W + pad if wrap else pi[:, 0]", "px = pi[:, 0]",
+           _k(BUMP, "cross_the_cylinder_seam")),
+    Mutant("bump-furrows-seam-copy-shifted-wrong-way", "jaxskin/wrinkles.py",
+           "shift = jnp.where(c0 < 0, W, jnp.where(c0 + 2 * R + 1 > W, -W, 0))",
+           "shift = jnp.where(c0 < 0, -W, jnp.where(c0 + 2 * R + 1 > W, W, 0))",
+           _k(BUMP, "cross_the_cylinder_seam")),
+    # ---- the one radiometric scale (shading/lafortune.py shade, render.py expose)
+    Mutant("scale-lafortune-pi-dropped", "jaxskin/shading/lafortune.py",
+           "(math.pi * light) * f", "light * f", _k(RAD, "without_lobes")),
+    Mutant("scale-lafortune-ambient-over-pi", "jaxskin/shading/lafortune.py",
+           "return ambient * p.diffuse + (math.pi",
+           "return ambient * p.diffuse / math.pi + (math.pi",
+           _k(RAD, "without_lobes")),
+    Mutant("scale-exposure-e-not-2", "jaxskin/render.py",
+           "return linear * jnp.exp2(", "return linear * jnp.exp(",
+           _k(RAD, "exposure_in_the_cosmetics")),
+    Mutant("scale-exposure-sign", "jaxskin/render.py",
+           "jnp.exp2(jnp.asarray(stops,", "jnp.exp2(-jnp.asarray(stops,",
+           _k(RAD, "exposure_in_the_cosmetics")),
+    # ---- shadows (shadow.py)
+    Mutant("shadow-bias-x10", "jaxskin/shadow.py", "BIAS = 1.5", "BIAS = 15.0",
+           _k(SHADOW, "floating_square or convex or close_occluder")),
+    Mutant("shadow-lit-comparison-flipped", "jaxskin/shadow.py",
+           "(depth <= nearest + bias)", "(depth >= nearest + bias)",
+           _k(SHADOW, "floating_square or convex or close_occluder")),
+    Mutant("shadow-bias-subtracted", "jaxskin/shadow.py",
+           "(depth <= nearest + bias)", "(depth <= nearest - bias)",
+           _k(SHADOW, "floating_square or convex or close_occluder")),
+    Mutant("shadow-light-direction-reversed", "jaxskin/shadow.py",
+           "w = w / np.linalg.norm(w)", "w = -w / np.linalg.norm(w)",
+           _k(SHADOW, "floating_square or convex or close_occluder")),
+    Mutant("shadow-slope-bias-cos-not-sin", "jaxskin/shadow.py",
+           "slope = np.sqrt(np.maximum(1 - cos * cos, 0.0)) / np.maximum(",
+           "slope = cos / np.maximum(", _k(SHADOW, "floating_square or convex or close_occluder")),
+    # ---- texture padding beyond the mesh (view.pad_index)
+    Mutant("pad-corners-before-edges", "jaxskin/view.py",
+           "steps.sort(key=lambda s: abs(s[0]) + abs(s[1]))",
+           "steps.sort(key=lambda s: -abs(s[0]) - abs(s[1]))", _k(VIEW, "pad_index")),
+    Mutant("pad-one-texel-short", "jaxskin/view.py",
+           "for _ in range(width):", "for _ in range(width - 1):", _k(VIEW, "pad_index")),
+    Mutant("pad-seam-not-wrapped", "jaxskin/view.py",
+           "src_filled = _shift(filled, dy, dx, wrap_x, False)",
+           "src_filled = _shift(filled, dy, dx, False, False)", _k(VIEW, "pad_index")),
 ]
 
 
@@ -325,9 +404,8 @@ def _write_results(rows, total) -> None:
               for m, k, s, _ in rows]
     survivors = [m.id for m, k, _, _ in rows if not k]
     lines += ["", "Survivors: " + (", ".join(survivors) if survivors else "none") + ".", "",
-              "To be added after merge (code being rewritten by other branches): Blinn's "
-              "skin colour, the bump-normal formula, the light scale of the Blinn and "
-              "Lafortune renders, shadows."]
+              "Not in the list yet: the shipped materials' and cosmetics' colour targets "
+              "(data/materials), data rather than one line of code."]
     write_section("mutation", "\n".join(lines) + "\n")
 
 
