@@ -57,6 +57,15 @@ class Prepared:
 
 @functools.lru_cache(maxsize=8)
 def prepare(config: SceneConfig) -> Prepared:
+    """The host-side work of a configuration, once: mesh, texture space, view, furrows and
+    the arrays `render` takes. Evaluated eagerly even when first asked for inside a trace
+    (`jit(lambda p: render(config, p))`): staged there, the cache would keep tracers that
+    leak into every later call."""
+    with jax.ensure_compile_time_eval():
+        return _prepare(config)
+
+
+def _prepare(config: SceneConfig) -> Prepared:
     s = texture.setup(config.texture)
     view = make_view(s.tmap, config.image, config.camera, config.supersample, config.fov,
                      config.rotate, config.image_height)
@@ -175,19 +184,12 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
         colour = to_view(_cosmetics_texture(config, p, params, arrays, normals))
     else:
         # Shade where the camera looks: the bumped normal map sampled into the view (fewer
-        # samples than texels), in the object's frame (L and V turned by Rᵀ instead of
-        # every normal by R: N·L = n·RᵀL).
+        # samples than texels), in the object's frame.
         n = to_view(normals)
         nn = jnp.sum(n * n, axis=-1, keepdims=True)
         N = jnp.where(nn > 0, n / jnp.sqrt(jnp.where(nn > 0, nn, 1.0)), 0.0)
-        R = jnp.asarray(p.view.R, jnp.float32)
-        d = params["light.direction"]
-        L = (d / jnp.linalg.norm(d)) @ R
-        if p.view.eye is None:
-            V = jnp.asarray([0.0, 0.0, 1.0], jnp.float32) @ R
-        else:
-            to_eye = jnp.asarray(p.view.eye, jnp.float32) - to_view(arrays["positions"]) @ R.T
-            V = (to_eye / jnp.linalg.norm(to_eye, axis=-1, keepdims=True)) @ R
+        L, V = _light_and_view(p.view, params["light.direction"], jnp.float32,
+                               lambda: to_view(arrays["positions"]))
         ambient, light = params["light.ambient"], params["light.intensity"]
         if "lit" in arrays:  # shadows: the direct light only where the light reaches
             light = light * arrays["lit"][..., None]
@@ -205,6 +207,18 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
     return _finish(colour, view_mask, k, output, params["camera.exposure"])
 
 
+def _light_and_view(view: View, direction, dtype, positions):
+    """Unit light and view directions in the object's frame (where the normals are): L and
+    V turned by Rᵀ instead of every normal by R, as N·L = n·RᵀL. Orthographic: one V;
+    perspective: a V per point, `positions()` giving the points (camera frame)."""
+    R = jnp.asarray(view.R, dtype)
+    L = (direction / jnp.linalg.norm(direction)) @ R
+    if view.eye is None:
+        return L, jnp.asarray([0.0, 0.0, 1.0], dtype) @ R
+    to_eye = jnp.asarray(view.eye, dtype) - positions() @ R.T
+    return L, (to_eye / jnp.linalg.norm(to_eye, axis=-1, keepdims=True)) @ R
+
+
 def expose(linear, stops):
     """The camera's exposure: `linear` × 2^`stops` (linear light, before encoding)."""
     return linear * jnp.exp2(jnp.asarray(stops, jnp.result_type(linear)))
@@ -216,12 +230,10 @@ def _finish(samples, view_mask, k: int, output: str, stops):
     `None` (the height mode): display values, averaged as they are (decoded for a linear
     output)."""
     linear = stops is not None
-    if linear:
-        def exposed(image):
-            return expose(image, stops)
-    else:
-        def exposed(image):
-            return image
+
+    def exposed(image):
+        return expose(image, stops) if linear else image
+
     if output == "display":
         mean = exposed(downsample(samples, k))
         return encode_srgb(mean) if linear else mean
@@ -251,14 +263,8 @@ def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: d
         return out.at[texels].set(values, unique_indices=True).reshape(*shape, -1)
 
     normals = to_list(normals)
-    R = jnp.asarray(p.view.R, normals.dtype)
-    d = params["light.direction"]
-    L = (d / jnp.linalg.norm(d)) @ R  # object frame, as the normals
-    if p.view.eye is None:
-        V = jnp.asarray([0.0, 0.0, 1.0], normals.dtype) @ R
-    else:  # texture-space positions: a view direction per texel
-        to_eye = jnp.asarray(p.view.eye, normals.dtype) - to_list(arrays["positions"]) @ R.T
-        V = (to_eye / jnp.linalg.norm(to_eye, axis=-1, keepdims=True)) @ R
+    L, V = _light_and_view(p.view, params["light.direction"], normals.dtype,
+                           lambda: to_list(arrays["positions"]))  # per texel
     light = params["light.intensity"]
     if "lit" in arrays:  # shadows, per texel: the blur below softens their edges
         light = light * arrays["lit"]
