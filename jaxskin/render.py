@@ -41,7 +41,7 @@ from .shading import blinn, lafortune, layered
 from .view import View, coverage, downsample, make_view, pad_index, sample
 
 __all__ = ["OUTPUTS", "Prepared", "albedo", "decode_srgb", "encode_srgb", "expose", "prepare",
-           "render", "render_prepared", "render_rgba"]
+           "render", "render_prepared"]
 
 OUTPUTS = ("display", "rgba", "linear_rgba")
 SHADOW_MAX = 2048  # texels across the shadow map, at most
@@ -134,11 +134,6 @@ def render(config: SceneConfig, params: dict, output: str = "display"):
     uses the configuration's (see `jaxskin.shadow`)."""
     config = _shadow_config(config, params)
     return _render(config, params, prepare(config).arrays, output)
-
-
-def render_rgba(config: SceneConfig, params: dict, linear: bool = False):
-    """`render` with alpha: `"linear_rgba"` if `linear`, else `"rgba"`."""
-    return render(config, params, "linear_rgba" if linear else "rgba")
 
 
 def render_prepared(config: SceneConfig, params: dict, arrays: dict,

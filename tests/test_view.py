@@ -63,8 +63,8 @@ def test_alpha_is_the_coverage_and_straight_colour_undoes_it():
     mask = render.prepare(sc.config).view.mask
     alpha = coverage(mask, 2)
     assert set(np.unique(alpha)) <= {0.0, 0.25, 0.5, 0.75, 1.0} and 0 < alpha.mean() < 1
-    rgba = np.asarray(render.render_rgba(sc.config, sc.params))
-    linear = np.asarray(render.render_rgba(sc.config, sc.params, linear=True))
+    rgba = np.asarray(render.render(sc.config, sc.params, "rgba"))
+    linear = np.asarray(render.render(sc.config, sc.params, "linear_rgba"))
     display = np.asarray(render.render(sc.config, sc.params))
     np.testing.assert_array_equal(rgba[..., 3], alpha)
     np.testing.assert_array_equal(linear[..., 3], alpha)
