@@ -29,6 +29,7 @@ import optimistix as optx
 
 from jaxskin import km
 from jaxskin.io import FitError, InputError
+from jaxskin.precision import einsum, matmul
 
 from .measurements import Measurement
 
@@ -176,8 +177,8 @@ def _normal_equations(y, args):
     pad = jnp.zeros((1, 2), y.dtype)
     g_prior = (jnp.concatenate([pad, diff]) - jnp.concatenate([diff, pad])) * jnp.stack(
         [ident, jnp.ones_like(ident)], -1)
-    g = jnp.einsum("nri,nr->ni", J, r) + prior**2 * g_prior
-    H = jnp.einsum("nri,nrj->nij", J, J)
+    g = einsum("nri,nr->ni", J, r) + prior**2 * g_prior
+    H = einsum("nri,nrj->nij", J, J)
     return 0.5 * (jnp.sum(r * r) + prior**2 * jnp.sum(diff**2)), g, H
 
 
@@ -197,7 +198,7 @@ def block_tridiagonal_solve(D, off, b):
         Dj, up, low, bj = block
         Dj = Dj - low[:, None] * C_prev
         inv = _inverse2(Dj)
-        C, d = inv * up[None, :], inv @ (bj - low * d_prev)
+        C, d = inv * up[None, :], matmul(inv, bj - low * d_prev)
         return (C, d), (C, d)
 
     init = (jnp.zeros((2, 2), D.dtype), jnp.zeros(2, D.dtype))
@@ -205,7 +206,7 @@ def block_tridiagonal_solve(D, off, b):
 
     def backward(x_next, block):
         Cj, dj = block
-        x = dj - Cj @ x_next
+        x = dj - matmul(Cj, x_next)
         return x, x
 
     _, x = jax.lax.scan(backward, jnp.zeros(2, D.dtype), (C, d), reverse=True)
@@ -241,7 +242,7 @@ def _solve_banded(y0, args, max_steps=256, rtol=1e-9, atol=1e-12):
         y, cost, g, H, mu, nu, k, done, ok = state
         D = H + (prior**2 * count + mu)[:, :, None] * jnp.eye(2, dtype=y.dtype)
         if y.shape[0] == 1:  # one band (the separable case): a 2×2 solve, no scan
-            delta = -(_inverse2(D[0]) @ g[0])[None]
+            delta = -matmul(_inverse2(D[0]), g[0])[None]
         else:
             delta = block_tridiagonal_solve(D, -prior**2 * links, -g)
         y_new = y + delta

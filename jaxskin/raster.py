@@ -17,6 +17,8 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
+from .precision import einsum
+
 __all__ = ["Raster", "interpolate", "rasterize", "unwrap_seam"]
 
 
@@ -117,5 +119,5 @@ def interpolate(attributes, faces, raster: Raster, empty=0.0):
     corners = jnp.asarray(np.asarray(faces))[safe]  # (H, W, 3)
     values = attributes[corners]  # (H, W, 3, C)
     bary = jnp.asarray(raster.bary, attributes.dtype)
-    out = jnp.einsum("hwk,hwkc->hwc", bary, values)
+    out = einsum("hwk,hwkc->hwc", bary, values)
     return jnp.where((tri >= 0)[..., None], out, empty)

@@ -35,6 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import cosmetics, formats, shadow, skin, sss, texture
+from .precision import matmul
 from .raster import interpolate
 from .scene import SceneConfig
 from .shading import blinn, lafortune, layered
@@ -207,11 +208,11 @@ def _light_and_view(view: View, direction, dtype, positions):
     V turned by Rᵀ instead of every normal by R, as N·L = n·RᵀL. Orthographic: one V;
     perspective: a V per point, `positions()` giving the points (camera frame)."""
     R = jnp.asarray(view.R, dtype)
-    L = (direction / jnp.linalg.norm(direction)) @ R
+    L = matmul(direction / jnp.linalg.norm(direction), R)
     if view.eye is None:
-        return L, jnp.asarray([0.0, 0.0, 1.0], dtype) @ R
-    to_eye = jnp.asarray(view.eye, dtype) - positions() @ R.T
-    return L, (to_eye / jnp.linalg.norm(to_eye, axis=-1, keepdims=True)) @ R
+        return L, matmul(jnp.asarray([0.0, 0.0, 1.0], dtype), R)
+    to_eye = jnp.asarray(view.eye, dtype) - matmul(positions(), R.T)
+    return L, matmul(to_eye / jnp.linalg.norm(to_eye, axis=-1, keepdims=True), R)
 
 
 def expose(linear, stops):

@@ -20,6 +20,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from .precision import matmul
+
 __all__ = ["ILLUMINANTS", "STEPS", "Grid", "resample", "to_rgb", "to_xyz"]
 
 STEPS = (1, 5, 10, 20)
@@ -122,13 +124,13 @@ def _rgb_matrix(start: int, stop: int, step: int, illuminant: str) -> np.ndarray
 def to_xyz(spectra: Float[ArrayLike, "*shape n"], grid: Grid) -> Float[Array, "*shape 3"]:
     """CIE XYZ (Y = 1 for a perfect reflector) of reflectance spectra sampled on `grid`."""
     spectra = jnp.asarray(spectra)
-    return spectra @ jnp.asarray(grid.xyz_matrix, dtype=_float(spectra))
+    return matmul(spectra, jnp.asarray(grid.xyz_matrix, dtype=_float(spectra)))
 
 
 def to_rgb(spectra: Float[ArrayLike, "*shape n"], grid: Grid) -> Float[Array, "*shape 3"]:
     """Linear sRGB of reflectance spectra sampled on `grid` (last axis = wavelength)."""
     spectra = jnp.asarray(spectra)
-    return spectra @ jnp.asarray(grid.rgb_matrix, dtype=_float(spectra))
+    return matmul(spectra, jnp.asarray(grid.rgb_matrix, dtype=_float(spectra)))
 
 
 def resample(values: ArrayLike, wavelengths: ArrayLike, grid: Grid) -> np.ndarray:

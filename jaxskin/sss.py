@@ -52,7 +52,7 @@ def _separable(image, kernel):
 
     def conv(x, kernel_shape):
         return jax.lax.conv_general_dilated(x, k.reshape(kernel_shape)[None, None], (1, 1),
-                                            "SAME")
+                                            "SAME", precision=jax.lax.Precision.HIGHEST)
 
     x = conv(conv(x, (1, 2 * r + 1)), (2 * r + 1, 1))
     return jnp.moveaxis(x[:, 0], 0, -1)

@@ -38,6 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import km
+from ..precision import matmul
 from ..spectral import Grid
 from . import kelemen
 
@@ -76,7 +77,7 @@ def radiance(grid: Grid, N, L, V, ambient, light, skin_R, skin_roughness, skin_r
     dtype = N.dtype
     to_rgb = jnp.asarray(grid.rgb_matrix, dtype)  # (n, 3)
     E = irradiance(N, L, ambient, light)[..., None]
-    skin_rgb = skin_R @ to_rgb
+    skin_rgb = matmul(skin_R, to_rgb)
     h = jnp.asarray(light)[..., None] * kelemen.specular(N, L, V, skin_roughness,
                                                         skin_rho)[..., None]  # white
     if X is None:
@@ -95,13 +96,13 @@ def radiance(grid: Grid, N, L, V, ambient, light, skin_R, skin_roughness, skin_r
     rgb_surface, xyz_da, xyz_dta = colours[..., :3], colours[..., 3:6], colours[..., 6:]
     to_xyz = jnp.asarray(grid.xyz_matrix, dtype)
     xyz_to_rgb = jnp.asarray(grid.xyz_to_rgb, dtype)
-    skin = E * (skin_rgb + xyz_da @ xyz_to_rgb)  # the colour of E a
-    xyz_a = skin_R @ to_xyz + xyz_da
+    skin = E * (skin_rgb + matmul(xyz_da, xyz_to_rgb))  # the colour of E a
+    xyz_a = matmul(skin_R, to_xyz) + xyz_da
     ok = xyz_a > 1e-12
     t1 = jnp.where(ok, xyz_dta / jnp.where(ok, xyz_a, 1.0), -1.0)  # t − 1, in [−1, 0]
     out = blur(skin)
     rgb_to_xyz = jnp.asarray(np.linalg.inv(grid.xyz_to_rgb), dtype)
-    return (rgb_surface + (out + (t1 * (out @ rgb_to_xyz)) @ xyz_to_rgb)) + h
+    return (rgb_surface + matmul(out + t1 * matmul(out, rgb_to_xyz), xyz_to_rgb)) + h
 
 
 def _spectra(X, E, h, h_l, S, K, skin_R):
@@ -129,9 +130,10 @@ def _joint(grid, blurred, *args):
     surface, da, dta = _spectra(*args)
     to_rgb = jnp.asarray(grid.rgb_matrix, surface.dtype)
     if not blurred:
-        return (surface + args[1] * (da + dta)) @ to_rgb
+        return matmul(surface + args[1] * (da + dta), to_rgb)
     to_xyz = jnp.asarray(grid.xyz_matrix, surface.dtype)
-    return jnp.concatenate([surface @ to_rgb, da @ to_xyz, dta @ to_xyz], axis=-1)
+    return jnp.concatenate([matmul(surface, to_rgb), matmul(da, to_xyz), matmul(dta, to_xyz)],
+                           axis=-1)
 
 
 CHUNK = 1024  # texels per step of the derivative's loop
@@ -157,8 +159,8 @@ def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
     to_rgb = jnp.asarray(grid.rgb_matrix, X.dtype)
     to_xyz = jnp.asarray(grid.xyz_matrix, X.dtype)
     rgb_surface, xyz_da, xyz_dta = _separately(
-        [lambda: _spectra(*args)[0] @ to_rgb, lambda: _spectra(*args)[1] @ to_xyz,
-         lambda: _spectra(*args)[2] @ to_xyz])
+        [lambda: matmul(_spectra(*args)[0], to_rgb), lambda: matmul(_spectra(*args)[1], to_xyz),
+         lambda: matmul(_spectra(*args)[2], to_xyz)])
     return jnp.concatenate([rgb_surface, xyz_da, xyz_dta], axis=-1)
 
 
