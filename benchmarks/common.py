@@ -75,7 +75,13 @@ def machine() -> str:
     except (OSError, AttributeError):
         pass
     return (f"{cpu}, {os.cpu_count()} cores{mem}; Python {platform.python_version()}, "
-            f"JAX {jax.__version__} on {jax.default_backend().upper()}")
+            f"JAX {jax.__version__} on {jax.default_backend().upper()} ({device()})")
+
+
+def device() -> str:
+    """The device JAX computes on: platform, kind and how many, e.g. `gpu: NVIDIA H200 (1)`."""
+    devices = jax.devices()
+    return f"{devices[0].platform}: {devices[0].device_kind} ({len(devices)})"
 
 
 def write_section(name: str, body: str) -> None:

@@ -1,6 +1,7 @@
 """How far each hot stage is from this machine's limits (issue 8).
 
     python benchmarks/limits.py              # about a minute on 2 cores
+    python benchmarks/limits.py --quick      # tiny sizes: checks that it runs
 
 Two limits, both measured here rather than taken from a data sheet:
 
@@ -12,13 +13,18 @@ Two limits, both measured here rather than taken from a data sheet:
   measured as a 2048² float32 matmul, so "× peak" is the stage's time over that ideal.
 
 A stage far above both lines is bound by neither: by how XLA schedules it (fusion,
-materialised intermediates) or by latency. Loops (the furrow program, the fits) are not
-listed: XLA counts a loop body once, not per trip. Writes the `limits` section of
-RESULTS.md.
+materialised intermediates) or by latency. The furrow program (issue 19) gets the memory
+line only: the texels it must touch once (its direction fields, mask and centroids read,
+its height field written); XLA counts a loop body once, not per trip, so its arithmetic
+count means nothing. The gradients with respect to the makeup's thickness maps and the
+Blinn material are stages too (their inputs and the gradient's bytes). Everything runs on
+JAX's default device, and the memory pass and the peak are measured on that device.
+Writes the `limits` section of RESULTS.md (or of the file `--results` names).
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -27,9 +33,10 @@ import jax.numpy as jnp
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine, table, timeit, write_section  # noqa: E402
+import common  # noqa: E402
+from common import device, machine, table, timeit, write_section  # noqa: E402
 
-from jaxskin import render, spectral, sss  # noqa: E402
+from jaxskin import render, spectral, sss, wrinkles  # noqa: E402
 from jaxskin.scene import load_scene  # noqa: E402
 
 
@@ -46,64 +53,114 @@ def memory_pass(nbytes: int) -> float:
     return timeit(jax.jit(lambda v: v * 1.0001), x, repeat=5)
 
 
-def _nbytes(tree) -> int:
-    return int(sum(np.asarray(a).nbytes for a in jax.tree.leaves(tree)))
-
-
-def stages():
-    """(name, jitted function, arguments) of the hot stages, at their benchmark sizes."""
+def stages(quick: bool = False):
+    """(name, jitted function, arguments, loop) of the hot stages, at their benchmark
+    sizes (`quick`: tiny ones); `loop`: a program of loops, whose arithmetic XLA does not
+    count per trip."""
     out = []
     import bench_km
 
+    tex, km_size, sss_size = (64, 32, 32) if quick else (1024, 1024, 512)
     grid = spectral.Grid(10)
     wl = grid.wavelengths
     S, K = bench_km.load_materials(wl)
-    X = bench_km.thickness_maps(1024)
+    X = bench_km.thickness_maps(km_size)
     Rg = bench_km.skin_reflectance(wl)
     args = [jnp.asarray(a, jnp.float32) for a in (S, K, X, Rg)]
-    out.append(("KM: 3 layers over skin, 1024² × 41 bands", jax.jit(bench_km.over_skin), args))
-    for label, name, overrides in [
-            ("render: hand, Blinn, 512² from 1024²", "hand",
-             ["texture.size=1024", "camera.size=512"]),
-            ("render: hand, Lafortune, 512² from 1024²", "hand",
-             ["texture.size=1024", "camera.size=512", "material.model=lafortune"]),
-            ("render: makeup face, 1280×720 (3 layers, SSS)", "makeup",
-             ["camera.size=1280", "camera.height=720"]),
-            ("render: makeup face, 1280×720, SSS off", "makeup",
-             ["camera.size=1280", "camera.height=720", "sss.enabled=false"])]:
+    out.append((f"KM: 3 layers over skin, {km_size}² × 41 bands",
+                jax.jit(bench_km.over_skin), args, False))
+    hand = [f"texture.size={tex}", f"camera.size={tex // 2}"]
+    face = [f"texture.size={tex // 2}"] + (["camera.size=32"] if quick else
+                                            ["camera.size=1280", "camera.height=720"])
+    hand_label = f"hand, {tex // 2}² from {tex}²"
+    face_label = "makeup face, " + ("quick" if quick else "1280×720")
+    for label, name, overrides, grad in [
+            (f"render: {hand_label}, Blinn", "hand", hand, None),
+            (f"render: {hand_label}, Lafortune", "hand",
+             hand + ["material.model=lafortune"], None),
+            (f"render: {face_label} (4 layers, SSS)", "makeup", face, None),
+            (f"render: {face_label}, SSS off", "makeup", face + ["sss.enabled=false"], None),
+            (f"gradient: {hand_label}, Blinn, d(mean image)/d(material)", "hand", hand,
+             "material"),
+            (f"gradient: {face_label}, d(sum image)/d(thickness maps)", "makeup", face,
+             "maps")]:
         sc = load_scene(name, overrides)
-        f = jax.jit(lambda p, a, c=sc.config: render.render_prepared(c, p, a))
-        out.append((label, f, [sc.params, render.prepare(sc.config).arrays]))
-    E = jnp.asarray(np.random.default_rng(1).uniform(size=(512, 512, 3)), jnp.float32)
-    out.append(("SSS blur by FFT, 512², 0.2 mm texels",
-                jax.jit(lambda e: sss.blur(e, 0.2)), [E]))
+        arrays = render.prepare(sc.config).arrays
+        if grad is None:
+            f = jax.jit(lambda p, a, c=sc.config: render.render_prepared(c, p, a))
+            out.append((label, f, [sc.params, arrays], False))
+        elif grad == "maps":
+            f = jax.jit(jax.grad(lambda cover, a, c=sc.config, p=sc.params: jnp.sum(
+                render.render_prepared(c, p, {**a, "cover": cover}))))
+            out.append((label, f, [arrays["cover"], arrays], False))
+        else:
+            keys = [k for k in sc.params if k.startswith("material.")]
+            f = jax.jit(jax.grad(lambda sub, a, c=sc.config, p=sc.params: jnp.mean(
+                render.render_prepared(c, {**p, **sub}, a))))
+            out.append((label, f, [{k: sc.params[k] for k in keys}, arrays], False))
+    E = jnp.asarray(np.random.default_rng(1).uniform(size=(sss_size, sss_size, 3)),
+                    jnp.float32)
+    out.append((f"SSS blur by FFT, {sss_size}², 0.2 mm texels",
+                jax.jit(lambda e: sss.blur(e, 0.2)), [E], False))
+    out.append(furrow_stage(32 if quick else 512))
     return out
 
 
-def main():
+def furrow_stage(size: int):
+    """The furrow program on the hand at `size`²: the texels it touches once are its
+    inputs (mask, two direction fields, centroids) and its height field."""
+    import bench_wrinkles
+
+    sc, s, cent, radius = bench_wrinkles.inputs(size)
+    args = [s.mask, s.field1, s.field2, cent, sc.config.texture.k_scale,
+            jax.random.key(sc.config.texture.seed)]
+
+    def f(mask, f1, f2, cent, k, key):
+        return wrinkles.height_field(mask, f1, f2, cent, k, key, radius=radius)[0]
+
+    return (f"furrows: hand {size}² (program of loops)", f, args, True)
+
+
+def _nbytes(tree) -> int:
+    return int(sum(np.asarray(a).nbytes for a in jax.tree.leaves(tree)
+                   if not jax.dtypes.issubdtype(np.asarray(a).dtype, jax.dtypes.prng_key)))
+
+
+def main(argv: list[str] | None = None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="tiny sizes (a check that it runs)")
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--results", type=Path, help="write the section to this file instead")
+    opts = ap.parse_args(argv or [])
+    if opts.results:
+        common.RESULTS = opts.results
     print(machine())
     peak = peak_flops()
     rows = []
-    for name, f, args in stages():
-        t = timeit(f, *args, repeat=5)
+    for name, f, args, loop in stages(opts.quick):
+        t = timeit(f, *args, repeat=opts.repeat)
         out = f(*args)
         nbytes = _nbytes(args) + _nbytes(out)
         t_mem = memory_pass(nbytes)
-        cost = f.lower(*args).compile().cost_analysis()
-        cost = cost[0] if isinstance(cost, list) else cost
-        flops = float(cost.get("flops", 0.0)) + float(cost.get("transcendentals", 0.0))
-        t_peak = flops / peak
-        rows.append((name, f"{t * 1e3:.1f}", f"{nbytes / 1e6:.0f}", f"{t_mem * 1e3:.1f}",
-                     f"{t / t_mem:.1f}×", f"{flops / 1e9:.2f}", f"{t_peak * 1e3:.1f}",
-                     f"{t / t_peak:.0f}×"))
+        if loop:
+            flops_cols = ("—", "—", "—")
+        else:
+            cost = f.lower(*args).compile().cost_analysis()
+            cost = cost[0] if isinstance(cost, list) else cost
+            flops = float(cost.get("flops", 0.0)) + float(cost.get("transcendentals", 0.0))
+            t_peak = flops / peak
+            flops_cols = (f"{flops / 1e9:.2f}", f"{t_peak * 1e3:.2f}", f"{t / t_peak:.0f}×")
+        rows.append((name, f"{t * 1e3:.2f}", f"{nbytes / 1e6:.1f}", f"{t_mem * 1e3:.3f}",
+                     f"{t / t_mem:.1f}×", *flops_cols))
         print(rows[-1], flush=True)
     t = table(["stage", "warm ms", "in + out MB", "memory pass ms", "× memory",
                "XLA GFLOP", "at peak ms", "× peak"], rows)
     print(f"peak {peak / 1e9:.0f} GFLOP/s (float32 matmul)")
     print(t)
-    write_section("limits", f"""## Physical limits: memory and arithmetic (issue 8)
+    command = "python benchmarks/limits.py" + (" --quick" if opts.quick else "")
+    write_section("limits", f"""## Physical limits: memory and arithmetic (issues 8, 19)
 
-Command: `python benchmarks/limits.py`. Machine: {machine()}.
+Command: `{command}`. Machine: {machine()}. Device: {device()}.
 
 Peak arithmetic measured as a 2048² float32 matmul: {peak / 1e9:.0f} GFLOP/s. "memory
 pass": the stage's input and output bytes read and written once by a fused copy; "XLA
@@ -123,4 +180,4 @@ custom kernel could gain; no XLA flag closes them.
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:])

@@ -1,0 +1,139 @@
+#!/usr/bin/env bash
+# The GPU check (issue 19): one script, about 8 minutes on a GPU machine that reaches no
+# package registry. It installs the wheels it lacks without dependencies, runs the frame,
+# gradient, furrow and limit benchmarks with reduced repeats and a chosen test subset,
+# and writes everything under $OUT.
+#
+#   benchmarks/gpu_check.sh --download   # HERE, with a network: fill the wheel folder
+#   benchmarks/gpu_check.sh              # on the GPU machine (carry benchmarks/_work)
+#   benchmarks/gpu_check.sh --cpu        # the same end to end on the CPU, tiny sizes
+#
+# The wheel folder is benchmarks/_work/wheels (ignored by git; carry it): the jaxskin wheel
+# of this working tree (with a stamp of its sources) and, for what the GPU machine did not
+# have when last measured (JAX with CUDA, equinox, optimistix, lineax were there), the
+# pure-Python wheels plus CPython 3.12 manylinux builds of matplotlib and its binaries.
+# Only modules that do not import already are installed, into a folder outside the tree,
+# so the machine's own JAX is kept. Tests and benchmarks run from a scratch copy without
+# the source package, so the installed jaxskin (with jaxskin.fitting, jaxskin.data) is the
+# one imported. Each step has its own time limit; a failed step is recorded, not fatal.
+#
+# Output under $OUT: env.txt (Python, JAX, devices, what was installed), RESULTS.md (the
+# benchmark sections), one log per step, tests.txt (pytest's summary), summary.txt.
+set -u
+HERE="$(cd "$(dirname "$0")" && pwd)"
+ROOT="$(dirname "$HERE")"
+WHEELS="$HERE/_work/wheels"
+PY="${PYTHON:-python3}"
+MODE=gpu
+for arg in "$@"; do
+  case "$arg" in
+    --cpu) MODE=cpu ;;
+    --download) MODE=download ;;
+    *) echo "gpu_check.sh: unknown argument $arg" >&2; exit 2 ;;
+  esac
+done
+
+stamp() {  # a hash of the sources a jaxskin wheel is built from
+  (cd "$ROOT" && find jaxskin fitting data pyproject.toml -type f \
+     \( -name '*.py' -o -name '*.toml' -o -name '*.json' -o -name '*.csv' -o -name '*.obj' \
+        -o -name '*.md' -o -name '*.txt' \) -print0 | sort -z | xargs -0 cat | sha256sum | cut -c1-16)
+}
+
+build_wheel() {  # $1: python; the jaxskin wheel of this tree into $WHEELS
+  rm -f "$WHEELS"/jaxskin-*.whl
+  "$1" -m pip wheel -q --no-deps --no-build-isolation -w "$WHEELS" "$ROOT" && stamp > "$WHEELS/jaxskin.stamp"
+}
+
+if [ "$MODE" = download ]; then
+  PIP="${PYTHON:-$ROOT/.venv/bin/python}"
+  mkdir -p "$WHEELS"
+  "$PIP" -m pip download -q --no-deps -d "$WHEELS" trimesh==5.2.0 colour-science==0.4.7 \
+    imageio==2.38.1 jaxtyping==0.3.11 wadler-lindig tqdm==4.70.1 pypng==0.20220715.0 \
+    mpmath==1.4.1 pytest==9.2.0 pluggy==1.7.0 iniconfig==2.3.1 cycler==0.12.1 \
+    pyparsing==3.3.3 packaging typing-extensions
+  "$PIP" -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 \
+    --platform manylinux2014_x86_64 --platform manylinux_2_28_x86_64 -d "$WHEELS" \
+    matplotlib==3.11.2 pillow==13.0.0 kiwisolver==1.5.1 contourpy==1.3.3 fonttools==4.68.0
+  build_wheel "$PIP"
+  du -sh "$WHEELS"
+  exit 0
+fi
+
+OUT="${OUT:-/tmp/jaxskin_check_out}"
+mkdir -p "$OUT"
+DEPS="$(mktemp -d /tmp/jaxskin_deps.XXXX)"
+WORK="$(mktemp -d /tmp/jaxskin_work.XXXX)"
+START=$(date +%s)
+log() { echo "[$(( $(date +%s) - START )) s] $*" | tee -a "$OUT/summary.txt"; }
+
+if [ "$MODE" = cpu ]; then
+  export JAX_PLATFORMS=cpu
+  PY="${PYTHON:-$ROOT/.venv/bin/python}"
+  QUICK=--quick; REPEAT=2; TEST_LIMIT=300
+  SCENES=(camera.size=64 camera.height=64 texture.size=64)
+else
+  QUICK=; REPEAT=3; TEST_LIMIT=200
+  SCENES=()
+fi
+
+# 1. What the machine lacks, from the wheel folder, without dependencies.
+if [ ! -f "$WHEELS/jaxskin.stamp" ] || [ "$(cat "$WHEELS/jaxskin.stamp")" != "$(stamp)" ]; then
+  log "the jaxskin wheel is missing or older than the sources: building it here"
+  build_wheel "$PY" >> "$OUT/install.log" 2>&1 || log "could not build the jaxskin wheel"
+fi
+"$PY" -m pip install -q --no-deps --no-index --target "$DEPS" "$WHEELS"/jaxskin-*.whl \
+  >> "$OUT/install.log" 2>&1 || log "FAILED: installing the jaxskin wheel"
+missing=()
+for pair in trimesh:trimesh colour:colour_science imageio:imageio jaxtyping:jaxtyping \
+            wadler_lindig:wadler_lindig tqdm:tqdm png:pypng mpmath:mpmath pytest:pytest \
+            pluggy:pluggy iniconfig:iniconfig matplotlib:matplotlib PIL:pillow \
+            kiwisolver:kiwisolver contourpy:contourpy fontTools:fonttools cycler:cycler \
+            pyparsing:pyparsing packaging:packaging typing_extensions:typing_extensions; do
+  module="${pair%%:*}"; dist="${pair##*:}"
+  "$PY" -c "import $module" 2>/dev/null || missing+=("$dist")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  log "installing without dependencies: ${missing[*]}"
+  "$PY" -m pip install -q --no-deps --no-index --find-links "$WHEELS" --target "$DEPS" \
+    "${missing[@]}" >> "$OUT/install.log" 2>&1 || log "FAILED: some wheels (install.log)"
+fi
+export PYTHONPATH="$DEPS${PYTHONPATH:+:$PYTHONPATH}"
+cp -r "$ROOT/benchmarks" "$ROOT/tests" "$ROOT/data" "$ROOT/pyproject.toml" "$WORK/"
+rm -rf "$WORK/benchmarks/_work"
+cd "$WORK" || exit 1
+{ "$PY" -c "import sys, jax, jaxskin; print('Python', sys.version.split()[0]);
+print('JAX', jax.__version__, jax.default_backend(), jax.devices());
+print('jaxskin from', jaxskin.__file__)"; echo "installed: ${missing[*]:-nothing}"; \
+  nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv 2>/dev/null; } \
+  > "$OUT/env.txt" 2>&1
+cat "$OUT/env.txt" | tee -a "$OUT/summary.txt"
+
+step() {  # step NAME LIMIT COMMAND...: run with a time limit, log under $OUT, record it
+  local name=$1 limit=$2; shift 2
+  local t0=$(date +%s)
+  timeout "$limit" "$@" > "$OUT/$name.log" 2>&1
+  local rc=$?
+  log "$name: exit $rc in $(( $(date +%s) - t0 )) s (limit $limit s)"
+}
+
+# 2. Benchmarks (reduced repeats), sections into $OUT/RESULTS.md.
+RUN=("$PY" benchmarks/run.py --device --results "$OUT/RESULTS.md" --repeat "$REPEAT" $QUICK)
+if [ "$MODE" = cpu ]; then
+  step frames 120 "$PY" benchmarks/frame_check.py "${SCENES[@]}"
+else
+  step frames 90 "$PY" benchmarks/frame_check.py
+fi
+step gradients 120 "${RUN[@]}" gradients
+step limits 120 "${RUN[@]}" limits
+if [ "$MODE" = gpu ]; then
+  step furrows 90 "${RUN[@]}" wrinkles
+fi
+
+# 3. Tests: precision first, then golden images, references, renders and gradients.
+step tests "$TEST_LIMIT" "$PY" -m pytest -q -x -p no:cacheprovider -m "not slow" \
+  tests/test_precision.py tests/test_golden.py tests/test_references.py \
+  tests/test_radiometry.py tests/test_spectral.py tests/test_km.py tests/test_render.py \
+  tests/test_gradients.py tests/test_makeup.py
+tail -n 15 "$OUT/tests.log" > "$OUT/tests.txt"
+log "done; tables in $OUT/RESULTS.md"
+rm -rf "$DEPS" "$WORK"
