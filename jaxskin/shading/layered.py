@@ -152,6 +152,12 @@ def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
     stay in the cache; reverse mode transposes that loop. Measured on the makeup face at
     1280×720 (benchmarks/bench_makeup.py): the gradient with respect to every thickness
     map takes 4.3–4.7× the forward pass, against 20–23× with plain autodiff.
+    Re-measured for issue 19 on the 4-layer scene (benchmarks/bench_gradients.py, a loaded
+    2-core machine): plain reverse mode through this forward (the `switch` inside a `map`
+    keeps every branch's residuals) took 162× (maps) and 332× (scalars) the forward pass and
+    21 GB, against 10–11× for this rule in the same conditions; reverse mode over chunks
+    of `_joint`, each under `jax.checkpoint` (no custom rule), was no better (5.8–14×).
+    So the rule stays; measure again on a GPU (benchmarks/gpu_check.sh).
     """
     if not blurred:
         return _joint(grid, False, X, E, h, h_l, S, K, skin_R)
