@@ -21,9 +21,8 @@
 # Output under $OUT: env.txt (Python, JAX, devices, what was installed), RESULTS.md (the
 # benchmark sections), one log per step, tests.txt (pytest's summary), summary.txt.
 set -u
-HERE="$(cd "$(dirname "$0")" && pwd)"
-ROOT="$(dirname "$HERE")"
-WHEELS="$HERE/_work/wheels"
+ROOT="${JAXSKIN_ROOT:-$(cd "$(dirname "$0")/.." && pwd)}"  # the repository
+WHEELS="$ROOT/benchmarks/_work/wheels"
 PY="${PYTHON:-python3}"
 MODE=gpu
 for arg in "$@"; do

@@ -175,7 +175,9 @@ their bytes, which fit in this CPU's cache, so the pass itself is fast; 10–90�
 small per-pixel work, gathers (bilinear view sampling, texel lists) that XLA does not
 count as arithmetic, and for the makeup face the three spectral colours computed apart
 (`layered._separately`). The FFT blur is 3× its arithmetic ideal. The gaps are where a
-custom kernel could gain; no XLA flag closes them.
+custom kernel could gain; no XLA flag closes them. (That reading is issue 8's, from a run
+without the gradient and furrow rows; those are issue 19's: the furrow row's memory line
+is the time to touch its texels once, the floor a parallel furrow program could reach.)
 """)
 
 
