@@ -72,3 +72,24 @@ def test_bench_km_calibration_scaling_inputs_and_table():
                                                                       True)],
                                     {0.0: (400.0, 420.0, 5.0, (3.0, 500.0))}, 1.0)
     assert "| 21 | 0 | 0.010 | 0.500 | 50.0 | 3 | True |" in text
+
+
+def test_gradient_benchmark_measures_every_model_and_the_maps(capsys):
+    import bench_gradients
+    import run
+
+    cases = bench_gradients.cases(quick=True)
+    labels = " ".join(c[0] for c in cases)
+    assert all(m in labels for m in ("Blinn", "Lafortune", "spectral"))
+    assert "per-texel thickness maps" in [c[1] for c in cases]
+    assert "gradients" in run.BENCHMARKS
+    assert run.main(["--device", "nope"]) == 2 and "unknown benchmark" in capsys.readouterr().err
+
+
+def test_gpu_check_script_parses_and_rejects_unknown_arguments():
+    import subprocess
+
+    script = Path(__file__).resolve().parent.parent / "benchmarks" / "gpu_check.sh"
+    assert subprocess.run(["bash", "-n", str(script)]).returncode == 0
+    r = subprocess.run(["bash", str(script), "--nope"], capture_output=True, text=True)
+    assert r.returncode == 2 and "unknown argument --nope" in r.stderr
