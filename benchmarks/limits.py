@@ -122,8 +122,9 @@ def furrow_stage(size: int):
 
 
 def _nbytes(tree) -> int:
-    return int(sum(np.asarray(a).nbytes for a in jax.tree.leaves(tree)
-                   if not jax.dtypes.issubdtype(np.asarray(a).dtype, jax.dtypes.prng_key)))
+    """Bytes of the arrays in `tree` (random keys and Python scalars: none)."""
+    return int(sum(a.nbytes for a in jax.tree.leaves(tree) if hasattr(a, "nbytes")
+                   and not jax.dtypes.issubdtype(a.dtype, jax.dtypes.prng_key)))
 
 
 def main(argv: list[str] | None = None):
