@@ -102,7 +102,7 @@ def radiance(grid: Grid, N, L, V, ambient, light, skin_R, skin_roughness, skin_r
     t1 = jnp.where(ok, xyz_dta / jnp.where(ok, xyz_a, 1.0), -1.0)  # t − 1, in [−1, 0]
     out = blur(skin)
     rgb_to_xyz = jnp.asarray(np.linalg.inv(grid.xyz_to_rgb), dtype)
-    return (rgb_surface + matmul(out + t1 * matmul(out, rgb_to_xyz), xyz_to_rgb)) + h
+    return (rgb_surface + (out + matmul(t1 * matmul(out, rgb_to_xyz), xyz_to_rgb))) + h
 
 
 def _spectra(X, E, h, h_l, S, K, skin_R):
