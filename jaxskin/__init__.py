@@ -9,6 +9,7 @@ Modules, one idea each:
 - `scene`, `view`, `shadow`, `render`: TOML scenes → `render(config, params)`, the pure
   function; camera views, shadow maps from the light.
 - `km`, `spectral`: Kubelka–Munk layers and spectra → colour (Huang et al. 2013).
+- `precision`: every float32 product at full precision on every device (no TF32 on GPUs).
 - `maps`, `export`, `io`, `outputs`, `resources`, `cli`: PNG (8/16-bit), OpenEXR and GLB
   output, input errors, output folders and names, memory estimates, the command line.
 
