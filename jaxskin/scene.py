@@ -89,6 +89,7 @@ arrays: everything differentiable) are the split the renderer uses.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import difflib
 import functools
@@ -106,7 +107,7 @@ from .projection import KINDS
 from .spectral import ILLUMINANTS, STEPS, Grid
 
 __all__ = ["BUILTIN_SCENES", "Scene", "SceneConfig", "TextureConfig", "builtin_scenes",
-           "load_scene", "scene_at_width"]
+           "load_scene", "parse_scene", "scene_at_width"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -333,6 +334,16 @@ def load_scene(name_or_path, overrides=()) -> Scene:
         raise InputError(f"cannot read ({e.__class__.__name__})", path) from None
     except tomllib.TOMLDecodeError as e:
         raise InputError(f"not valid TOML: {e}", path) from None
+    return parse_scene(doc, path, overrides)
+
+
+def parse_scene(doc: dict, path, overrides=()) -> Scene:
+    """A scene from its parsed TOML document `doc` (as `tomllib` gives it; not changed), read
+    as if from the file `path` (relative paths are taken from its folder), with `-D`
+    `overrides`: what `load_scene` does after reading the file (the editor builds scenes
+    from documents it holds)."""
+    path = Path(path)
+    doc = copy.deepcopy(doc)
     edits_raw = doc.get("fields", {}).pop("edit", []) if isinstance(doc.get("fields"), dict) \
         else []
     layers_raw = doc.pop("layer", [])
