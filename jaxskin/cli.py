@@ -251,6 +251,25 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--seed", type=_number(int, 0, 2147483647), default=0,
                    help="seed of the random starts (0)")
     b.add_argument("--no-report", action="store_true", help="write the JSON only, no PNG")
+
+    e = sub.add_parser(
+        "edit",
+        help="edit a scene interactively in the browser (sliders, field edits, painting)",
+        description="Start a local web server with an editor for SCENE (default: hand): the "
+        "rendered view, every scene value as a slider, direction-field edits picked on the "
+        "mesh, cosmetic layers painted on the face; Save writes DIR/<name>.toml (and painted "
+        "maps as 16-bit PNGs) that jaxskin render reproduces. Needs pip install "
+        "'jaxskin[edit]'. Files the page opens must lie in the scene's folder or DIR.",
+    )
+    e.add_argument("scene", nargs="?", metavar="SCENE", help="built-in name or TOML file")
+    e.add_argument("-o", "--output", default=".", metavar="DIR",
+                   help="folder Save writes to (default: the current folder)")
+    e.add_argument("--port", type=_number(int, 0, 65535), default=0,
+                   help="port to serve on (default 0: a free one)")
+    e.add_argument("--host", default="127.0.0.1",
+                   help="address to serve on (default 127.0.0.1: this machine only; others "
+                   "are warned about)")
+    e.add_argument("--no-browser", action="store_true", help="do not open a browser")
     return p
 
 
@@ -615,6 +634,12 @@ def _fit_brdf(args, run: _Run) -> int:
     return 0
 
 
+def _edit(args, run: _Run) -> int:
+    from .editor import command
+
+    return command(args, run)
+
+
 def main(argv=None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
@@ -625,7 +650,8 @@ def main(argv=None) -> int:
         return _list(args)
     _enable_compilation_cache()
     run = _Run()
-    commands = {"calibrate": _calibrate, "fit-brdf": _fit_brdf, "render": _render}
+    commands = {"calibrate": _calibrate, "fit-brdf": _fit_brdf, "render": _render,
+                "edit": _edit}
     with _signals():
         try:
             return commands[args.command](args, run)

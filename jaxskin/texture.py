@@ -23,7 +23,7 @@ from .projection import TextureMap, project
 from .raster import interpolate
 from .scene import SceneConfig, TextureConfig
 
-__all__ = ["TextureSetup", "furrows", "setup", "texture_maps"]
+__all__ = ["TextureSetup", "furrows", "mapped", "setup", "texture_maps"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -50,11 +50,7 @@ class TextureSetup:
 
 @functools.lru_cache(maxsize=8)
 def setup(config: TextureConfig) -> TextureSetup:
-    mesh = load_mesh(config.mesh)
-    try:
-        tmap = project(config.projection, mesh, config.size)
-    except ValueError as e:
-        raise InputError(str(e), key="mesh.projection") from None
+    mesh, tmap = mapped(config.mesh, config.projection, config.size)
     edits = []
     for i, e in enumerate(config.edits):
         if e.vertex is not None:
@@ -72,6 +68,17 @@ def setup(config: TextureConfig) -> TextureSetup:
     n, gradients = surface_frame(tmap)
     return TextureSetup(config, mesh, tmap, tuple(edits), d1, d2, field1, field2, n,
                         jnp.asarray(raster.mask), gradients)
+
+
+@functools.lru_cache(maxsize=4)
+def mapped(mesh_name: str, projection: str, size: int) -> tuple[Mesh, TextureMap]:
+    """The mesh and its texture map (rasterized on first use), shared by every
+    configuration that differs only in its field edits (the editor changes those)."""
+    mesh = load_mesh(mesh_name)
+    try:
+        return mesh, project(projection, mesh, size)
+    except ValueError as e:
+        raise InputError(str(e), key="mesh.projection") from None
 
 
 def surface_frame(tmap: TextureMap):
