@@ -48,6 +48,10 @@ def _static_dir() -> Path:
     return Path(str(importlib.resources.files("jaxskin.editor") / "static"))
 
 
+async def _no_content():
+    return web.Response(status=204)
+
+
 def _error(status: int, message: str, key=None) -> web.Response:
     return web.json_response({"error": message, "key": key}, status=status)
 
@@ -124,8 +128,9 @@ def make_app(session: Session, log=print) -> web.Application:
     async def open_(request):
         body = await _body(request)
         scene, changes = body.get("scene"), body.get("changes", {})
-        if not isinstance(scene, str) or not isinstance(changes, dict):
-            raise EditorError("expected {scene: name or file, changes: {key: value}}", 400)
+        if not isinstance(scene, str) or not isinstance(changes, (dict, list)):
+            raise EditorError("expected {scene: name or file, changes: {key: value} or "
+                              "[[key, TOML value], ...]}", 400)
 
         def run():
             refused = session.open(scene, changes)
@@ -213,6 +218,7 @@ def make_app(session: Session, log=print) -> web.Application:
 
     app.add_routes([
         web.get("/", page), web.get("/static/{name}", static),
+        web.get("/favicon.ico", lambda request: _no_content()),
         web.get("/api/state", state), web.get("/api/files", files),
         web.post("/api/open", open_), web.post("/api/set", set_),
         web.post("/api/undo", stepper("undo")), web.post("/api/redo", stepper("redo")),

@@ -127,7 +127,9 @@ class Session:
         self.saved_as: str | None = None
         self.version += 1
         refused = []
-        for key, value in (changes or {}).items():
+        items = changes.items() if isinstance(changes, dict) else changes or []
+        for item in items:
+            key, value = _pair(item)
             try:
                 self.set({key: value}, record=False)
             except EditorError as e:
@@ -388,7 +390,9 @@ class Session:
             return {"hit": False, **axes}
         mesh = texture.setup(config.texture).mesh
         vertex = int(mesh.faces[tri][int(np.argmax(view.raster.bary[i, j]))])
+        s = texture.setup(config.texture)
         return {"hit": True, "vertex": vertex, "position": mesh.vertices[vertex].tolist(),
+                "d1": s.d1[vertex].tolist(), "d2": s.d2[vertex].tolist(),
                 "normal": mesh.normals[vertex].tolist(),
                 "screen": (view.xy[vertex] / k).tolist(), **axes}
 
@@ -549,6 +553,19 @@ class Session:
         from .toml import value_text
 
         return [[k, value_text(v)] for k, v in self.changes.items()]
+
+
+def _pair(item) -> tuple:
+    """A change from a link: `[key, TOML text]` (the `-D` syntax) or `(key, value)`."""
+    if not (isinstance(item, (list, tuple)) and len(item) == 2 and isinstance(item[0], str)):
+        raise EditorError(f"expected [key, value] pairs, got {item!r}", 400)
+    key, value = item
+    if isinstance(value, str) and isinstance(item, list):
+        try:
+            value = tomllib.loads(f"v = {value}")["v"]
+        except tomllib.TOMLDecodeError:
+            pass  # a bare word: a string, as -D reads it
+    return key, value
 
 
 def schema() -> dict:
