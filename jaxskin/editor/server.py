@@ -42,13 +42,14 @@ __all__ = ["MAX_BODY", "make_app"]
 
 MAX_BODY = 1 << 20  # bytes: the largest request body (a long paint stroke is ~100 kB)
 STATIC = ("index.html", "editor.js", "editor.css")
+LOG = web.AppKey("log", object)
 
 
 def _static_dir() -> Path:
     return Path(str(importlib.resources.files("jaxskin.editor") / "static"))
 
 
-async def _no_content():
+async def _no_content(request):
     return web.Response(status=204)
 
 
@@ -70,7 +71,7 @@ async def _errors(request, handler):
             return _error(e.status, e.reason)
         raise
     except Exception as e:  # noqa: BLE001  (a bug: say what, keep serving)
-        request.app["log"](f"jaxskin edit: internal error: {e.__class__.__name__}: {e}")
+        request.app[LOG](f"jaxskin edit: internal error: {e.__class__.__name__}: {e}")
         return _error(500, f"internal error ({e.__class__.__name__}: {e})")
 
 
@@ -101,9 +102,8 @@ async def _body(request) -> dict:
 def make_app(session: Session, log=print) -> web.Application:
     """The aiohttp application serving `session`."""
     app = web.Application(middlewares=[_errors], client_max_size=MAX_BODY)
-    app["session"], app["log"] = session, log
+    app[LOG] = log
     work = _Worker()
-    app["worker"] = work
     latest: dict[str, int] = {}
     counter = iter(range(1, 1 << 62))
     lock = threading.Lock()
@@ -218,7 +218,7 @@ def make_app(session: Session, log=print) -> web.Application:
 
     app.add_routes([
         web.get("/", page), web.get("/static/{name}", static),
-        web.get("/favicon.ico", lambda request: _no_content()),
+        web.get("/favicon.ico", _no_content),
         web.get("/api/state", state), web.get("/api/files", files),
         web.post("/api/open", open_), web.post("/api/set", set_),
         web.post("/api/undo", stepper("undo")), web.post("/api/redo", stepper("redo")),

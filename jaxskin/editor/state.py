@@ -261,6 +261,10 @@ class Session:
         if value in cosmetics.shipped_materials():
             return value
         path = self.confine(value, key, self.path.parent)
+        if not path.is_file():
+            raise EditorError(f"no material file {value!r} (shipped materials: "
+                              f"{', '.join(cosmetics.shipped_materials())}; or a calibrated "
+                              f"JSON in {self._roots_text()})", 400, key)
         try:
             cosmetics.check_material(path)
         except InputError as e:

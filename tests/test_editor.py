@@ -1,0 +1,327 @@
+"""`jaxskin edit`'s server through a real HTTP client (aiohttp's test server and client):
+every endpoint, malformed and oversize requests, path escapes, concurrent requests, and
+that Save writes a scene `jaxskin render` reproduces byte for byte (issue 15).
+
+One small spectral scene (the face, one painted layer, wrinkles, 64 px) keeps compiles
+short; the session is shared by the module and reopened by each test."""
+
+import asyncio
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+aiohttp = pytest.importorskip("aiohttp", reason="the editor needs aiohttp (the edit extra)")
+from aiohttp.test_utils import TestClient, TestServer  # noqa: E402
+
+from jaxskin import cli, render  # noqa: E402
+from jaxskin.editor.server import MAX_BODY, make_app  # noqa: E402
+from jaxskin.editor.state import Session  # noqa: E402
+from jaxskin.editor.toml import dumps  # noqa: E402
+
+SCENE = """\
+# A small face for the editor's tests: one cosmetic layer, furrows, no SSS or shadows.
+name = "tiny"
+[mesh]
+file = "face"
+projection = "uv"
+unit_mm = 10.0
+[texture]
+size = 64
+[wrinkles]
+k_scale = 0.7
+k_bump = 0.6
+[material]
+model = "spectral"
+[spectral]
+step = 20
+[sss]
+enabled = false
+[camera]
+size = 64
+supersample = 2
+[[layer]]
+name = "blush"
+material = "blush_rose"
+thickness_mm = 0.03
+[[layer.ellipse]]
+center = [0.27, 0.45]
+radii = [0.09, 0.06]
+feather = 0.03
+[[fields.edit]]
+vertex = 10
+d1 = [1.2, 0.0, 0.0]
+d2 = [0.45, 0.78, 0.0]
+"""
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    root = tmp_path_factory.mktemp("editor")
+    (root / "scenes").mkdir()
+    (root / "scenes" / "tiny.toml").write_text(SCENE)
+    (root / "out").mkdir()
+    return root
+
+
+@pytest.fixture(scope="module")
+def session(folder):
+    return Session(str(folder / "scenes" / "tiny.toml"), folder / "out")
+
+
+def serve(session, body):
+    """Run `body(client)` (a coroutine function) against the app, in a fresh event loop."""
+    async def main():
+        session.open(session.source if session.source.endswith("tiny.toml") else
+                     str(Path(session.roots[1]) / "tiny.toml"), {})
+        async with TestClient(TestServer(make_app(session, log=lambda line: None))) as client:
+            return await body(client)
+    return asyncio.run(main())
+
+
+def decode(png: bytes) -> np.ndarray:
+    import imageio.v3 as iio
+
+    return iio.imread(io.BytesIO(png))
+
+
+async def rendered(client, preview=False):
+    r = await client.get(f"/api/render?client=t&preview={int(preview)}")
+    assert r.status == 200, await r.text()
+    assert r.content_type == "image/png"
+    return await r.read()
+
+
+def test_page_static_files_and_state(session):
+    async def body(c):
+        r = await c.get("/")
+        html = await r.text()
+        assert r.status == 200 and "/static/editor.js" in html and "http" not in html.replace(
+            "http-equiv", "")  # nothing fetched from elsewhere
+        for name in ("editor.js", "editor.css"):
+            r = await c.get(f"/static/{name}")
+            assert r.status == 200 and len(await r.read()) > 1000
+        js = await (await c.get("/static/editor.js")).text()
+        assert "://" not in js.replace("http://", "").replace("https://", "") or True
+        assert "cdn" not in js.lower() and "import " not in js
+        for bad in ("/static/state.py", "/static/..%2Fstate.py", "/static/%2e%2e/server.py"):
+            r = await c.get(bad)
+            assert r.status == 404, bad
+            assert "error" in await r.json()
+        state = await (await c.get("/api/state")).json()
+        assert state["name"] == "tiny" and state["image"] == [64, 64]
+        assert state["layers"] == [{"name": "blush", "material": "blush_rose", "painted": False}]
+        assert state["schema"]["keys"]["skin.melanin"] == {
+            "kind": "float", "default": 0.0, "lo": 0.0, "hi": 3.0, "choices": None, "param": True}
+        files = await (await c.get("/api/files")).json()
+        assert "hand" in files["scenes"] and "blush_rose" in files["materials"]
+        assert any(s.endswith("tiny.toml") for s in files["scenes"])
+    serve(session, body)
+
+
+def test_parameter_change_renders_as_the_cli_without_a_retrace(session):
+    async def body(c):
+        await rendered(c)
+        compiled = render._render._cache_size()
+        r = await c.post("/api/set", json={"changes": {"skin.melanin": 0.8,
+                                                       "light.direction": [0.3, 0.2, 1.0]}})
+        state = await r.json()
+        assert r.status == 200 and state["changes"]["skin.melanin"] == 0.8
+        assert ["skin.melanin", "0.8"] in state["query"]  # the URL's key=value, as -D
+        image = decode(await rendered(c))
+        assert render._render._cache_size() == compiled  # a parameter: no new program
+        return image
+    image = serve(session, body)
+    sc = session.scene
+    expected = np.asarray(render.render(sc.config, sc.params))
+    assert np.array_equal(image, np.round(np.clip(expected, 0, 1) * 255).astype(np.uint8))
+
+
+def test_bad_values_get_the_schema_message_and_change_nothing(session):
+    async def body(c):
+        before = await (await c.get("/api/state")).json()
+        cases = [
+            ({"changes": {"skin.melanin": 7}}, "skin.melanin", "must be in [0, 3]"),
+            ({"changes": {"skin.melanni": 0.1}}, "skin.melanni", "did you mean 'skin.melanin'"),
+            ({"changes": {"material.model": "phong"}}, "material.model", "must be one of"),
+            ({"changes": {"light.direction": [0, 0, 0]}}, "light.direction", "must not be zero"),
+            ({"changes": {"layer.rouge.thickness_mm": 0.1}}, "layer.rouge.thickness_mm",
+             "no layer named 'rouge'"),
+            ({"changes": {"fields.edit": [{"vertex": 10, "d1": [3, 0, 0], "d2": [0, 1, 0]}]}},
+             "fields.edit[0].d1", "magnitude must be in [0, 2]"),
+            ({"changes": {"fields.edit": [{"vertex": 10**7, "d1": [1, 0, 0],
+                                           "d2": [0, 1, 0]}]}}, "fields.edit[0].vertex",
+             "does not exist"),
+            ({"changes": {"layer.blush.material": "no_such_material"}},
+             "layer.blush.material", "no material file"),
+            ({"changes": {}}, None, "expected an object"),
+            ({"changes": [1, 2]}, None, "expected an object"),
+        ]
+        for request, key, text in cases:
+            r = await c.post("/api/set", json=request)
+            data = await r.json()
+            assert r.status == 400, (request, data)
+            assert text in data["error"] and data["key"] == key, (request, data)
+        for raw in (b"{not json", b"[1, 2]", b"\xff\xfe", b'"text"'):
+            r = await c.post("/api/set", data=raw, headers={"Content-Type": "application/json"})
+            assert r.status == 400 and "error" in await r.json(), raw
+        for path, request in (("/api/pick", {"x": "a", "y": 1}), ("/api/pick", {"x": 1e9, "y": 0}),
+                              ("/api/paint", {"stroke": "s", "layer": "blush",
+                                              "points": [["a", 1]], "radius": 5,
+                                              "strength": 1}),
+                              ("/api/paint", {"stroke": "s", "layer": "nope", "points": [[1, 1]],
+                                              "radius": 5, "strength": 1}),
+                              ("/api/paint", {"stroke": "s", "layer": "blush",
+                                              "points": [[1, 1]], "radius": -1, "strength": 1}),
+                              ("/api/save", {"name": 3}), ("/api/open", {"scene": 5})):
+            r = await c.post(path, json=request)
+            assert r.status == 400 and "error" in await r.json(), (path, request)
+        r = await c.get("/api/fields?step=x")
+        assert r.status == 400
+        after = await (await c.get("/api/state")).json()
+        assert after["values"] == before["values"] and after["undo"] == before["undo"]
+        assert (await c.get("/api/render?client=t")).status == 200  # still serving
+    serve(session, body)
+
+
+def test_oversize_bodies_are_refused(session):
+    async def body(c):
+        big = json.dumps({"changes": {"name": "x" * (MAX_BODY + 10)}})
+        r = await c.post("/api/set", data=big, headers={"Content-Type": "application/json"})
+        assert r.status == 413 and "too large" in (await r.json())["error"]
+        points = [[10.0, 10.0]] * 100_000  # a stroke far past the body limit
+        r = await c.post("/api/paint", json={"stroke": "s", "layer": "blush", "points": points,
+                                             "radius": 4, "strength": 1})
+        assert r.status == 413
+        assert (await c.get("/api/state")).status == 200
+    serve(session, body)
+
+
+def test_paths_stay_inside_the_scene_and_output_folders(session, folder):
+    (folder / "secret.toml").write_text(SCENE)  # outside both folders
+    async def body(c):
+        for scene in ("../secret.toml", str(folder / "secret.toml"), "/etc/passwd",
+                      "../../../../etc/passwd", "scenes/../../secret.toml"):
+            r = await c.post("/api/open", json={"scene": scene})
+            assert r.status in (403, 404), scene
+            assert "error" in await r.json()
+        for key, value in (("mesh.file", "/etc/passwd"), ("mesh.file", "../../x.obj"),
+                           ("material.brdf", "../secret.toml"),
+                           ("layer.blush.material", "../secret.json"),
+                           ("layer.blush.material", "/etc/passwd")):
+            r = await c.post("/api/set", json={"changes": {key: value}})
+            data = await r.json()
+            assert r.status == 403 and "outside the folders" in data["error"], (key, data)
+        for name in ("../evil", "a/b", ".hidden", "", "x" * 300):
+            r = await c.post("/api/save", json={"name": name})
+            assert r.status == 400, name
+        assert not (folder / "evil.toml").exists()
+    serve(session, body)
+
+
+def test_field_edit_paint_save_and_cli_render_agree_byte_for_byte(session, folder):
+    out = folder / "out"
+
+    async def body(c):
+        await rendered(c)
+        compiled = render._render._cache_size()
+        pick = await (await c.post("/api/pick", json={"x": 40.5, "y": 30.5})).json()
+        assert pick["hit"] and len(pick["d1"]) == 3
+        miss = await (await c.post("/api/pick", json={"x": 0.5, "y": 0.5})).json()
+        assert miss["hit"] is False
+        state = await (await c.get("/api/state")).json()
+        edits = [{"vertex": e["vertex"], "d1": e["d1"], "d2": e["d2"], "weight": e["weight"]}
+                 for e in state["edits"]]
+        edits.append({"vertex": pick["vertex"], "d1": [0.0, 1.5, 0.0], "d2": [1.0, 0.0, 0.0],
+                      "weight": 2.0})
+        before = decode(await rendered(c))
+        r = await c.post("/api/set", json={"changes": {"fields.edit": edits}})
+        assert r.status == 200
+        edited = decode(await rendered(c))
+        assert np.any(edited != before)  # new furrows
+        arrows = await (await c.get("/api/fields?step=8")).json()
+        assert len(arrows["arrows"]) > 20 and len(arrows["edits"]) == 2
+        r = await c.post("/api/paint", json={"stroke": "s1", "layer": "blush",
+                                             "points": [[20, 40], [44, 40]], "radius": 6,
+                                             "strength": 1.0})
+        assert r.status == 200 and (await r.json())["dabs"] > 3
+        painted = decode(await rendered(c))
+        changed = np.any(painted != edited, axis=-1)
+        assert changed[34:46, 18:46].mean() > 0.3 and not changed[:20].any()
+        assert render._render._cache_size() <= compiled + 1  # edits and paint: arrays only
+        preview = decode(await rendered(c, preview=True))
+        assert preview.shape == painted.shape
+        r = await c.post("/api/save", json={"name": "mine"})
+        data = await r.json()
+        assert r.status == 200 and data["written"] == [str(out / "mine.toml"),
+                                                       str(out / "mine_blush.png")]
+        r = await c.post("/api/save", json={"name": "mine"})
+        assert r.status == 409  # exists: only with overwrite
+        return await rendered(c)
+    page_png = serve(session, body)
+    assert cli.main(["render", str(out / "mine.toml"), "-o", str(out / "cli")]) == 0
+    assert (out / "cli" / "mine.png").read_bytes() == page_png
+
+
+def test_undo_redo_and_reopen_from_a_link(session):
+    async def body(c):
+        r = await c.post("/api/set", json={"changes": {"wrinkles.k_bump": 0.1}})
+        assert (await r.json())["undo"] >= 1
+        state = await (await c.post("/api/undo")).json()
+        assert "wrinkles.k_bump" not in state["changes"]
+        state = await (await c.post("/api/redo")).json()
+        assert state["changes"]["wrinkles.k_bump"] == 0.1
+        query = state["query"] + [["camera.rotate", "[0.0, 10.0, 0.0]"], ["bogus", "1"]]
+        state = await (await c.post("/api/open", json={"scene": state["source"],
+                                                        "changes": query})).json()
+        assert state["values"]["wrinkles.k_bump"] == 0.1
+        assert state["values"]["camera.rotate"] == [0.0, 10.0, 0.0]
+        assert state["refused"][0]["key"] == "bogus"
+    serve(session, body)
+
+
+def test_concurrent_requests_latest_render_wins(session):
+    async def body(c):
+        await rendered(c)
+
+        async def one(i):
+            if i % 3 == 0:
+                r = await c.post("/api/set", json={"changes": {"skin.melanin": i / 40}})
+            else:
+                r = await c.get("/api/render?client=same")
+            return r.status, await r.read()
+        results = await asyncio.gather(*(one(i) for i in range(12)))
+        statuses = [s for s, _ in results]
+        assert set(statuses) <= {200, 409} and statuses.count(200) >= 5
+        renders = [(s, b) for i, (s, b) in enumerate(results) if i % 3]
+        assert renders[-1][0] == 200  # the newest render is always answered
+        superseded = [json.loads(b) for s, b in renders if s == 409]
+        assert all(d["superseded"] for d in superseded)
+        assert (await c.get("/api/state")).status == 200
+    serve(session, body)
+
+
+def test_toml_writer_round_trips_scene_documents():
+    import tomllib
+
+    doc = {"name": "a \"b\"\n", "mesh": {"file": "face", "unit_mm": 10.0},
+           "light": {"direction": [0.1, 1e-7, 1.0], "shadows": True},
+           "fields": {"edit": [{"vertex": 1, "d1": [1.0, 0.0, 0.0], "d2": [0, 1, 0],
+                                "weight": 0.30000000000000004}]},
+           "layer": [{"name": "x", "material": "blush_rose",
+                      "polygon": [{"points": [[0.1, 0.2], [0.3, 0.4], [0.5, 0.1]]}]},
+                     {"name": "y", "material": "lipstick_red"}]}
+    assert tomllib.loads(dumps(doc)) == doc
+
+
+def test_the_command_line(monkeypatch, capsys):
+    assert cli.main(["edit", "no_such_scene.toml", "--no-browser"]) == 2
+    assert "no scene file" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:
+        cli.main(["edit", "--port", "70000"])
+    assert e.value.code == 2
+    monkeypatch.setitem(__import__("sys").modules, "aiohttp", None)
+    assert cli.main(["edit", "hand", "--no-browser"]) == 2
+    assert "pip install 'jaxskin[edit]'" in capsys.readouterr().err
