@@ -1,13 +1,22 @@
 """`jaxskin edit`'s server through a real HTTP client (aiohttp's test server and client):
 every endpoint, malformed and oversize requests, path escapes, concurrent requests, and
-that Save writes a scene `jaxskin render` reproduces byte for byte (issue 15).
+that Save writes a scene `jaxskin render` reproduces byte for byte (issue 15). Then the
+page in headless Chromium (Selenium): load, move a slider, add a field edit by clicking
+the mesh, paint a stroke, save; `jaxskin render` of the saved scene is the page's last
+image, byte for byte. The browser test skips, saying why, where no Chromium and
+chromedriver are installed (`.ci/run` installs Debian's `chromium` and `chromium-driver`).
 
 One small spectral scene (the face, one painted layer, wrinkles, 64 px) keeps compiles
 short; the session is shared by the module and reopened by each test."""
 
 import asyncio
+import base64
+import importlib.util
 import io
 import json
+import shutil
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -325,3 +334,128 @@ def test_the_command_line(monkeypatch, capsys):
     monkeypatch.setitem(__import__("sys").modules, "aiohttp", None)
     assert cli.main(["edit", "hand", "--no-browser"]) == 2
     assert "pip install 'jaxskin[edit]'" in capsys.readouterr().err
+
+
+# --- The page in a browser.
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which(
+    "google-chrome")
+DRIVER = shutil.which("chromedriver")
+needs_browser = pytest.mark.skipif(
+    not (CHROMIUM and DRIVER) or importlib.util.find_spec("selenium") is None,
+    reason="no headless browser: install chromium and chromium-driver (Debian) and selenium "
+    "to run the browser tests")
+
+
+class Server:
+    """The editor's app on 127.0.0.1, a free port, in a thread of its own."""
+
+    def __init__(self, session):
+        from aiohttp import web
+
+        self.loop = asyncio.new_event_loop()
+        self.runner = web.AppRunner(make_app(session, log=lambda line: None))
+        self.loop.run_until_complete(self.runner.setup())
+        site = web.TCPSite(self.runner, "127.0.0.1", 0)
+        self.loop.run_until_complete(site.start())
+        self.port = site._server.sockets[0].getsockname()[1]
+        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
+        self.thread.start()
+
+    def close(self):
+        asyncio.run_coroutine_threadsafe(self.runner.cleanup(), self.loop).result(30)
+        self.loop.call_soon_threadsafe(self.loop.stop)
+        self.thread.join(10)
+
+
+@pytest.fixture
+def browser():
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+                "--window-size=1200,800"):
+        options.add_argument(arg)
+    driver = webdriver.Chrome(service=Service(DRIVER), options=options)
+    yield driver
+    driver.quit()
+
+
+def wait_idle(driver, version_above=None, timeout=120):
+    """Until no change, paint or render is pending and an image is shown (newer than
+    `version_above`)."""
+    t = time.time()
+    while time.time() - t < timeout:
+        ok = driver.execute_script(
+            "const v = document.getElementById('view').dataset;"
+            "return document.body.dataset.idle === '1' && v.version !== undefined"
+            " && v.preview === '0' ? parseInt(v.version) : null;")
+        if ok is not None and (version_above is None or ok > version_above):
+            return ok
+        time.sleep(0.2)
+    raise AssertionError("the page did not finish rendering: " + driver.execute_script(
+        "return document.getElementById('message').textContent"))
+
+
+@needs_browser
+def test_edit_in_the_browser_then_render_the_saved_scene(tmp_path, browser):
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+
+    (tmp_path / "tiny.toml").write_text(SCENE)
+    out = tmp_path / "out"
+    server = Server(Session(str(tmp_path / "tiny.toml"), out))
+    try:
+        d = browser
+        d.get(f"http://127.0.0.1:{server.port}/")
+        v = wait_idle(d)
+        assert "scene=" in d.current_url
+
+        # A slider: drag the skin's melanin thumb to the right.
+        slider = d.find_element(By.CSS_SELECTOR, 'input[type=range][name="skin.melanin"]')
+        ActionChains(d).click_and_hold(slider).move_by_offset(40, 0).release().perform()
+        v = wait_idle(d, v)
+        melanin = d.execute_script("return S.values['skin.melanin']")
+        assert melanin > 0 and "skin.melanin=" in d.current_url
+
+        # A field edit: click the mesh and drag (the field-edit tool), an edit more.
+        d.find_element(By.CSS_SELECTOR, "button[data-tool=fields]").click()
+        n = d.execute_script("return S.edits.length")
+        overlay = d.find_element(By.ID, "overlay")
+        ActionChains(d).move_to_element_with_offset(overlay, 30, 20).click_and_hold() \
+            .move_by_offset(25, -15).release().perform()
+        v = wait_idle(d, v)
+        assert d.execute_script("return S.edits.length") == n + 1
+        assert "fields.edit=" in d.current_url
+
+        # A stroke of paint on the blush layer.
+        d.find_element(By.CSS_SELECTOR, "button[data-tool=paint]").click()
+        ActionChains(d).move_to_element_with_offset(overlay, -60, 0).click_and_hold() \
+            .move_by_offset(30, 5).move_by_offset(30, 5).release().perform()
+        v = wait_idle(d, v)
+        assert d.execute_script("return S.painted") == ["blush"], (d.execute_script(
+            "return document.getElementById('message').textContent"), d.get_log("browser"))
+
+        # Save, then the CLI renders the saved scene: the page's last image, byte for byte.
+        name = d.find_element(By.ID, "save-name")
+        name.clear()
+        name.send_keys("browser")
+        d.find_element(By.ID, "save-btn").click()
+        wait_idle(d, v)
+        for _ in range(100):
+            if (out / "browser.toml").exists():
+                break
+            time.sleep(0.1)
+        assert (out / "browser_blush.png").is_file()
+        png = base64.b64decode(d.execute_async_script(
+            "const done = arguments[0];"
+            "fetch(document.getElementById('view').src).then(r => r.arrayBuffer())"
+            ".then(b => { let s = ''; new Uint8Array(b).forEach(c => s += String.fromCharCode(c));"
+            " done(btoa(s)); });"))
+        assert cli.main(["render", str(out / "browser.toml"), "-o", str(out / "cli")]) == 0
+        assert (out / "cli" / "browser.png").read_bytes() == png
+        assert not [e for e in d.get_log("browser") if e["level"] == "SEVERE"]
+    finally:
+        server.close()

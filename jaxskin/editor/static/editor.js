@@ -50,6 +50,7 @@ const R = {inFlight: false, want: null, busyTimer: null, lastUrl: null};
 
 function requestRender(preview) {
   // `preview`: one sample per pixel while something is dragged; a final render replaces it.
+  document.body.dataset.idle = "0";
   if (R.want === null || R.want === true) R.want = preview;
   pump();
 }
@@ -356,7 +357,11 @@ function paintPoints(points, final) {
 
 async function sendPaint() {
   if (P.inFlight || (!P.queue.length && !P.final)) return;
-  if (!P.queue.length) { P.final = false; requestRender(false); return; }
+  if (!P.queue.length) {  // the stroke ended with nothing left to send
+    P.final = false;
+    api("GET", "/api/state").then(adopt).catch(fail).finally(() => requestRender(false));
+    return;
+  }
   const points = P.queue.splice(0);
   const final = P.final; P.final = false;
   P.inFlight = true;
@@ -366,11 +371,8 @@ async function sendPaint() {
       stroke: P.stroke, layer: $("paint-layer").value, points,
       radius: parseFloat($("brush-radius").value), strength: parseFloat($("brush-strength").value),
       erase: $("brush-erase").checked || !!alt});
+    if (final) adopt(await api("GET", "/api/state"));
     requestRender(!final);
-    if (final) {
-      const state = await api("GET", "/api/state");
-      adopt(state);
-    }
   } catch (e) { fail(e); }
   finally {
     P.inFlight = false;
@@ -489,6 +491,7 @@ async function pointerDown(ev) {
   } else if (tool === "paint") {
     if (!S.layers.length) { message("no layer to paint: add one in the painting panel", "error"); return; }
     P.stroke = `${CLIENT}-${++strokeSeq}`;
+    document.body.dataset.idle = "0";
     drag = {kind: "paint", last: p, alt: ev.altKey};
     paintPoints([p], false);
   } else {
