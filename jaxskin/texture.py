@@ -65,7 +65,7 @@ def setup(config: TextureConfig) -> TextureSetup:
     raster = tmap.raster
     field1 = interpolate(tmap.vectors(d1).astype(np.float32), mesh.faces, raster)
     field2 = interpolate(tmap.vectors(d2).astype(np.float32), mesh.faces, raster)
-    n, gradients = surface_frame(tmap)
+    n, gradients = _frame(config.mesh, config.projection, config.size)
     return TextureSetup(config, mesh, tmap, tuple(edits), d1, d2, field1, field2, n,
                         jnp.asarray(raster.mask), gradients)
 
@@ -79,6 +79,12 @@ def mapped(mesh_name: str, projection: str, size: int) -> tuple[Mesh, TextureMap
         return mesh, project(projection, mesh, size)
     except ValueError as e:
         raise InputError(str(e), key="mesh.projection") from None
+
+
+@functools.lru_cache(maxsize=4)
+def _frame(mesh_name: str, projection: str, size: int):
+    """`surface_frame` of `mapped(...)`: like the map, the same for every field edit."""
+    return surface_frame(mapped(mesh_name, projection, size)[1])
 
 
 def surface_frame(tmap: TextureMap):

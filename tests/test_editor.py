@@ -99,7 +99,7 @@ def decode(png: bytes) -> np.ndarray:
 async def rendered(client, preview=False):
     r = await client.get(f"/api/render?client=t&preview={int(preview)}")
     assert r.status == 200, await r.text()
-    assert r.content_type == "image/png"
+    assert r.content_type == ("image/bmp" if preview else "image/png")
     return await r.read()
 
 

@@ -19,7 +19,7 @@ rendered. Every error is a JSON object `{"error": ..., "key": ...}` with a 4xx s
 | POST | `/api/pick` | `{x, y}` (image pixels) | the nearest vertex |
 | GET | `/api/fields` | `step=` | arrows and edit markers |
 | POST | `/api/paint` | `{stroke, layer, points, radius, strength, erase}` | `{dabs}` |
-| GET | `/api/render` | `client=`, `preview=1`, `version=` | `image/png` |
+| GET | `/api/render` | `client=`, `preview=1` | `image/png` (a preview: `image/bmp`) |
 | POST | `/api/save` | `{name, overwrite?}` | the files written, state |
 """
 
@@ -191,15 +191,15 @@ def make_app(session: Session, log=print) -> web.Application:
             key = (session.version, preview)
             if cache.get("key") != key:
                 t0 = time.perf_counter()
-                cache.update(key=key, png=session.png(preview),
-                             seconds=time.perf_counter() - t0)
-            return cache["png"], cache["seconds"], session.version
+                data, kind = session.image_file(preview)
+                cache.update(key=key, data=data, kind=kind, seconds=time.perf_counter() - t0)
+            return cache["data"], cache["kind"], cache["seconds"], session.version
         out = await work(run)
         if out is None:
             return web.json_response({"error": "superseded by a newer render request",
                                       "superseded": True}, status=409)
-        png, seconds, version = out
-        return web.Response(body=png, content_type="image/png", headers={
+        data, kind, seconds, version = out
+        return web.Response(body=data, content_type=kind, headers={
             "Cache-Control": "no-store", "X-Render-Seconds": f"{seconds:.4f}",
             "X-Version": str(version)})
 

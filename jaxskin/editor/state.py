@@ -363,6 +363,17 @@ class Session:
         """The view as the PNG `jaxskin render` writes (8-bit)."""
         return maps.image_bytes(self.render(preview))
 
+    def image_file(self, preview: bool = False) -> tuple[bytes, str]:
+        """The view as the page gets it, `(bytes, MIME type)`: the PNG `jaxskin render`
+        writes; a preview as an uncompressed BMP of the same 8-bit samples (2 ms to encode
+        at 512², where the PNG takes 30-60 ms on this CPU)."""
+        if not preview:
+            return self.png(), "image/png"
+        import imageio.v3 as iio
+
+        image = maps.quantize(self.render(preview))
+        return iio.imwrite("<bytes>", image, extension=".bmp"), "image/bmp"
+
     # --- the view: picking, arrows, painting ---------------------------------------------
 
     def _view(self):
