@@ -189,17 +189,21 @@ function control(key, spec, value) {
     `${spec.param ? "" : "<small title='static: changes what is compiled (slower)'>static</small>"}` +
     `</span></div><div class="ctl"></div><div class="err"></div>`;
   const ctl = div.querySelector(".ctl");
+  const name = div.querySelector(".name");
+  name.onclick = () => { if (key in S.changes) change({[key]: null}, false); };
   if (spec.kind === "bool") {
     const c = document.createElement("input");
     c.type = "checkbox"; c.checked = value; c.name = key;
     c.onchange = () => change({[key]: c.checked}, false);
     ctl.append(c);
+    div.update = (v) => { c.checked = v; };
   } else if (spec.choices) {
     const c = document.createElement("select");
     c.name = key;
     for (const o of spec.choices) c.add(new Option(o, o, false, o === value));
     c.onchange = () => change({[key]: spec.kind === "int" ? parseInt(c.value) : c.value}, false);
     ctl.append(c);
+    div.update = (v) => { c.value = v; };
   } else if (spec.kind === "vec3") {
     const lim = key === "camera.rotate" ? 180 : key.startsWith("light") ? 1 : 2;
     const vec = document.createElement("div");
@@ -215,11 +219,17 @@ function control(key, spec, value) {
       const read = () => inputs.map((p) => parseFloat(p[0].value));
       r.oninput = () => { n.value = r.value; change({[key]: read()}, true); };
       r.onchange = () => change({[key]: read()}, false);
-      n.onchange = () => { r.value = n.value; change({[key]: read()}, false); };
+      n.onchange = () => {
+        if (!isFinite(parseFloat(n.value))) { n.value = r.value; return; }
+        r.value = n.value; change({[key]: read()}, false);
+      };
       inputs.push([r, n]);
       vec.append(lab, r, n);
     });
     ctl.append(vec);
+    div.update = (v) => inputs.forEach(([r, n], i) => {
+      if (document.activeElement !== r && document.activeElement !== n) { r.value = v[i]; n.value = v[i]; }
+    });
   } else if ((spec.kind === "float" || spec.kind === "int") && spec.lo !== null &&
              (spec.hi - spec.lo) <= 10000 && !/size|height/.test(key)) {
     const r = document.createElement("input");
@@ -231,20 +241,45 @@ function control(key, spec, value) {
     const num = (v) => spec.kind === "int" ? parseInt(v) : parseFloat(v);
     r.oninput = () => { n.value = r.value; change({[key]: num(r.value)}, true); };
     r.onchange = () => change({[key]: num(r.value)}, false);
-    n.onchange = () => { r.value = n.value; change({[key]: num(n.value)}, false); };
+    n.onchange = () => {
+      if (!isFinite(num(n.value))) { n.value = r.value; return; }  // emptied: nothing to send
+      r.value = n.value; change({[key]: num(n.value)}, false);
+    };
     ctl.append(r, n);
+    div.update = (v) => {
+      if (document.activeElement !== r) r.value = v;
+      if (document.activeElement !== n) n.value = v;
+    };
   } else {
     const c = document.createElement("input");
     c.type = spec.kind === "str" ? "text" : "number"; c.value = value; c.name = key;
-    c.onchange = () => change({[key]: spec.kind === "str" ? c.value :
-      spec.kind === "int" ? parseInt(c.value) : parseFloat(c.value)}, false);
+    c.onchange = () => {
+      const v = spec.kind === "str" ? c.value : spec.kind === "int" ? parseInt(c.value) : parseFloat(c.value);
+      if (spec.kind !== "str" && !isFinite(v)) return;
+      change({[key]: v}, false);
+    };
     ctl.append(c);
+    div.update = (v) => { if (document.activeElement !== c) c.value = v; };
   }
   return div;
 }
 
+let paramsShown = "";
+
 function buildParams() {
   const root = $("params");
+  const shown = JSON.stringify(Object.keys(S.values).filter((k) => relevant(k)));
+  if (shown === paramsShown) {  // the same controls: new values in place (a drag goes on)
+    root.querySelectorAll(".param").forEach((div) => {
+      const key = div.dataset.key;
+      div.update(S.values[key]);
+      div.classList.toggle("changed", key in S.changes);
+      div.querySelector(".name").title = key in S.changes ?
+        `${key}: changed; click to go back to the scene file's value` : key;
+    });
+    return;
+  }
+  paramsShown = shown;
   const open = new Set([...root.querySelectorAll("details[open]")].map((d) => d.dataset.group));
   const first = root.children.length === 0;
   root.innerHTML = "";
@@ -326,7 +361,10 @@ function buildLayers() {
   const keep = sel.value;
   sel.innerHTML = "";
   for (const l of S.layers) sel.add(new Option(l.name + (l.painted ? " (painted)" : ""), l.name));
-  if (keep && S.layers.some((l) => l.name === keep)) sel.value = keep;
+  const want = sel.dataset.want || keep;
+  if (want && S.layers.some((l) => l.name === want)) sel.value = want;
+  else if (S.layers.length) sel.value = S.layers[S.layers.length - 1].name;  // the top layer
+  delete sel.dataset.want;
   const layer = S.layers.find((l) => l.name === sel.value);
   const mats = $("paint-material");
   api("GET", "/api/files").then((f) => {
@@ -602,7 +640,7 @@ function wire() {
     const f = () => { $(id + "-out").textContent = $(id).value; };
     $(id).addEventListener("input", f); f();
   }
-  $("paint-layer").onchange = () => buildLayers();
+  $("paint-layer").onchange = () => { $("paint-layer").dataset.want = $("paint-layer").value; buildLayers(); };
   $("paint-material").onchange = () => {
     const layer = $("paint-layer").value;
     if (layer) change({[`layer.${layer}.material`]: $("paint-material").value}, false);
@@ -612,7 +650,6 @@ function wire() {
     if (!name) { message("name the new layer first", "error"); return; }
     change({[`layer.${name}.material`]: $("paint-material").value || "blush_rose"}, false);
     $("paint-layer").dataset.want = name;
-    setTimeout(() => { $("paint-layer").value = name; }, 300);
   };
   $("undo-btn").onclick = () => step("undo");
   $("redo-btn").onclick = () => step("redo");
