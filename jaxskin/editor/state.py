@@ -320,10 +320,19 @@ class Session:
         return arrays
 
     def _prepared_config(self, config: SceneConfig) -> SceneConfig:
-        """A configuration equal to `config` but for its field edits whose preparation is
-        cached already (else `config`): an edit then costs a furrow run, not a view."""
+        """A configuration equal to `config` but for what `arrays` puts in (field edits,
+        painted layers' maps) whose preparation is cached already (else `config`): an edit
+        then costs a furrow run and a stroke nothing, not a new view, shadow map or blur."""
+        def normal(c: SceneConfig) -> SceneConfig:
+            c = dataclasses.replace(c, texture=dataclasses.replace(c.texture, edits=()))
+            if c.spectral is None or not self.paint:
+                return c
+            return dataclasses.replace(c, spectral=dataclasses.replace(c.spectral, layers=tuple(
+                LayerSpec(s.name, s.material, None) if s.name in self.paint else s
+                for s in c.spectral.layers)))
+
         for other in self._prepared:
-            if dataclasses.replace(other, texture=config.texture) == config:
+            if normal(other) == normal(config):
                 return other
         self._prepared = [config, *self._prepared[:5]]
         return config
