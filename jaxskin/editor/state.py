@@ -75,6 +75,7 @@ class _Stroke:
     layer: str
     before: np.ndarray  # float64 (H, W) in [0, 1]
     mask: np.ndarray  # float64 (H, W) in [0, 1]
+    last: tuple | None = None  # the stroke's last point so far (image pixels)
 
 
 class Session:
@@ -210,12 +211,19 @@ class Session:
                 changes.pop(key, None)
                 continue
             changes[key] = self._checked(key, value, names)
-        scene = self._build(changes, self.paint)
+        paint = self.paint
+        scene = self._build(changes, paint)
+        added = [s.name for s in scene.layers if s.name not in names
+                 and s.name not in paint and not (s.image or s.ellipses or s.polygons)]
+        if added:  # a layer added here starts bare, to be painted (else it covers everything)
+            t = texture.mapped(*_texture_key(scene.config))[1]
+            paint = {**paint, **{n: np.zeros((t.height, t.width), np.uint16) for n in added}}
+            scene = self._build(changes, paint)
         if scene.config != self.scene.config:
             self._check(scene)
         if record:
             self._record()
-        self.changes, self.scene = changes, scene
+        self.changes, self.scene, self.paint = changes, scene, paint
         self.version += 1
 
     def _checked(self, key, value, layer_names):
@@ -473,7 +481,10 @@ class Session:
             self._record()
             self._stroke = _Stroke(str(stroke), layer, before, np.zeros((Ht, Wt)))
         mask = self._stroke.mask
-        dabs = _dabs([tuple(map(float, p)) for p in points], radius)
+        points = [tuple(map(float, p)) for p in points]
+        last = self._stroke.last  # the stroke goes on from where its last request ended
+        dabs = _dabs(points, radius) if last is None else _dabs([last, *points], radius)[1:]
+        self._stroke.last = points[-1]
         for x, y in dabs:
             i, j = self._sample(view, k, x, y)
             if not view.mask[i, j]:
@@ -577,6 +588,11 @@ class Session:
         from .toml import value_text
 
         return [[k, value_text(v)] for k, v in self.changes.items()]
+
+
+def _texture_key(config: SceneConfig) -> tuple:
+    t = config.texture
+    return t.mesh, t.projection, t.size
 
 
 def _pair(item) -> tuple:

@@ -13,6 +13,7 @@ let selected = -1;       // the selected field edit
 let arrows = null;       // {arrows, edits} from /api/fields
 let drag = null;         // the pointer gesture in progress
 let magnify = 1;         // the viewer's zoom of an orthographic view (the image is unchanged)
+let pan = [0, 0];        // and its offset, screen pixels
 
 // --- the server --------------------------------------------------------------------------
 
@@ -426,8 +427,22 @@ function fitStage() {
   const scale = Math.min((vp.clientWidth - 24) / w, (vp.clientHeight - 24) / h);
   img.style.width = `${w * scale}px`;
   img.style.height = `${h * scale}px`;
-  $("stage").style.transform = `scale(${magnify})`;
-  $("stage").style.transformOrigin = "50% 50%";
+  placeStage();
+  sizeOverlay();
+}
+
+function placeStage() {
+  $("stage").style.transform = `translate(${pan[0]}px, ${pan[1]}px) scale(${magnify})`;
+}
+
+function zoomAt(ev, factor) {
+  // magnify about the pointer: the point under it stays put
+  const vp = $("viewport").getBoundingClientRect(), st = $("stage");
+  const cx = ev.clientX - vp.left - st.offsetLeft, cy = ev.clientY - vp.top - st.offsetTop;
+  const m = Math.min(8, Math.max(1, magnify * factor));
+  pan = m === 1 ? [0, 0] : [cx - (cx - pan[0]) * m / magnify, cy - (cy - pan[1]) * m / magnify];
+  magnify = m;
+  placeStage();
   sizeOverlay();
 }
 
@@ -603,7 +618,7 @@ function setTool(t) {
   $("fields-panel").classList.toggle("hidden", t !== "fields");
   $("paint-panel").classList.toggle("hidden", t !== "paint");
   $("hint").textContent = {
-    orbit: "drag: turn the mesh · wheel: zoom (field of view, or magnify an orthographic view)",
+    orbit: "drag: turn the mesh · wheel: zoom (the field of view; an orthographic view is magnified) · middle drag or Space+drag: pan · double-click: fit",
     fields: "click the mesh: add an edit at the nearest vertex · drag: its direction and magnitude · Shift: d2",
     paint: "drag: paint the layer's thickness · Alt: erase",
   }[t];
@@ -624,10 +639,24 @@ function wire() {
       const fov = Math.min(120, Math.max(1, S.values["camera.fov"] * Math.exp(ev.deltaY * 0.001)));
       change({"camera.fov": Math.round(fov * 10) / 10}, false);
     } else {
-      magnify = Math.min(8, Math.max(1, magnify * Math.exp(-ev.deltaY * 0.001)));
-      fitStage();
+      zoomAt(ev, Math.exp(-ev.deltaY * 0.0015));
     }
   }, {passive: false});
+  $("viewport").addEventListener("dblclick", () => { magnify = 1; pan = [0, 0]; fitStage(); });
+  // the middle button (or any button with Space held) pans a magnified view
+  let panning = null, space = false;
+  window.addEventListener("keydown", (ev) => { if (ev.code === "Space" && ev.target === document.body) { space = true; ev.preventDefault(); } });
+  window.addEventListener("keyup", (ev) => { if (ev.code === "Space") space = false; });
+  $("viewport").addEventListener("pointerdown", (ev) => {
+    if (ev.button === 1 || space) {
+      panning = [ev.clientX - pan[0], ev.clientY - pan[1]];
+      ev.preventDefault(); ev.stopPropagation();
+    }
+  }, true);
+  window.addEventListener("pointermove", (ev) => {
+    if (panning) { pan = [ev.clientX - panning[0], ev.clientY - panning[1]]; placeStage(); }
+  });
+  window.addEventListener("pointerup", () => { panning = null; });
   $("show-arrows").onchange = () => (S && $("show-arrows").checked ? loadArrows() : draw());
   $("edit-weight").oninput = () => { $("edit-weight-out").textContent = $("edit-weight").value; };
   $("edit-weight").onchange = () => {
