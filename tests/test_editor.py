@@ -260,6 +260,19 @@ def test_field_edit_paint_save_and_cli_render_agree_byte_for_byte(session, folde
         changed = np.any(painted != edited, axis=-1)
         assert changed[34:46, 18:46].mean() > 0.3 and not changed[:20].any()
         assert render._render._cache_size() <= compiled + 1  # edits and paint: arrays only
+        # One stroke over two requests is one continuous line (the second goes on from
+        # the first's last point), and one undo step.
+        undo = (await (await c.get("/api/state")).json())["undo"]
+        for points in ([[20, 48]], [[44, 48]]):
+            r = await c.post("/api/paint", json={"stroke": "s2", "layer": "blush",
+                                                 "points": points, "radius": 3,
+                                                 "strength": 1.0})
+            assert r.status == 200
+        erased = decode(await rendered(c))
+        assert np.any(erased != painted, axis=-1)[46:51, 22:43].any(axis=0).all()
+        assert (await (await c.get("/api/state")).json())["undo"] == undo + 1
+        await c.post("/api/undo")
+        assert np.array_equal(decode(await rendered(c)), painted)
         preview = decode(await rendered(c, preview=True))
         assert preview.shape == painted.shape
         r = await c.post("/api/save", json={"name": "mine"})
@@ -289,6 +302,25 @@ def test_undo_redo_and_reopen_from_a_link(session):
         assert state["values"]["camera.rotate"] == [0.0, 10.0, 0.0]
         assert state["refused"][0]["key"] == "bogus"
     serve(session, body)
+
+
+def test_a_new_layer_starts_bare_and_is_saved_with_its_map(session, folder):
+    async def body(c):
+        r = await c.post("/api/set", json={"changes": {"layer.gloss.material": "lipstick_red",
+                                                       "layer.gloss.thickness_mm": 0.05}})
+        state = await r.json()
+        assert r.status == 200, state
+        assert state["layers"][-1] == {"name": "gloss", "material": "lipstick_red",
+                                       "painted": True}
+        assert ["layer.gloss.material", '"lipstick_red"'] in state["query"]
+        r = await c.post("/api/save", json={"name": "bare", "overwrite": True})
+        assert r.status == 200
+    serve(session, body)
+    import imageio.v3 as iio
+
+    saved = (folder / "out" / "bare.toml").read_text()
+    assert 'image = "bare_gloss.png"' in saved and "thickness_mm = 0.05" in saved
+    assert not iio.imread(folder / "out" / "bare_gloss.png").any()
 
 
 def test_concurrent_requests_latest_render_wins(session):

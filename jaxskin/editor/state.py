@@ -206,11 +206,13 @@ class Session:
             raise EditorError("expected an object of scene keys and values", 400)
         changes = dict(self.changes)
         names = [layer.name for layer in self.scene.layers]
+        adding = [k.split(".")[1] for k, v in values.items() if isinstance(k, str)
+                  and k.startswith("layer.") and k.endswith(".material") and v is not None]
         for key, value in values.items():
             if value is None:
                 changes.pop(key, None)
                 continue
-            changes[key] = self._checked(key, value, names)
+            changes[key] = self._checked(key, value, [*names, *adding])
         paint = self.paint
         scene = self._build(changes, paint)
         added = [s.name for s in scene.layers if s.name not in names
