@@ -357,6 +357,22 @@ def test_toml_writer_round_trips_scene_documents():
     assert tomllib.loads(dumps(doc)) == doc
 
 
+def test_the_command_line_serves_where_asked(monkeypatch, capsys, tmp_path):
+    from aiohttp import web
+
+    served = []
+    monkeypatch.setattr(web, "run_app", lambda app, **kw: served.append(kw))
+    assert cli.main(["edit", "hand", "--no-browser", "-o", str(tmp_path)]) == 0
+    assert served[-1]["host"] == "127.0.0.1" and served[-1]["port"] > 0  # a free port
+    out, err = capsys.readouterr()
+    assert f"http://127.0.0.1:{served[-1]['port']}/" in out and "warning" not in err
+    assert cli.main(["edit", "hand", "--no-browser", "--host", "0.0.0.0", "--port",
+                     "8123"]) == 0
+    assert served[-1] == {**served[-1], "host": "0.0.0.0", "port": 8123}
+    assert "jaxskin: warning: serving on 0.0.0.0: anyone who can reach" in (
+        capsys.readouterr().err)
+
+
 def test_the_command_line(monkeypatch, capsys):
     assert cli.main(["edit", "no_such_scene.toml", "--no-browser"]) == 2
     assert "no scene file" in capsys.readouterr().err

@@ -13,7 +13,6 @@ from __future__ import annotations
 import ipaddress
 import socket
 import sys
-import warnings
 
 __all__ = ["command"]
 
@@ -40,9 +39,9 @@ def command(args, run) -> int:
         except ValueError:
             local = False
         if not local:
-            warnings.warn(f"serving on {host}: anyone who can reach this address can read and "
-                          "write scenes in the editor's folders; the default 127.0.0.1 is "
-                          "reachable from this machine only", stacklevel=1)
+            print(f"jaxskin: warning: serving on {host}: anyone who can reach this address "
+                  "can read and write scenes in the editor's folders; the default 127.0.0.1 "
+                  "is reachable from this machine only", file=sys.stderr, flush=True)
     run.stage = "loading the scene"
     try:
         session = Session(args.scene or "hand", args.output)

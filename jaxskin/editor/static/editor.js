@@ -368,20 +368,28 @@ function buildLayers() {
   delete sel.dataset.want;
   const layer = S.layers.find((l) => l.name === sel.value);
   const mats = $("paint-material");
-  api("GET", "/api/files").then((f) => {
+  if (files && mats.options.length !== files.materials.length) {
     mats.innerHTML = "";
-    for (const m of f.materials) mats.add(new Option(m.split("/").pop(), m));
-    if (layer) mats.value = layer.material;
-    const list = $("open-list");
-    const current = list.value;
-    list.innerHTML = "";
-    for (const s of f.scenes) list.add(new Option(s.split("/").pop(), s));
-    list.value = current || S.source;
-  }).catch(() => {});
+    for (const m of files.materials) mats.add(new Option(m.split("/").pop(), m));
+  }
+  if (layer) mats.value = layer.material;
   $("paint-note").textContent = spectral ? (S.layers.length ? "Drag on the face to paint; " +
     "a painted layer is saved as a 16-bit map beside the scene." : "Add a layer to paint.") :
     "Painting needs the cosmetics model: set material → model to spectral (the face or " +
     "makeup scene has it).";
+}
+
+let files = null;  // the scenes and materials the server offers (refreshed on open and save)
+
+async function loadFiles() {
+  files = await api("GET", "/api/files").catch(() => null);
+  if (!files) return;
+  const list = $("open-list");
+  list.innerHTML = "";
+  for (const s of files.scenes) list.add(new Option(s.split("/").pop(), s));
+  list.value = S ? S.source : files.scenes[0];
+  $("paint-material").innerHTML = "";
+  if (S) buildLayers();
 }
 
 let strokeSeq = 0;
@@ -711,6 +719,7 @@ async function save(overwrite) {
   try {
     const r = await api("POST", "/api/save", {name, overwrite: overwrite === true});
     adopt(r);
+    loadFiles();
     message(`saved ${r.written.join(", ")}`, "ok");
     requestRender(false);
   } catch (e) {
@@ -724,6 +733,7 @@ async function openScene(scene, query) {
     const state = await api("POST", "/api/open", {scene, changes: query});
     selected = -1;
     adopt(state);
+    loadFiles();
     if (state.refused && state.refused.length)
       message("not applied: " + state.refused.map((r) => `${r.key}: ${r.error}`).join("; "), "error");
     else message(`opened ${state.source}`);
@@ -742,7 +752,7 @@ async function start() {
   const query = [...params.entries()].filter(([k]) => k !== "scene");
   const same = !wanted || (wanted === state.source &&
     JSON.stringify(query) === JSON.stringify(state.query));
-  if (same) { adopt(state); requestRender(false); }
+  if (same) { adopt(state); requestRender(false); loadFiles(); }
   else await openScene(wanted, query);
   if (tool === "fields") loadArrows();
 }
