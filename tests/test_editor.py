@@ -173,7 +173,8 @@ def test_bad_values_get_the_schema_message_and_change_nothing(session):
             data = await r.json()
             assert r.status == 400, (request, data)
             assert text in data["error"] and data["key"] == key, (request, data)
-        for raw in (b"{not json", b"[1, 2]", b"\xff\xfe", b'"text"'):
+        for raw in (b"{not json", b"[1, 2]", b"\xff\xfe", b'"text"', b"[" * 200_000,
+                    b'{"changes": {"skin.melanin": NaN}}'):
             r = await c.post("/api/set", data=raw, headers={"Content-Type": "application/json"})
             assert r.status == 400 and "error" in await r.json(), raw
         for path, request in (("/api/pick", {"x": "a", "y": 1}), ("/api/pick", {"x": 1e9, "y": 0}),

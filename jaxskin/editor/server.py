@@ -92,8 +92,9 @@ async def _body(request) -> dict:
     raw = await request.read()
     try:
         body = json.loads(raw or b"{}")
-    except (ValueError, UnicodeDecodeError) as e:
-        raise EditorError(f"expected a JSON body ({e.__class__.__name__}: {e})", 400) from None
+    except (ValueError, UnicodeDecodeError, RecursionError) as e:
+        raise EditorError(f"expected a JSON body ({e.__class__.__name__}: {e})"[:300],
+                          400) from None
     if not isinstance(body, dict):
         raise EditorError("expected a JSON object", 400)
     return body
