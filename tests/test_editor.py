@@ -324,6 +324,33 @@ def test_a_new_layer_starts_bare_and_is_saved_with_its_map(session, folder):
     assert not iio.imread(folder / "out" / "bare_gloss.png").any()
 
 
+def test_uploads_are_checked_bounded_and_kept_in_the_output_folder(session, folder):
+    from jaxskin.io import data_dir
+
+    material = (data_dir() / "materials" / "blush_rose.json").read_bytes()
+
+    async def body(c):
+        r = await c.post("/api/upload?name=rouge.json", data=material)
+        path = (await r.json())["path"]
+        assert r.status == 200 and path == str(folder / "out" / "rouge.json")
+        r = await c.post("/api/set", json={"changes": {"layer.blush.material": path}})
+        assert r.status == 200
+        assert (await r.json())["layers"][0]["material"] == path
+        r = await c.post("/api/upload?name=scene2.toml", data=SCENE.encode())
+        assert r.status == 200
+        cases = [("../x.json", material, 400), ("x.exe", material, 400),
+                 ("bad.json", b'{"name": 1}', 400), ("bad.toml", b"[mesh\n", 400),
+                 ("bad2.toml", b"[material]\nmodel = 'phong'\n", 400),
+                 ("rouge.json", material + b" ", 409),
+                 ("big.json", b" " * (MAX_BODY + 1), 413)]
+        for name, data, status in cases:
+            r = await c.post(f"/api/upload?name={name}", data=data)
+            assert r.status == status and "error" in await r.json(), name
+        assert not (folder / "out" / "bad.json").exists()
+        assert not (folder / "x.json").exists()
+    serve(session, body)
+
+
 def test_concurrent_requests_latest_render_wins(session):
     async def body(c):
         await rendered(c)

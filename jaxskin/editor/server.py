@@ -21,6 +21,7 @@ rendered. Every error is a JSON object `{"error": ..., "key": ...}` with a 4xx s
 | POST | `/api/paint` | `{stroke, layer, points, radius, strength, erase}` | `{dabs}` |
 | GET | `/api/render` | `client=`, `preview=1` | `image/png` (a preview: `image/bmp`) |
 | POST | `/api/save` | `{name, overwrite?}` | the files written, state |
+| POST | `/api/upload` | `name=` and the file's bytes | `{path}` (kept in the output folder) |
 """
 
 from __future__ import annotations
@@ -217,6 +218,12 @@ def make_app(session: Session, log=print) -> web.Application:
             return {"written": written, **session.state()}
         return web.json_response(await work(run))
 
+    async def upload(request):
+        name = request.query.get("name", "")
+        data = await request.read()
+        path = await work(session.upload, name, data)
+        return web.json_response({"path": path})
+
     app.add_routes([
         web.get("/", page), web.get("/static/{name}", static),
         web.get("/favicon.ico", _no_content),
@@ -225,7 +232,7 @@ def make_app(session: Session, log=print) -> web.Application:
         web.post("/api/undo", stepper("undo")), web.post("/api/redo", stepper("redo")),
         web.post("/api/pick", pick), web.get("/api/fields", fields),
         web.post("/api/paint", paint), web.get("/api/render", render),
-        web.post("/api/save", save),
+        web.post("/api/save", save), web.post("/api/upload", upload),
     ])
 
     async def close(app):

@@ -557,6 +557,43 @@ class Session:
         self.version = version + 1
         return [str(toml_path), *(str(p) for p in pngs.values())]
 
+    def upload(self, name: str, data: bytes) -> str:
+        """Keep a file the page uploads (a scene `.toml`, or a cosmetic material `.json` from
+        `jaxskin calibrate`) in the output folder, checked first: the way to bring in a
+        file from outside the session's folders. Returns its path."""
+        try:
+            check_name(name, "upload")
+        except InputError as e:
+            raise EditorError(e.message, 400, "name") from None
+        suffix = Path(name).suffix
+        if suffix not in (".toml", ".json"):
+            raise EditorError("expected a scene (.toml) or a material (.json)", 400, "name")
+        target = self.output / name
+        if target.exists():
+            if target.read_bytes() == data:
+                return str(target)
+            raise EditorError(f"{name} exists in {self.output} with other contents; rename "
+                              "the file to upload it", 409, "name")
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as tmp:
+            probe = Path(tmp) / name
+            probe.write_bytes(data)
+            try:
+                if suffix == ".json":
+                    cosmetics.check_material(probe)
+                else:
+                    doc = tomllib.loads(data.decode("utf-8"))
+                    parse_scene(doc, target)
+            except InputError as e:
+                raise EditorError(f"{name}: {e.message}", 400, e.key) from None
+            except (UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+                raise EditorError(f"{name}: not a TOML scene ({e})", 400) from None
+        self.output.mkdir(parents=True, exist_ok=True)
+        with atomic_write(target, "wb") as fh:
+            fh.write(data)
+        return str(target)
+
     # --- what the page shows -------------------------------------------------------------
 
     def files(self) -> dict:

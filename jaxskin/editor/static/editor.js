@@ -693,6 +693,7 @@ function wire() {
   $("save-btn").onclick = save;
   $("save-name").oninput = () => { $("save-name").dataset.auto = "0"; };
   $("open-btn").onclick = () => openScene($("open-list").value, []);
+  $("upload").onchange = upload;
   window.addEventListener("resize", fitStage);
   window.addEventListener("keydown", (ev) => {
     if (ev.target.tagName === "INPUT" && ev.target.type !== "range") return;
@@ -726,6 +727,24 @@ async function save(overwrite) {
     if (e.status === 409 && confirm(`${e.message}\n\nReplace it?`)) return save(true);
     fail(e);
   }
+}
+
+async function upload() {
+  const file = $("upload").files[0];
+  $("upload").value = "";
+  if (!file) return;
+  try {
+    const r = await fetch(`/api/upload?name=${encodeURIComponent(file.name)}`, {method: "POST", body: file});
+    const data = await r.json();
+    if (!r.ok) throw Object.assign(new Error(data.error), {key: data.key, status: r.status});
+    await loadFiles();
+    if (file.name.endsWith(".toml")) await openScene(data.path, []);
+    else {
+      message(`uploaded ${data.path}: choose it as a layer's material`, "ok");
+      const layer = $("paint-layer").value;
+      if (layer) change({[`layer.${layer}.material`]: data.path}, false);
+    }
+  } catch (e) { fail(e); }
 }
 
 async function openScene(scene, query) {
