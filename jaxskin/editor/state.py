@@ -24,7 +24,6 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-import os
 import time
 import tomllib
 from pathlib import Path
@@ -46,6 +45,8 @@ from ..scene import (
     check_value,
     parse_scene,
 )
+from . import brush
+from .document import EditorError, pair, put, relocate
 from .toml import dumps
 
 __all__ = ["EditorError", "Session"]
@@ -53,18 +54,6 @@ __all__ = ["EditorError", "Session"]
 HISTORY = 50  # undo steps kept
 PATH_KEYS = ("mesh.file", "material.brdf")
 LAYER_SET = ("material", *LAYER_SCHEMA)  # what the page may set on a layer
-
-
-class EditorError(Exception):
-    """A request the session refuses: `status` (an HTTP 4xx), a one-line `message`, the
-    scene `key` it concerns (or None)."""
-
-    def __init__(self, message: str, status: int = 400, key: str | None = None):
-        super().__init__(message)
-        self.message, self.status, self.key = message, status, key
-
-    def json(self) -> dict:
-        return {"error": self.message, "key": self.key}
 
 
 @dataclasses.dataclass
@@ -130,7 +119,7 @@ class Session:
         refused = []
         items = changes.items() if isinstance(changes, dict) else changes or []
         for item in items:
-            key, value = _pair(item)
+            key, value = pair(item)
             try:
                 self.set({key: value}, record=False)
             except EditorError as e:
@@ -171,7 +160,7 @@ class Session:
         """The scene's TOML document with `changes` (default: the session's) applied."""
         doc = copy.deepcopy(self.base)
         for key, value in (self.changes if changes is None else changes).items():
-            _put(doc, key, value)
+            put(doc, key, value)
         return doc
 
     def _build(self, changes: dict, paint: dict) -> Scene:
@@ -485,15 +474,16 @@ class Session:
         mask = self._stroke.mask
         points = [tuple(map(float, p)) for p in points]
         last = self._stroke.last  # the stroke goes on from where its last request ended
-        dabs = _dabs(points, radius) if last is None else _dabs([last, *points], radius)[1:]
+        dabs = brush.dabs(points, radius) if last is None else brush.dabs(
+            [last, *points], radius)[1:]
         self._stroke.last = points[-1]
         for x, y in dabs:
             i, j = self._sample(view, k, x, y)
             if not view.mask[i, j]:
                 continue
             t = view.tex[i, j].astype(np.float64)
-            scale = _texels_per_pixel(view, i, j, k)
-            _dab(mask, t[0], t[1], radius * scale, s.tmap.wrap_x)
+            scale = brush.texels_per_pixel(view, i, j, k)
+            brush.dab(mask, t[0], t[1], radius * scale, s.tmap.wrap_x)
         target = 0.0 if erase else 1.0
         before = self._stroke.before
         value = before + (target - before) * float(strength) * mask
@@ -537,7 +527,7 @@ class Session:
                 raise EditorError("cannot overwrite a built-in scene", 403, "name")
         doc = self.document()
         doc["name"] = name
-        _relocate(doc, self.path.parent, self.output)
+        relocate(doc, self.path.parent, self.output)
         for table in doc.get("layer", []):
             if table.get("name") in pngs:
                 for k in ("image", "ellipse", "polygon"):
@@ -634,19 +624,6 @@ def _texture_key(config: SceneConfig) -> tuple:
     return t.mesh, t.projection, t.size
 
 
-def _pair(item) -> tuple:
-    """A change from a link: `[key, TOML text]` (the `-D` syntax) or `(key, value)`."""
-    if not (isinstance(item, (list, tuple)) and len(item) == 2 and isinstance(item[0], str)):
-        raise EditorError(f"expected [key, value] pairs, got {item!r}", 400)
-    key, value = item
-    if isinstance(value, str) and isinstance(item, list):
-        try:
-            value = tomllib.loads(f"v = {value}")["v"]
-        except tomllib.TOMLDecodeError:
-            pass  # a bare word: a string, as -D reads it
-    return key, value
-
-
 def schema() -> dict:
     """The scene schema for the page: kind, default, range, choices, differentiable."""
     def one(spec):
@@ -670,58 +647,6 @@ def _scalar(value, key, layer_names):
     return value
 
 
-def _put(doc: dict, key: str, value) -> None:
-    """Set a flat key's value in a scene document."""
-    if key == "fields.edit":
-        fields = doc.setdefault("fields", {})
-        if not isinstance(fields, dict):
-            raise EditorError("the scene's [fields] is not a table", 400, key)
-        fields["edit"] = copy.deepcopy(value)
-        return
-    parts = key.split(".")
-    if parts[0] == "layer":
-        name, attr = parts[1], parts[2]
-        tables = doc.setdefault("layer", [])
-        table = next((t for t in tables if isinstance(t, dict) and t.get("name") == name),
-                     None)
-        if table is None:
-            table = {"name": name}
-            tables.append(table)
-        table[attr] = value
-        return
-    if len(parts) == 1:
-        doc[key] = value
-        return
-    section = doc.setdefault(parts[0], {})
-    if not isinstance(section, dict):
-        raise EditorError(f"the scene's [{parts[0]}] is not a table", 400, key)
-    section[parts[1]] = value
-
-
-def _relocate(doc: dict, source: Path, output: Path) -> None:
-    """Rewrite the document's file paths (relative to `source`, the scene's old folder) to
-    be relative to `output` where it is saved (absolute where no relative path exists)."""
-    def moved(text: str) -> str:
-        p = Path(text) if Path(text).is_absolute() else (source / text).resolve()
-        try:
-            return Path(os.path.relpath(p, output)).as_posix()
-        except ValueError:  # another drive
-            return str(p)
-
-    mesh = doc.get("mesh", {})
-    if isinstance(mesh.get("file"), str) and mesh["file"] not in BUILTIN_MESHES:
-        mesh["file"] = moved(mesh["file"])
-    material = doc.get("material", {})
-    if isinstance(material.get("brdf"), str) and material["brdf"] != "skin":
-        material["brdf"] = moved(material["brdf"])
-    for table in doc.get("layer", []):
-        m = table.get("material")
-        if isinstance(m, str) and m not in cosmetics.shipped_materials():
-            table["material"] = moved(m)
-        if isinstance(table.get("image"), str):
-            table["image"] = moved(table["image"])
-
-
 def _material_name(path: str) -> str:
     p = Path(path)
     shipped = data_dir() / "materials" / f"{p.stem}.json"
@@ -734,44 +659,3 @@ def _jsonable(v):
     return v
 
 
-def _dabs(points: list, radius: float) -> list:
-    """The stroke's dab centres: its points, with more between any two further apart than
-    a third of the radius (a continuous line at any drag speed)."""
-    out = [points[0]]
-    spacing = max(radius / 3.0, 0.5)
-    for (x0, y0), (x1, y1) in zip(points, points[1:], strict=False):
-        n = int(math.ceil(math.hypot(x1 - x0, y1 - y0) / spacing))
-        out += [(x0 + (x1 - x0) * t / n, y0 + (y1 - y0) * t / n) for t in range(1, n + 1)]
-    return out[:20000]
-
-
-def _texels_per_pixel(view, i: int, j: int, k: int) -> float:
-    """How many texels one image pixel spans at view sample `(i, j)` (from neighbours on
-    the same surface; 1 where none is)."""
-    H, W = view.mask.shape
-    steps = []
-    for di, dj in ((0, 1), (1, 0), (0, -1), (-1, 0)):
-        a, b = i + di, j + dj
-        if 0 <= a < H and 0 <= b < W and view.mask[a, b]:
-            d = np.abs(view.tex[a, b] - view.tex[i, j])
-            if d.max() < 8:  # not across a seam or a fold
-                steps.append(float(np.hypot(*d)))
-    return k * float(np.median(steps)) if steps else 1.0
-
-
-def _dab(mask: np.ndarray, cx: float, cy: float, r: float, wrap: bool) -> None:
-    """The union (max) of `mask` and a soft round dab at texel coordinates `(cx, cy)`,
-    radius `r` texels: (1 − (d/r)²)² inside, 0 outside."""
-    H, W = mask.shape
-    r = max(r, 0.75)
-    y0, y1 = max(int(cy - r - 1), 0), min(int(cy + r + 1) + 1, H)
-    x0, x1 = int(cx - r - 1), int(cx + r + 1) + 1
-    if not wrap:
-        x0, x1 = max(x0, 0), min(x1, W)
-    if y1 <= y0 or x1 <= x0:
-        return
-    yy, xx = np.mgrid[y0:y1, x0:x1]
-    d2 = ((xx + 0.5 - cx) ** 2 + (yy + 0.5 - cy) ** 2) / (r * r)
-    f = np.where(d2 < 1, (1 - d2) ** 2, 0.0)
-    cols = np.mod(xx, W) if wrap else xx
-    np.maximum.at(mask, (yy, cols), f)
