@@ -539,14 +539,14 @@ def test_edit_in_the_browser_then_render_the_saved_scene(tmp_path, browser):
 
 def test_the_brush_dab_and_stroke_spacing():
     """A dab is (1 - (d/r)^2)^2 inside radius r: its integral is pi r^2 / 3 (by hand:
-    2 pi r^2 * int_0^1 (1 - u^2)^2 u du = pi r^2 / 3); measured 0.1 % off at r = 20
-    (texel centres), tolerance 1 %. Across a wrapping texture's seam it continues on the
+    2 pi r^2 * int_0^1 (1 - u^2)^2 u du = pi r^2 / 3); measured 7e-6 off at r = 20
+    (texel centres), tolerance 1e-4. Across a wrapping texture's seam it continues on the
     other side; a stroke is filled in to a third of the radius apart."""
     from jaxskin.editor import brush
 
     mask = np.zeros((100, 100))
     brush.dab(mask, 50.0, 50.0, 20.0, wrap=False)
-    assert mask.sum() == pytest.approx(np.pi * 400 / 3, rel=0.01)
+    assert mask.sum() == pytest.approx(np.pi * 400 / 3, rel=1e-4)
     assert mask.max() == pytest.approx(1.0, abs=0.01) and mask[50, 72] == 0
     seam = np.zeros((40, 40))
     brush.dab(seam, 1.0, 20.0, 5.0, wrap=True)
