@@ -47,16 +47,27 @@ function fail(e) {
 
 // --- rendering: one request in flight, the latest wins ----------------------------------
 
-const R = {inFlight: false, want: null, busyTimer: null, lastUrl: null};
+const R = {inFlight: false, want: null, then: null, busyTimer: null, lastUrl: null};
 
 function requestRender(preview) {
   // `preview`: one sample per pixel while something is dragged; a final render replaces it.
+  // "progressive": a preview now, the final render after it (a field edit: its new furrows
+  // show at the preview's cost).
   document.body.dataset.idle = "0";
-  if (R.want === null || R.want === true) R.want = preview;
+  if (preview === "progressive") {
+    R.want = true;
+    R.then = false;
+  } else if (R.want === null || R.want === true) {
+    R.want = preview;
+    if (preview === false) R.then = null;
+  }
   pump();
 }
 
 async function pump() {
+  if (!R.inFlight && R.want === null && R.then !== null && R.then !== undefined) {
+    R.want = R.then; R.then = null;
+  }
   if (R.inFlight || R.want === null) return;
   const preview = R.want;
   R.want = null;
@@ -91,7 +102,7 @@ async function pump() {
   } finally {
     R.inFlight = false;
     clearTimeout(R.busyTimer);
-    if (R.want === null) {
+    if (R.want === null && (R.then === null || R.then === undefined)) {
       $("busy").hidden = true;
       document.body.dataset.idle = "1";
     }
@@ -135,7 +146,8 @@ const C = {inFlight: false, pending: null, render: null};
 function change(values, preview) {
   document.body.dataset.idle = "0";
   C.pending = Object.assign(C.pending || {}, values);
-  C.render = (C.render === false || preview === false) ? false : true;
+  C.render = preview === "progressive" || C.render === "progressive" ? "progressive" :
+    (C.render === false || preview === false) ? false : true;
   sendChanges();
 }
 
@@ -344,7 +356,7 @@ function buildEdits() {
 }
 
 function setEdits(list) {
-  change({"fields.edit": list}, false);
+  change({"fields.edit": list}, "progressive");
 }
 
 async function loadArrows() {
