@@ -270,6 +270,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="address to serve on (default 127.0.0.1: this machine only; others "
                    "are warned about)")
     e.add_argument("--no-browser", action="store_true", help="do not open a browser")
+    e.add_argument("-D", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="start with a scene value changed, as jaxskin render -D (repeatable)")
     return p
 
 

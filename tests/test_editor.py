@@ -399,6 +399,10 @@ def test_the_command_line_serves_where_asked(monkeypatch, capsys, tmp_path):
     assert served[-1] == {**served[-1], "host": "0.0.0.0", "port": 8123}
     assert "jaxskin: warning: serving on 0.0.0.0: anyone who can reach" in (
         capsys.readouterr().err)
+    assert cli.main(["edit", "hand", "--no-browser", "-D", "material.melanin=0.6"]) == 0
+    assert cli.main(["edit", "hand", "--no-browser", "-D", "material.melanin=6"]) == 2
+    assert "jaxskin: error: -D: key 'material.melanin': must be in [0, 1], got 6.0" in (
+        capsys.readouterr().err)
 
 
 def test_the_command_line(monkeypatch, capsys):

@@ -46,8 +46,17 @@ def command(args, run) -> int:
     run.stage = "loading the scene"
     try:
         session = Session(args.scene or "hand", args.output)
+        pairs = []
+        for item in args.overrides:
+            key, sep, value = (t.strip() for t in item.partition("="))
+            if not sep:
+                raise InputError(f"expected -D key=value, got {item!r}")
+            pairs.append([key, value])
+        refused = session.open(session.source, pairs)
     except EditorError as e:
         raise InputError(e.message, key=e.key) from None
+    if refused:
+        raise InputError(refused[0]["error"], "-D", key=refused[0]["key"])
     port = args.port
     if port == 0:
         with socket.socket() as s:  # a free port, known before the browser is opened

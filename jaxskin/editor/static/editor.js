@@ -341,8 +341,9 @@ function buildEdits() {
   S.edits.forEach((e, i) => {
     const li = document.createElement("li");
     const len = (d) => Math.hypot(...d).toFixed(2);
-    li.textContent = `${e.vertex !== null ? "vertex " + e.vertex : "at " + e.at.map(fmt).join(", ")}` +
-      `  |d1| ${len(e.d1)}  |d2| ${len(e.d2)}  λ ${e.weight}`;
+    li.textContent = `${e.vertex !== null ? "vertex " + e.vertex : "at (" + e.at.map((v) => v.toFixed(2)).join(", ") + ")"}` +
+      ` · |d1| ${len(e.d1)} · |d2| ${len(e.d2)} · λ ${e.weight}`;
+    li.title = `d1 = [${e.d1.map(fmt)}], d2 = [${e.d2.map(fmt)}]`;
     if (i === selected) li.className = "sel";
     li.onclick = () => { selected = i; buildEdits(); draw(); };
     ol.append(li);
