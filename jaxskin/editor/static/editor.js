@@ -556,7 +556,7 @@ function nearestEdit(p) {
   return best;
 }
 
-async function pointerDown(ev) {
+function pointerDown(ev) {
   if (!S || ev.button !== 0) return;
   const p = toImage(ev);
   $("overlay").setPointerCapture(ev.pointerId);
@@ -569,18 +569,21 @@ async function pointerDown(ev) {
     drag = {kind: "paint", last: p, alt: ev.altKey};
     paintPoints([p], false);
   } else {
+    // The drag starts now; the vertex under the pointer arrives when the server answers
+    // (moves and the release meanwhile are kept, not lost).
     const which = ev.shiftKey ? "d2" : document.querySelector("input[name=which]:checked").value;
     const near = nearestEdit(p);
-    if (near >= 0) {
-      selected = near; buildEdits();
-      const at = arrows.edits.find((e) => e.index === near).screen;
-      drag = {kind: "edit", index: near, from: at, to: p, which, pick: await api("POST", "/api/pick", {x: at[0], y: at[1]}).catch(() => null)};
-    } else {
-      let hit;
-      try { hit = await api("POST", "/api/pick", {x: p[0], y: p[1]}); } catch (e) { fail(e); return; }
-      if (!hit.hit) { message("no mesh there", ""); return; }
-      drag = {kind: "edit", index: -1, from: hit.screen, to: p, which, pick: hit};
-    }
+    const at = near >= 0 ? arrows.edits.find((e) => e.index === near).screen : p;
+    if (near >= 0) { selected = near; buildEdits(); }
+    const d = {kind: "edit", index: near, from: at, to: p, which, pick: null};
+    d.picked = api("POST", "/api/pick", {x: at[0], y: at[1]}).then((hit) => {
+      if (!hit.hit) { message("no mesh there", ""); return null; }
+      if (near < 0) d.from = hit.screen;
+      d.pick = hit;
+      draw();
+      return hit;
+    }).catch((e) => { fail(e); return null; });
+    drag = d;
     draw();
   }
 }
@@ -597,10 +600,11 @@ function pointerMove(ev) {
   draw();
 }
 
-function pointerUp(ev) {
+async function pointerUp(ev) {
   if (!drag) return;
   const d = drag;
   drag = null;
+  if (d.kind === "edit") await d.picked;
   if (d.kind === "orbit") {
     if (Math.hypot(d.to[0] - d.from[0], d.to[1] - d.from[1]) > 2) {
       drag = d; const a = orbitAngles(); drag = null;
