@@ -29,7 +29,7 @@ class EditorError(Exception):
 def pair(item) -> tuple:
     """A change from a link: `[key, TOML text]` (the `-D` syntax) or `(key, value)`."""
     if not (isinstance(item, (list, tuple)) and len(item) == 2 and isinstance(item[0], str)):
-        raise EditorError(f"expected [key, value] pairs, got {item!r}", 400)
+        raise EditorError(f"expected [key, value] pairs, got {item!r:.100}", 400)
     key, value = item
     if isinstance(value, str) and isinstance(item, list):
         try:

@@ -119,11 +119,11 @@ class Session:
         refused = []
         items = changes.items() if isinstance(changes, dict) else changes or []
         for item in items:
-            key, value = pair(item)
             try:
+                key, value = pair(item)
                 self.set({key: value}, record=False)
             except EditorError as e:
-                refused.append({"key": key, "error": e.message})
+                refused.append({"key": e.key or str(item)[:100], "error": e.message})
         return refused
 
     def _scene_path(self, scene: str) -> Path:
