@@ -517,7 +517,9 @@ class Session:
         except InputError as e:
             raise EditorError(e.message, 400, "name") from None
         toml_path = self.output / f"{name}.toml"
-        pngs = {layer: self.output / f"{name}_{layer}.png" for layer in self.paint}
+        layers = [spec.name for spec in self.scene.layers]
+        pngs = {layer: self.output / f"{name}_{layer}.png" for layer in self.paint
+                if layer in layers}
         for p in [toml_path, *pngs.values()]:
             if p.exists() and not overwrite:
                 raise EditorError(f"{p.name} exists in {self.output}; save with overwrite to "
