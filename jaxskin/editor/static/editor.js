@@ -645,7 +645,7 @@ function setTool(t) {
   $("hint").textContent = {
     orbit: "drag: turn the mesh · wheel: zoom (the field of view; an orthographic view is magnified) · middle drag or Space+drag: pan · double-click: fit",
     fields: "click the mesh: add an edit at the nearest vertex · drag: its direction and magnitude · Shift: d2",
-    paint: "drag: paint the layer's thickness · Alt: erase",
+    paint: "drag: paint the layer's thickness · Alt: erase · [ ]: brush size",
   }[t];
   if (t === "fields" && S) loadArrows(); else draw();
 }
@@ -717,6 +717,14 @@ function wire() {
     if ((ev.ctrlKey || ev.metaKey) && ev.key.toLowerCase() === "z") {
       ev.preventDefault(); step(ev.shiftKey ? "redo" : "undo");
     } else if (ev.key === "Delete" && tool === "fields") deleteEdit();
+    else if (ev.ctrlKey || ev.metaKey || ev.altKey) return;
+    else if (["1", "2", "3"].includes(ev.key)) setTool(["orbit", "fields", "paint"][ev.key - 1]);
+    else if (ev.key === "[" || ev.key === "]") {  // brush size, as in paint programs
+      const r = $("brush-radius");
+      r.value = Math.max(2, Math.min(80, parseFloat(r.value) * (ev.key === "]" ? 1.25 : 0.8)));
+      r.dispatchEvent(new Event("input"));
+      draw();
+    }
   });
 }
 
