@@ -30,7 +30,7 @@ import time
 import warnings
 from pathlib import Path
 
-from . import __version__
+from . import __version__, cluster
 from .io import FitError, InputError
 from .outputs import Outputs, check_name, slug
 
@@ -188,6 +188,7 @@ def _parser() -> argparse.ArgumentParser:
                    "linearly; without it a material that does not cover the grid is refused "
                    "at render time (calibrate warns)")
     c.add_argument("--no-report", action="store_true", help="write the JSON only, no PNG")
+    cluster.add_option(c, "file")
 
     r = sub.add_parser(
         "render",
@@ -229,6 +230,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("-D", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene value, e.g. -D wrinkles.k_scale=1.3 (repeatable; "
                    "applies to every scene)")
+    cluster.add_option(r, f"batch of {cluster.SWEEP_BATCH} sweep values, or scene")
 
     b = sub.add_parser(
         "fit-brdf",
@@ -251,6 +253,7 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--seed", type=_number(int, 0, 2147483647), default=0,
                    help="seed of the random starts (0)")
     b.add_argument("--no-report", action="store_true", help="write the JSON only, no PNG")
+    cluster.add_option(b, "RGB channel")
     return p
 
 
@@ -484,11 +487,9 @@ def _check_image(path, scene, key) -> None:
 
 def _render(args, run: _Run) -> int:
     import jax
-    import jax.numpy as jnp
     import numpy as np
-    from tqdm import tqdm
 
-    from . import maps, render, texture
+    from . import maps
     from .scene import load_scene
 
     if args.format == "exr" and not maps.exr_available():
@@ -507,7 +508,7 @@ def _render(args, run: _Run) -> int:
     plans = []
     for sc in scenes:
         sweep = [_parse_sweep(text, sc) for text in args.sweep]
-        count = len(sweep[0][1]) if sweep else 1
+        count = min(len(sweep[0][1]), cluster.SWEEP_BATCH) if sweep else 1  # per batch
         outputs.inputs += [Path(p) for p in _check_scene(sc, count)]
         plans.append((sc, sweep, _base_name(sc, args.overrides)))
     files = []
@@ -529,50 +530,76 @@ def _render(args, run: _Run) -> int:
                 planned[kind] = outputs.plan(f"{base}_{kind}.png", sc.source)
         files.append(planned)
     run.outputs.append(outputs)
-    rows = []
-    for (sc, sweep, _), planned in tqdm(list(zip(plans, files, strict=True)), desc="render",
-                                        unit="scene", disable=None):
-        run.stage = f"rendering {sc.name}"
-        t0 = time.perf_counter()
-        n0 = len(outputs.written)
-        config, params = sc.config, sc.params
+    # The units of work: a scene's sweep in batches of cluster.SWEEP_BATCH values (one
+    # compiled program per configuration), or the scene's one image; run here or on the
+    # --cluster, the results come back in order and are written here.
+    units, targets = [], []  # targets: (scene index, the unit's output paths)
+    for i, ((sc, sweep, _), planned) in enumerate(zip(plans, files, strict=True)):
+        params = jax.tree.map(np.asarray, sc.params)
         if sweep:
             (key, values), = sweep
-            batch = jax.jit(jax.vmap(lambda v, a, key=key, params=params, config=config:
-                                     render.render_prepared(config, {**params, key: v}, a,
-                                                            output),
-                                     in_axes=(0, None)))
-            images = batch(jnp.asarray(values, jnp.float32), render.prepare(config).arrays)
-            for image, path in zip(np.asarray(images), planned["sweep"], strict=True):
+            batches = cluster.sweep_batches(values)
+            for k, batch in enumerate(batches):
+                units.append((sc.config, params, key, batch, output))
+                targets.append((i, planned["sweep"][k * len(batch):(k + 1) * len(batch)]))
+        else:
+            units.append((sc.config, params, None, None, output))
+            targets.append((i, [planned["image"]]))
+    seconds, n0 = [0.0] * len(plans), [0] * len(plans)
+    rows = []
+    with cluster.pool(args.cluster) as pool:
+        run.stage = f"rendering {plans[0][0].name}"
+        results = pool.map(cluster.render_batch, units, desc="render", unit="batch")
+        for k, ((i, paths), (result, dt)) in enumerate(zip(targets, results, strict=True)):
+            sc, sweep, _ = plans[i]
+            t0 = time.perf_counter()
+            if k == 0 or targets[k - 1][0] != i:
+                n0[i] = len(outputs.written)
+            for image, path in zip(result if sweep else [result], paths, strict=False):
                 maps.write_render(image, path, args.format)
                 outputs.done(path)
-        else:
-            image = np.asarray(render.render(config, params, output))
-            maps.write_render(image, planned["image"], args.format)
-            outputs.done(planned["image"])
-        if args.maps or args.glb:
-            s = texture.setup(config.texture)
-            result = texture.texture_maps(config, params)
-        if args.glb:
-            from .export import write_glb
-
-            albedo = render.albedo(config, params)
-            write_glb(s, np.asarray(albedo), result["normals"], planned["glb"])
-            outputs.done(planned["glb"])
-        if args.maps:
-            maps.write_height(result["height"], planned["height"])
-            outputs.done(planned["height"])
-            maps.write_normals(result["normals"], s.mask, planned["normal"])
-            outputs.done(planned["normal"])
-            maps.write_field_plot(s, planned["field"])
-            outputs.done(planned["field"])
-        size = f"{config.image}x{config.image_height or config.image}"
-        rows.append((sc.name, size, len(outputs.written) - n0, time.perf_counter() - t0))
+            last = k + 1 == len(targets) or targets[k + 1][0] != i
+            if last:
+                run.stage = f"writing the maps of {sc.name}"
+                _write_maps(sc, files[i], outputs, args)
+            seconds[i] += dt + time.perf_counter() - t0
+            if last:
+                config = sc.config
+                size = f"{config.image}x{config.image_height or config.image}"
+                rows.append((sc.name, size, len(outputs.written) - n0[i], seconds[i]))
+            if k + 1 < len(targets):
+                run.stage = f"rendering {plans[targets[k + 1][0]][0].name}"
     print(f"{'scene':<16} {'image':>9} {'files':>6} {'time s':>7}")
     for name, size, n, dt in rows:
         print(f"{name:<16} {size:>9} {n:>6} {dt:>7.2f}")
     _print_written(outputs)
     return 0
+
+
+def _write_maps(sc, planned: dict, outputs: Outputs, args) -> None:
+    """The scene's texture-space maps (--maps) and GLB (--glb), computed and written here."""
+    import numpy as np
+
+    from . import maps, render, texture
+
+    if not (args.maps or args.glb):
+        return
+    config, params = sc.config, sc.params
+    s = texture.setup(config.texture)
+    result = texture.texture_maps(config, params)
+    if args.glb:
+        from .export import write_glb
+
+        albedo = render.albedo(config, params)
+        write_glb(s, np.asarray(albedo), result["normals"], planned["glb"])
+        outputs.done(planned["glb"])
+    if args.maps:
+        maps.write_height(result["height"], planned["height"])
+        outputs.done(planned["height"])
+        maps.write_normals(result["normals"], s.mask, planned["normal"])
+        outputs.done(planned["normal"])
+        maps.write_field_plot(s, planned["field"])
+        outputs.done(planned["field"])
 
 
 def _fit_brdf(args, run: _Run) -> int:
