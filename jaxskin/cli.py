@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import hashlib
 import math
 import os
@@ -307,8 +308,6 @@ def _calibrate(args, run: _Run) -> int:
         paths.append((json_path, png_path))
     run.outputs.append(outputs)
 
-    from tqdm import tqdm
-
     from jaxskin.fitting.report import write_report
     from jaxskin.formats import write_json
     from jaxskin.spectral import Grid
@@ -324,17 +323,22 @@ def _calibrate(args, run: _Run) -> int:
                   "render time; pass --extrapolate hold|linear to allow it", file=sys.stderr)
 
     rows = []
-    for m, (json_path, png_path) in tqdm(list(zip(measurements, paths, strict=True)),
-                                         desc="calibrate", unit="file", disable=None):
-        run.stage = f"fitting {m.name}"
-        t0 = time.perf_counter()
-        result = fit_km.fit(m, smooth=args.smooth, noise=noise)
-        write_json(result.to_json(m, extrapolate=args.extrapolate), json_path)
-        outputs.done(json_path)
-        if png_path is not None:
-            write_report(m, result, png_path)
-            outputs.done(png_path)
-        rows.append((m.name, result, time.perf_counter() - t0))
+    fit = functools.partial(fit_km.fit, smooth=args.smooth, noise=noise)
+    with cluster.pool(args.cluster) as pool:
+        run.stage = f"fitting {measurements[0].name}"
+        results = pool.map(fit, measurements, desc="calibrate", unit="file")
+        for k, (m, (json_path, png_path), (result, dt)) in enumerate(
+                zip(measurements, paths, results, strict=True)):
+            t0 = time.perf_counter()
+            run.stage = f"writing {m.name}"
+            write_json(result.to_json(m, extrapolate=args.extrapolate), json_path)
+            outputs.done(json_path)
+            if png_path is not None:
+                write_report(m, result, png_path)
+                outputs.done(png_path)
+            rows.append((m.name, result, dt + time.perf_counter() - t0))
+            if k + 1 < len(measurements):
+                run.stage = f"fitting {measurements[k + 1].name}"
     print(f"{'material':<24} {'bands':>5} {'identifiable':>12} {'rmse':>9} {'steps':>5} "
           f"{'time s':>7}")
     for name, r, dt in rows:
@@ -626,7 +630,12 @@ def _fit_brdf(args, run: _Run) -> int:
     print(f"fitting {args.lobes} lobes x {args.starts} starts x 3 channels to "
           f"{len(samples.f)} samples ...", flush=True)
     t0 = time.perf_counter()
-    result = brdf.fit(samples, lobes=args.lobes, starts=args.starts, seed=args.seed)
+    with cluster.pool(args.cluster) as pool:
+        def map_units(fn, units):
+            return (r for r, _ in pool.map(fn, units, desc="fit-brdf", unit="channel"))
+
+        result = brdf.fit(samples, lobes=args.lobes, starts=args.starts, seed=args.seed,
+                          map_units=map_units)
     seconds = time.perf_counter() - t0
     stats = result.stats()
     formats.write_lafortune(result.params, out, fit={"source": Path(args.file).name, **stats})
