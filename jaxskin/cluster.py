@@ -144,10 +144,11 @@ def _timed(fn, unit):
 
 
 @contextlib.contextmanager
-def pool(address: str | None = None, timeout: float = CONNECT_TIMEOUT) -> Iterator[Pool]:
+def pool(address: str | None = None, timeout: float | None = None) -> Iterator[Pool]:
     """A `Pool` here (`address` None) or on the Dask scheduler at `address`: connected
-    within `timeout` seconds and checked (its workers run this jaxskin), or an `InputError`
-    before any work. Leaving the block cancels what is still running and disconnects."""
+    within `timeout` seconds (default `CONNECT_TIMEOUT`) and checked (its workers run this
+    jaxskin), or an `InputError` before any work. Leaving the block cancels what is still
+    running and disconnects."""
     if address is None:
         yield Pool()
         return
@@ -161,13 +162,14 @@ def pool(address: str | None = None, timeout: float = CONNECT_TIMEOUT) -> Iterat
             client.close(timeout=5)
 
 
-def connect(address: str, timeout: float = CONNECT_TIMEOUT):
+def connect(address: str, timeout: float | None = None):
     """A `distributed.Client` on `address`, or an `InputError` saying why not: Dask missing,
     the scheduler not answering, workers without this jaxskin."""
     try:
         import distributed
     except ImportError:
         raise InputError(f"--cluster needs Dask distributed: {INSTALL}") from None
+    timeout = CONNECT_TIMEOUT if timeout is None else timeout
     import logging
 
     # A failed connection is our one error line, not distributed's log records as well.

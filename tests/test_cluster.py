@@ -1,0 +1,182 @@
+"""`--cluster`: render, calibrate and fit-brdf on a Dask cluster write the same bytes as a
+local run; a worker killed mid-run is survived; a bad address is one line, exit 2; a sweep
+sharded over two local devices gives the same bytes as one device.
+
+One `LocalCluster` (2 worker processes, 1 thread each) serves the module: starting it and
+the workers' first JAX import take seconds.
+"""
+
+import hashlib
+import logging
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from jaxskin import cluster
+from jaxskin.cli import main
+
+distributed = pytest.importorskip("distributed")
+
+ROOT = Path(__file__).resolve().parent.parent
+SMALL = ["-D", "texture.size=64", "-D", "camera.size=64"]
+
+
+@pytest.fixture(scope="module")
+def dask_cluster():
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None, silence_logs=logging.CRITICAL) as lc, \
+            distributed.Client(lc, set_as_default=False) as client:
+        yield lc, client
+
+
+def digests(folder) -> dict:
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(Path(folder).iterdir())}
+
+
+def run_both(tmp_path, capsys, address, args) -> tuple[dict, dict]:
+    """`args` (with `-o` added) run here and on the cluster: the two folders' digests, after
+    checking both runs exit 0 and print the same files and scene rows (time aside)."""
+    out = []
+    for where, extra in (("local", []), ("cluster", ["--cluster", address])):
+        assert main([*args, "-o", str(tmp_path / where), *extra]) == 0
+        text = capsys.readouterr().out.replace(str(tmp_path / where), "OUT")
+        out.append([line.rsplit(None, 1)[0] if line[:1] != " " else line
+                    for line in text.splitlines()])
+    assert out[0] == out[1]
+    return digests(tmp_path / "local"), digests(tmp_path / "cluster")
+
+
+def test_sweep_and_two_scenes_on_the_cluster_match_the_local_bytes(tmp_path, capsys,
+                                                                    dask_cluster):
+    """A sweep of 10 (two batches: 8, and 2 padded to 8) and two plain scenes; every file
+    byte-identical to the local run's."""
+    lc, _ = dask_cluster
+    local, there = run_both(tmp_path / "sweep", capsys, lc.scheduler_address,
+                            ["render", "hand", *SMALL, "--sweep", "material.melanin=0:1:10"])
+    assert len(local) == 10 and local == there
+    local, there = run_both(tmp_path / "scenes", capsys, lc.scheduler_address,
+                            ["render", "hand", "foot", *SMALL])
+    assert sorted(local) == ["foot_texture.size-64_camera.size-64.png",
+                             "hand_texture.size-64_camera.size-64.png"] and local == there
+    # Different scenes, different images: the comparison compares something.
+    assert len(set(local.values())) == 2
+
+
+def test_a_worker_killed_mid_run_has_its_task_retried_and_the_run_completes(
+        tmp_path, capsys, dask_cluster, monkeypatch):
+    """When the first result is written, a worker that is running a task is killed (SIGKILL):
+    its task is run again elsewhere and every file matches the local run's."""
+    from jaxskin import maps
+
+    lc, client = dask_cluster
+    args = ["render", "hand", "-D", "texture.size=64", "-D", "camera.size=96", "--sweep",
+            "material.melanin=0:1:40"]
+    assert main([*args, "-o", str(tmp_path / "local")]) == 0
+    killed = []
+    write = maps.write_render
+
+    def write_then_kill(*a, **kw):
+        if not killed:
+            busy = [w for w, keys in client.processing().items() if keys]
+            assert busy, "no task in flight when the first result came back"
+            pid = client.run(os.getpid, workers=busy[:1])[busy[0]]
+            os.kill(pid, signal.SIGKILL)
+            killed.append(pid)
+        return write(*a, **kw)
+
+    monkeypatch.setattr(maps, "write_render", write_then_kill)
+    assert main([*args, "-o", str(tmp_path / "cluster"), "--cluster",
+                 lc.scheduler_address]) == 0
+    assert killed and digests(tmp_path / "cluster") == digests(tmp_path / "local")
+    assert len(digests(tmp_path / "local")) == 40
+    client.wait_for_workers(2, timeout=60)  # the nanny restarts it, for the next tests
+    assert killed[0] not in client.run(os.getpid).values()
+    capsys.readouterr()
+
+
+def test_calibrate_and_fit_brdf_on_the_cluster_match_the_local_bytes(tmp_path, capsys,
+                                                                      dask_cluster):
+    """Two measurement files (two tasks) and a 1-lobe BRDF fit (three channel tasks)."""
+    lc, _ = dask_cluster
+    files = [str(ROOT / "data" / "measurements" / f"{n}.csv")
+             for n in ("blush_rose", "lipstick_red")]
+    local, there = run_both(tmp_path / "km", capsys, lc.scheduler_address,
+                            ["calibrate", *files])
+    assert len(local) == 4 and local == there
+    rng = np.random.default_rng(1)
+    rows = ["theta_in_deg,phi_in_deg,theta_out_deg,phi_out_deg,R,G,B"]
+    for _ in range(60):
+        ti, to, po = rng.uniform(0, 80), rng.uniform(0, 80), rng.uniform(0, 360)
+        lobe = np.exp(-((ti - to) / 20) ** 2) * np.array([0.5, 0.4, 0.3])
+        rows.append(f"{ti},0,{to},{po}," + ",".join(f"{0.2 + v:.6f}" for v in lobe))
+    (tmp_path / "s.csv").write_text("\n".join(rows) + "\n")
+    outs = []
+    for where, extra in (("local", []), ("cluster", ["--cluster", lc.scheduler_address])):
+        assert main(["fit-brdf", str(tmp_path / "s.csv"), "--lobes", "1", "--starts", "2",
+                     "-o", str(tmp_path / where / "fit.json"), *extra]) == 0
+        outs.append(digests(tmp_path / where))
+    assert len(outs[0]) == 2 and outs[0] == outs[1]
+    capsys.readouterr()
+
+
+def exit_code(argv) -> int:
+    try:
+        return main(argv)
+    except SystemExit as e:  # argparse's one-line errors
+        return e.code
+
+
+@pytest.mark.parametrize("address, why", [
+    ("tcp://127.0.0.1:9", "no Dask scheduler answered at tcp://127.0.0.1:9 within 2 s"),
+    ("localhost:8786", "expected a Dask scheduler address tcp://host:port, got 'localhost:8786'"),
+    ("tcp://127.0.0.1:99999", "expected a Dask scheduler address"),
+])
+def test_a_bad_address_is_one_line_and_exit_2_before_any_work(tmp_path, capsys, monkeypatch,
+                                                              address, why):
+    monkeypatch.setattr(cluster, "CONNECT_TIMEOUT", 2.0)
+    rc = exit_code(["render", "hand", "-o", str(tmp_path / "out"), "--cluster", address])
+    err = capsys.readouterr().err.splitlines()
+    assert rc == 2 and len(err) == 1 and err[0].startswith("jaxskin: error: "), err
+    assert why in err[0]
+    assert not (tmp_path / "out").exists()
+
+
+def test_without_dask_the_option_says_what_to_install(tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed → ImportError
+    rc = main(["calibrate", str(ROOT / "data" / "measurements" / "blush_rose.csv"), "-o",
+               str(tmp_path / "out"), "--cluster", "tcp://127.0.0.1:8786"])
+    err = capsys.readouterr().err.splitlines()
+    assert rc == 2 and err == ["jaxskin: error: --cluster needs Dask distributed: pip install "
+                               "'jaxskin[cluster]'"]
+    assert not (tmp_path / "out").exists()
+
+
+SHARDED = """
+import jax, sys
+from jaxskin import cluster
+from jaxskin.cli import main
+assert len(jax.devices()) == 2, jax.devices()
+values, replicated = cluster.shard_sweep([0.0, 0.5, 1.0])
+assert values.shape == (4,) and len(values.sharding.device_set) == 2 and replicated is not None
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_a_sweep_sharded_over_two_devices_matches_one_device(tmp_path, capsys):
+    """XLA_FLAGS gives the subprocess two CPU devices (it must be set before JAX starts):
+    a sweep of 5 (padded to 6, 3 per device) writes the bytes this one-device process does."""
+    args = ["render", "hand", *SMALL, "--sweep", "material.melanin=0.1:0.9:5"]
+    assert main([*args, "-o", str(tmp_path / "one")]) == 0
+    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
+    proc = subprocess.run([sys.executable, "-c", SHARDED, *args, "-o", str(tmp_path / "two")],
+                          env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    one = digests(tmp_path / "one")
+    assert len(one) == 5 and digests(tmp_path / "two") == one
+    capsys.readouterr()
