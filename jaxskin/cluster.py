@@ -138,6 +138,7 @@ class Pool:
 
 
 def _timed(fn, unit):
+    _compile_cache_once()
     t0 = time.perf_counter()
     result = fn(unit)
     return result, time.perf_counter() - t0
@@ -270,7 +271,6 @@ def render_batch(unit) -> "np.ndarray":
     from . import render
 
     config, params, key, values, output = unit
-    _compile_cache_once()
     if key is None:
         return np.asarray(render.render(config, params, output))
     arrays = render.prepare(config).arrays
@@ -282,7 +282,8 @@ def render_batch(unit) -> "np.ndarray":
 
 @functools.cache
 def _compile_cache_once() -> None:
-    """A worker keeps compiled programs on disk like the command does (same switch)."""
+    """A worker keeps compiled programs on disk like the command does (same switch): a
+    worker that restarts, or the next run, loads them instead of compiling again."""
     from .cli import _enable_compilation_cache
 
     _enable_compilation_cache()
