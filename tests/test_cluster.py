@@ -12,6 +12,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -94,6 +95,34 @@ def test_a_worker_killed_mid_run_has_its_task_retried_and_the_run_completes(
     client.wait_for_workers(2, timeout=60)  # the nanny restarts it, for the next tests
     assert len(before - set(client.run(os.getpid).values())) == 1  # one process did die
     capsys.readouterr()
+
+
+def test_ctrl_c_cancels_the_tasks_on_the_cluster(tmp_path, capsys, dask_cluster,
+                                                 monkeypatch):
+    """SIGINT (KeyboardInterrupt) when the first image is being written: exit 130, the line
+    names no file, and the scheduler is left with no task of the run."""
+    from jaxskin import maps
+
+    lc, client = dask_cluster
+
+    def interrupted(*a, **kw):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(maps, "write_render", interrupted)
+    rc = main(["render", "hand", *SMALL, "--sweep", "material.melanin=0:1:40", "-o",
+               str(tmp_path / "out"), "--cluster", lc.scheduler_address])
+    err = capsys.readouterr().err.splitlines()
+    assert rc == 130 and err == ["jaxskin: interrupted (SIGINT) while rendering hand; no file "
+                                 "was written"]
+
+    def tasks(dask_scheduler):
+        return [str(k) for k in dask_scheduler.tasks if "jaxskin-" in str(k)]
+
+    deadline = time.monotonic() + 10
+    while client.run_on_scheduler(tasks) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert client.run_on_scheduler(tasks) == []
+    assert not (tmp_path / "out").exists() or not list((tmp_path / "out").iterdir())
 
 
 def test_calibrate_on_the_cluster_matches_the_local_bytes(tmp_path, capsys, dask_cluster):
