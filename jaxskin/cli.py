@@ -544,35 +544,39 @@ def _render(args, run: _Run) -> int:
             (key, values), = sweep
             batches = cluster.sweep_batches(values)
             for k, batch in enumerate(batches):
-                units.append((sc.config, params, key, batch, output))
+                units.append(("images", sc.config, params, key, batch, output))
                 targets.append((i, planned["sweep"][k * len(batch):(k + 1) * len(batch)]))
         else:
-            units.append((sc.config, params, None, None, output))
+            units.append(("images", sc.config, params, None, None, output))
             targets.append((i, [planned["image"]]))
+        if args.maps or args.glb:
+            units.append(("maps", sc.config, params, args.glb))
+            targets.append((i, None))
     seconds, n0 = [0.0] * len(plans), [0] * len(plans)
     rows = []
     with cluster.pool(args.cluster) as pool:
         run.stage = f"rendering {plans[0][0].name}"
-        results = pool.map(cluster.render_batch, units, desc="render", unit="batch")
+        results = pool.map(cluster.render_unit, units, desc="render", unit="task")
         for k, ((i, paths), (result, dt)) in enumerate(zip(targets, results, strict=True)):
             sc, sweep, _ = plans[i]
             t0 = time.perf_counter()
             if k == 0 or targets[k - 1][0] != i:
                 n0[i] = len(outputs.written)
-            for image, path in zip(result if sweep else [result], paths, strict=False):
-                maps.write_render(image, path, args.format)
-                outputs.done(path)
-            last = k + 1 == len(targets) or targets[k + 1][0] != i
-            if last:
-                run.stage = f"writing the maps of {sc.name}"
-                _write_maps(sc, files[i], outputs, args)
+            if paths is None:
+                _write_maps(sc, files[i], outputs, result)
+            else:
+                for image, path in zip(result if sweep else [result], paths, strict=False):
+                    maps.write_render(image, path, args.format)
+                    outputs.done(path)
             seconds[i] += dt + time.perf_counter() - t0
-            if last:
+            if k + 1 == len(targets) or targets[k + 1][0] != i:  # the scene's last unit
                 config = sc.config
                 size = f"{config.image}x{config.image_height or config.image}"
                 rows.append((sc.name, size, len(outputs.written) - n0[i], seconds[i]))
             if k + 1 < len(targets):
-                run.stage = f"rendering {plans[targets[k + 1][0]][0].name}"
+                following = plans[targets[k + 1][0]][0].name
+                run.stage = (f"making the maps of {following}" if targets[k + 1][1] is None
+                             else f"rendering {following}")
     print(f"{'scene':<16} {'image':>9} {'files':>6} {'time s':>7}")
     for name, size, n, dt in rows:
         print(f"{name:<16} {size:>9} {n:>6} {dt:>7.2f}")
@@ -580,24 +584,18 @@ def _render(args, run: _Run) -> int:
     return 0
 
 
-def _write_maps(sc, planned: dict, outputs: Outputs, args) -> None:
-    """The scene's texture-space maps (--maps) and GLB (--glb), computed and written here."""
-    import numpy as np
+def _write_maps(sc, planned: dict, outputs: Outputs, result: dict) -> None:
+    """Write a scene's texture-space maps (--maps) and GLB (--glb) from `result`
+    (`cluster.scene_maps`: height, normals and the GLB's albedo, made here or on a worker)."""
+    from . import maps, texture
 
-    from . import maps, render, texture
-
-    if not (args.maps or args.glb):
-        return
-    config, params = sc.config, sc.params
-    s = texture.setup(config.texture)
-    result = texture.texture_maps(config, params)
-    if args.glb:
+    s = texture.setup(sc.config.texture)  # the mesh and texture space, for the mask and GLB
+    if "glb" in planned:
         from .export import write_glb
 
-        albedo = render.albedo(config, params)
-        write_glb(s, np.asarray(albedo), result["normals"], planned["glb"])
+        write_glb(s, result["albedo"], result["normals"], planned["glb"])
         outputs.done(planned["glb"])
-    if args.maps:
+    if "height" in planned:
         maps.write_height(result["height"], planned["height"])
         outputs.done(planned["height"])
         maps.write_normals(result["normals"], s.mask, planned["normal"])

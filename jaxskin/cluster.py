@@ -41,7 +41,7 @@ if TYPE_CHECKING:
     import numpy as np
 
 __all__ = ["SWEEP_BATCH", "Pool", "add_option", "check_address", "connect", "pool",
-           "render_batch", "shard_sweep", "sweep_batches"]
+           "render_batch", "render_unit", "scene_maps", "shard_sweep", "sweep_batches"]
 
 SWEEP_BATCH = 8  # sweep values per task (and per compiled call when run here)
 CONNECT_TIMEOUT = 10.0  # seconds to reach the scheduler
@@ -121,7 +121,11 @@ class Pool:
         following = 0
         with bar:
             for f in as_completed(futures, loop=client.loop):
-                ready[index[f.key]] = f.result()  # a task's own exception is raised here
+                try:
+                    ready[index[f.key]] = f.result()  # a task's own exception is raised here
+                except InputError as e:  # an input this process read but a worker could not
+                    raise InputError(f"{e} (on a worker at {self.address}: the workers need "
+                                     "the run's input files at the same paths)") from None
                 f.release()
                 bar.update()
                 while following in ready:
@@ -259,6 +263,27 @@ def _sweep_program(config, key: str, output: str):
         return render.render_prepared(config, {**params, key: v}, arrays, output)
 
     return jax.jit(jax.vmap(one, in_axes=(0, None, None)))
+
+
+def render_unit(unit):
+    """A unit of `jaxskin render`: `("images", config, params, key, values, output)` →
+    `render_batch`, `("maps", config, params, glb)` → `scene_maps`."""
+    kind, *rest = unit
+    return render_batch(tuple(rest)) if kind == "images" else scene_maps(tuple(rest))
+
+
+def scene_maps(unit) -> dict:
+    """A scene's texture-space maps, `(config, params, glb)` → `height (H, W)`,
+    `normals (H, W, 3)` and, with `glb`, the GLB's `albedo`, as NumPy arrays."""
+    import numpy as np
+
+    from . import render, texture
+
+    config, params, glb = unit
+    out = {k: np.asarray(v) for k, v in texture.texture_maps(config, params).items()}
+    if glb:
+        out["albedo"] = np.asarray(render.albedo(config, params))
+    return out
 
 
 def render_batch(unit) -> "np.ndarray":

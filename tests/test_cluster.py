@@ -53,20 +53,21 @@ def run_both(tmp_path, capsys, address, args) -> tuple[dict, dict]:
     return digests(tmp_path / "local"), digests(tmp_path / "cluster")
 
 
+@pytest.mark.slow  # 37 s under a load of 10 on 2 cores (two compiles per worker)
 def test_sweep_and_two_scenes_on_the_cluster_match_the_local_bytes(tmp_path, capsys,
                                                                     dask_cluster):
-    """A sweep of 10 (two batches: 8, and 2 padded to 8) and two plain scenes; every file
-    byte-identical to the local run's."""
+    """A sweep of 10 (two batches: 8, and 2 padded to 8) and two plain scenes with their
+    maps and GLB (made on the workers too); every file byte-identical to the local run's."""
     lc, _ = dask_cluster
     local, there = run_both(tmp_path / "sweep", capsys, lc.scheduler_address,
                             ["render", "hand", *SMALL, "--sweep", "material.melanin=0:1:10"])
     assert len(local) == 10 and local == there
     local, there = run_both(tmp_path / "scenes", capsys, lc.scheduler_address,
-                            ["render", "hand", "foot", *SMALL])
-    assert sorted(local) == ["foot_texture.size-64_camera.size-64.png",
-                             "hand_texture.size-64_camera.size-64.png"] and local == there
-    # Different scenes, different images: the comparison compares something.
-    assert len(set(local.values())) == 2
+                            ["render", "hand", "foot", *SMALL, "--maps", "--glb"])
+    assert len(local) == 10 and local == there  # image, glb, height, normal, field each
+    assert "foot_texture.size-64_camera.size-64_normal.png" in local
+    # Different scenes, different files: the comparison compares something.
+    assert len(set(local.values())) == 10
 
 
 def test_a_worker_killed_mid_run_has_its_task_retried_and_the_run_completes(
@@ -78,15 +79,15 @@ def test_a_worker_killed_mid_run_has_its_task_retried_and_the_run_completes(
     assert main([*args, "-o", str(tmp_path / "local")]) == 0
     before = set(client.run(os.getpid).values())
     marker = str(tmp_path / "a worker died")
-    render_batch = cluster.render_batch
+    render_unit = cluster.render_unit
 
     def dies_once(unit):  # a closure: pickled by value, run on the worker
         if not os.path.exists(marker):
             open(marker, "w").close()
             os.kill(os.getpid(), signal.SIGKILL)
-        return render_batch(unit)
+        return render_unit(unit)
 
-    monkeypatch.setattr(cluster, "render_batch", dies_once)
+    monkeypatch.setattr(cluster, "render_unit", dies_once)
     assert main([*args, "-o", str(tmp_path / "cluster"), "--cluster",
                  lc.scheduler_address]) == 0
     assert os.path.exists(marker)
@@ -125,6 +126,27 @@ def test_ctrl_c_cancels_the_tasks_on_the_cluster(tmp_path, capsys, dask_cluster,
     assert not (tmp_path / "out").exists() or not list((tmp_path / "out").iterdir())
 
 
+def test_an_input_a_worker_cannot_read_is_named_with_the_reason(tmp_path, capsys,
+                                                                 dask_cluster, monkeypatch):
+    """A worker without the run's files (no shared file system) raises the reader's
+    InputError there: one line that names the file and says what workers need; exit 2."""
+    lc, _ = dask_cluster
+
+    def cannot_read(unit):  # a closure: pickled by value, raises on the worker
+        from jaxskin.io import InputError
+
+        raise InputError("no such file", "/shared/meshes/head.obj")
+
+    monkeypatch.setattr(cluster, "render_unit", cannot_read)
+    rc = main(["render", "hand", *SMALL, "-o", str(tmp_path / "out"), "--cluster",
+               lc.scheduler_address])
+    err = capsys.readouterr().err.splitlines()
+    assert rc == 2 and err == [f"jaxskin: error: /shared/meshes/head.obj: no such file (on a "
+                               f"worker at {lc.scheduler_address}: the workers need the run's "
+                               "input files at the same paths)"]
+
+
+@pytest.mark.slow  # 21 s under a load of 10 on 2 cores
 def test_calibrate_on_the_cluster_matches_the_local_bytes(tmp_path, capsys, dask_cluster):
     """Two measurement files of one shape (one compiled fit), two tasks (the reports are drawn here from the results, so
     the JSON decides; --no-report keeps the test short)."""
