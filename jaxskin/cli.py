@@ -206,8 +206,8 @@ def _parser() -> argparse.ArgumentParser:
         "leading dot or control character) or it is refused. Everything is checked before "
         "anything is written: every scene, override, sweep, mesh, material, BRDF file, layer "
         "image and polygon, the output folder, that no output is an input, and that the "
-        "render fits in memory. All scenes render in one process; each static configuration "
-        "compiles once.",
+        "render fits in memory. All scenes render in one process (or on a Dask cluster, "
+        "--cluster); each static configuration compiles once (per worker).",
     )
     r.add_argument("scenes", nargs="+", metavar="SCENE", help="built-in name or TOML file")
     r.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
@@ -226,7 +226,8 @@ def _parser() -> argparse.ArgumentParser:
                    "wrinkle normal map as textures (opens in Blender or any glTF viewer)")
     r.add_argument("--sweep", action="append", default=[], metavar="KEY=START:STOP:COUNT",
                    help="render COUNT images with a parameter from START to STOP, vmapped in "
-                   "one compiled program, e.g. --sweep material.melanin=0:1:5; writes "
+                   "batches of 8 values by one compiled program, e.g. --sweep "
+                   "material.melanin=0:1:5; writes "
                    "DIR/<scene>_sweep-<i>_<key>-<value>.png")
     r.add_argument("-D", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene value, e.g. -D wrinkles.k_scale=1.3 (repeatable; "
