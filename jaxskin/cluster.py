@@ -30,11 +30,12 @@ from __future__ import annotations
 import contextlib
 import functools
 import re
+import sys
 import time
+import warnings
 from collections.abc import Callable, Iterable, Iterator
 from typing import TYPE_CHECKING
 
-from . import __version__
 from .io import InputError
 
 if TYPE_CHECKING:
@@ -187,31 +188,38 @@ def connect(address: str, timeout: float | None = None):
         raise InputError(f"--cluster: no Dask scheduler answered at {address} within "
                          f"{timeout:g} s ({why})") from None
     try:
-        found = client.run(_worker_version)
-    except Exception as e:  # noqa: BLE001
+        found = client.run(_versions)
+    except Exception as e:  # noqa: BLE001  (a worker that cannot even unpickle our function)
         client.close()
-        raise InputError(f"--cluster {address}: cannot ask the workers their version "
-                         f"({e.__class__.__name__}: {e})") from None
-    wrong = {w: v for w, v in found.items() if v != __version__}
+        raise InputError(f"--cluster {address}: cannot ask the workers their jaxskin version "
+                         f"({e.__class__.__name__}: {' '.join(str(e).split())[:160]}); install "
+                         "this jaxskin on every worker") from None
+    mine = _versions()
+    wrong = {w: v for w, v in found.items() if v[0] != mine[0]}
     if wrong:
         client.close()
-        worker, version = next(iter(wrong.items()))
+        worker, (version, _) = next(iter(wrong.items()))
         raise InputError(f"--cluster {address}: worker {worker} runs jaxskin {version}, this "
-                         f"is {__version__}; install the same jaxskin on every worker")
+                         f"is {mine[0]}; install the same jaxskin on every worker")
+    for worker, (_, jax_version) in found.items():
+        if jax_version != mine[1]:
+            warnings.warn(f"--cluster {address}: worker {worker} runs JAX {jax_version}, this "
+                          f"process {mine[1]}: its images may differ in the last bits",
+                          stacklevel=2)
+            break
     if not found:
-        import sys
-
         print(f"jaxskin: note: the scheduler at {address} has no workers yet; the tasks wait "
               "for one", file=sys.stderr, flush=True)
     return client
 
 
-def _worker_version() -> str:
-    try:
-        from jaxskin import __version__ as v
-    except ImportError:
-        return "(none)"
-    return v
+def _versions() -> tuple[str, str]:
+    """jaxskin's and JAX's versions where this runs (JAX's without importing it)."""
+    from importlib.metadata import version
+
+    from jaxskin import __version__ as v
+
+    return v, version("jax")
 
 
 # --- the render's units --------------------------------------------------------------------

@@ -199,6 +199,21 @@ def test_a_bad_address_is_one_line_and_exit_2_before_any_work(tmp_path, capsys, 
     assert not (tmp_path / "out").exists()
 
 
+def test_workers_with_another_jaxskin_are_refused_before_any_work(tmp_path, capsys,
+                                                                  dask_cluster, monkeypatch):
+    """This process claims another version than the workers report: exit 2, one line."""
+    lc, _ = dask_cluster
+    import jaxskin
+
+    real = cluster._versions()
+    monkeypatch.setattr(jaxskin, "__version__", "9.9.9")  # here only: workers import theirs
+    rc = main(["render", "hand", "-o", str(tmp_path / "out"), "--cluster",
+               lc.scheduler_address])
+    err = capsys.readouterr().err.splitlines()
+    assert rc == 2 and len(err) == 1 and f"runs jaxskin {real[0]}, this is 9.9.9" in err[0]
+    assert not (tmp_path / "out").exists()
+
+
 def test_without_dask_the_option_says_what_to_install(tmp_path, capsys, monkeypatch):
     monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed → ImportError
     rc = main(["calibrate", str(ROOT / "data" / "measurements" / "blush_rose.csv"), "-o",
