@@ -630,11 +630,8 @@ def _fit_brdf(args, run: _Run) -> int:
           f"{len(samples.f)} samples ...", flush=True)
     t0 = time.perf_counter()
     with cluster.pool(args.cluster) as pool:
-        def map_units(fn, units):
-            return (r for r, _ in pool.map(fn, units, desc="fit-brdf", unit="channel"))
-
         result = brdf.fit(samples, lobes=args.lobes, starts=args.starts, seed=args.seed,
-                          map_units=map_units)
+                          map_units=pool.mapper(desc="fit-brdf", unit="channel"))
     seconds = time.perf_counter() - t0
     stats = result.stats()
     formats.write_lafortune(result.params, out, fit={"source": Path(args.file).name, **stats})

@@ -100,6 +100,15 @@ class Pool:
             return self._here(fn, units, bar)
         return self._there(fn, units, bar, retries)
 
+    def mapper(self, *, desc: str, unit: str = "task") -> Callable:
+        """`map` as a plain `map_units(fn, units)` → results in order (seconds dropped): the
+        form a library function takes to run its units here or on a cluster
+        (`fitting.brdf.fit(..., map_units=pool.mapper(desc="fit-brdf", unit="channel"))`)."""
+        def map_units(fn, units):
+            return (result for result, _ in self.map(fn, units, desc=desc, unit=unit))
+
+        return map_units
+
     @staticmethod
     def _here(fn, units, bar):
         with bar:
