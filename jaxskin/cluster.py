@@ -121,7 +121,7 @@ class Pool:
         from distributed import as_completed
 
         client = self.client
-        futures = [client.submit(_timed, fn, u, pure=False, retries=retries, priority=-i,
+        futures = [client.submit(_timed_on_worker, fn, u, pure=False, retries=retries, priority=-i,
                                  key=f"jaxskin-{getattr(fn, '__name__', 'unit')}-{i}-"
                                      f"{time.time_ns()}")
                    for i, u in enumerate(units)]
@@ -152,10 +152,14 @@ class Pool:
 
 
 def _timed(fn, unit):
-    _compile_cache_once()
     t0 = time.perf_counter()
     result = fn(unit)
     return result, time.perf_counter() - t0
+
+
+def _timed_on_worker(fn, unit):
+    _compile_cache_once()
+    return _timed(fn, unit)
 
 
 @contextlib.contextmanager
