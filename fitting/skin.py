@@ -174,8 +174,7 @@ def fit(names, wavelengths, R, starts: int = 4, seed: int = 0, fixed=None, progr
         z0[..., bp.PARAMS.index(name)] = to_z(bp.DEFAULT._replace(**{name: value}))[
             bp.PARAMS.index(name)]
     free = tuple(i for i, name in enumerate(bp.PARAMS) if name not in fixed)
-    pad = (-m) % CHUNK if m > CHUNK else 0
-    chunk = CHUNK if m > CHUNK else m
+    pad, chunk = (-m) % CHUNK, CHUNK  # one shape: one compiled program for any m
     z0p = np.concatenate([z0, np.repeat(z0[-1:], pad, 0)])
     Rp = np.concatenate([Rm, np.repeat(Rm[-1:], pad, 0)])
     out = []
