@@ -118,7 +118,7 @@ def _residuals(z, args):
 def _solve(z0, R, c, free, max_steps=300):
     """LM for every (spectrum, start): `z0 (m, S, 6)` (the fixed parameters' entries are
     their values), `R (m, n)`; `free`: the indices of the parameters fitted."""
-    solver = optx.LevenbergMarquardt(rtol=1e-7, atol=1e-9)
+    solver = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-8)
 
     def one(z_all, R_k):
         args = (c, R_k, z_all, free)
@@ -258,7 +258,10 @@ def write_report(result: SkinFit, path, samples: int = 6) -> None:
         bins = np.geomspace(lo, hi, 21) if log else np.linspace(lo, hi, 21)
         ax.hist(np.clip(v, lo, hi), bins=bins, color="C0" if name != "ΔE2000" else "C3")
         if log:
+            from matplotlib.ticker import NullFormatter
+
             ax.set_xscale("log")
+            ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_title(f"{name}: median {np.median(v):.3g}", fontsize=8)
         ax.tick_params(labelsize=7)
     fig.suptitle(f"fit-skin: {m} spectra, ΔE2000 median {np.median(result.dE2000):.2f}, max "

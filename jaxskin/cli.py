@@ -5,6 +5,7 @@
     jaxskin calibrate FILE.csv [FILE.csv ...] -o OUTDIR   # S(λ), K(λ) of cosmetics
     jaxskin fit-brdf FILE.csv -o OUT.json [--lobes N]     # Lafortune lobes
     jaxskin render SCENE [SCENE ...] -o DIR --maps        # wrinkle height and normal maps
+    jaxskin fit-skin SPECTRA.csv -o DIR                   # the biophysical skin, fitted
 
 (`python -m jaxskin …` is the same.) Exit codes: 0 done; 2 bad input (a file, a column, a
 value, an option, an output path, a run that cannot fit in memory), reported as one line
