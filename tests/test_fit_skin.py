@@ -90,6 +90,22 @@ def test_synthetic_spectra_recover_their_parameters(fitted):
     assert r.rms.max() < 2e-4 and r.dE2000.max() < 0.05
 
 
+@pytest.mark.slow
+def test_fixed_parameters_are_held(fitted):
+    """`--fix`: a parameter held at its true value stays there exactly and the others are
+    still recovered (one more compiled program: the free set is static)."""
+    truth = bp.Skin(0.15, 0.5, 0.03, 0.7, 0.08, 2.0)
+    wl = np.arange(382.0, 780.0, 3.0)
+    with jax.enable_x64(True):
+        c = bp.chromophores(wl, formats.haemoglobin_table())
+        R = np.asarray(bp.reflectance(c, bp.Skin(*map(np.float64, truth))))[None]
+    r = skin.fit(["a"], wl, R, fixed={"epidermis_mm": 0.08})
+    assert r.params["epidermis_mm"][0] == pytest.approx(0.08, rel=1e-9)
+    for p in ("melanin", "haemoglobin", "scattering"):
+        assert r.params[p][0] == pytest.approx(getattr(truth, p), rel=0.03), p
+    assert r.dE2000[0] < 0.05
+
+
 def test_delta_e2000_against_colour_science_sd_to_xyz():
     """`delta_e2000` (XYZ by the grid's weights) against colour-science's own spectral path
     (SpectralDistribution, interpolated to 5 nm, `sd_to_XYZ`, `XYZ_to_Lab`, `delta_E`):
