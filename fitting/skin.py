@@ -45,8 +45,10 @@ PRIOR = 1e-3  # weight of the prior on z (see `_residuals`)
 
 @dataclasses.dataclass(frozen=True)
 class SkinFit:
-    """Per spectrum `(m,)`: `params` (name → values), `rms`, `dE2000`, `converged`, `steps`;
-    `wavelengths (n,)` fitted, `measured`, `fitted (m, n)` there."""
+    """Per spectrum `(m,)`: `params` (name → values), `rms`, `dE2000`, `converged`, `steps`,
+    `sd` (name → the linearised standard deviation of each parameter, 0 when fixed) and
+    `corr_melanin_epidermis` (their correlation: the spectra fix melanin × thickness better
+    than each); `wavelengths (n,)` fitted, `measured`, `fitted (m, n)` there."""
 
     names: list[str]
     wavelengths: np.ndarray
@@ -57,6 +59,8 @@ class SkinFit:
     dE2000: np.ndarray
     converged: np.ndarray
     steps: np.ndarray
+    sd: dict[str, np.ndarray]
+    corr_melanin_epidermis: np.ndarray
 
 
 def _bounds(name):
@@ -196,22 +200,56 @@ def fit(names, wavelengths, R, starts: int = 4, seed: int = 0, fixed=None, progr
         zb = z[np.arange(m), best]
         skin = from_z(jnp.asarray(zb))
         fitted = np.asarray(bp.reflectance(c, skin))
+        cov = np.asarray(_covariance(c, jnp.stack(skin, axis=-1), jnp.asarray(Rm), free))
     params = {name: np.asarray(v) for name, v in zip(bp.PARAMS, skin, strict=True)}
     rms = np.sqrt(np.mean((fitted - Rm) ** 2, axis=-1))
     dE = delta_e2000(wl, Rm, fitted)
+    sd = {name: np.sqrt(np.maximum(cov[:, i, i], 0.0)) for i, name in enumerate(bp.PARAMS)}
+    i, j = bp.PARAMS.index("melanin"), bp.PARAMS.index("epidermis_mm")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov[:, i, j] / (sd["melanin"] * sd["epidermis_mm"])
     return SkinFit(list(names), wl, Rm, fitted, params, rms, dE, ok[np.arange(m), best],
-                   steps[np.arange(m), best])
+                   steps[np.arange(m), best], sd, corr)
+
+
+@functools.partial(jax.jit, static_argnames=("free",))
+def _covariance(c, p, R, free):
+    """The linearised covariance of the fitted parameters `p (m, 6)` (in their own units):
+    σ² (JᵀJ)⁻¹ over the free ones, J = ∂R/∂p at the fit, σ² = Σ r² / (n − k) (the
+    residuals as noise: model error counts as noise too); 0 for the fixed ones."""
+    k = len(free)
+
+    def one(p_k, R_k):
+        def model(q):
+            return bp.reflectance(c, bp.Skin(*p_k.at[jnp.asarray(free)].set(q)))
+
+        q = p_k[jnp.asarray(free)]
+        J = jax.jacfwd(model)(q)
+        r = model(q) - R_k
+        var = jnp.sum(r * r) / max(R_k.shape[-1] - k, 1)
+        inner = jnp.linalg.pinv(J.T @ J, hermitian=True)
+        out = jnp.zeros((len(bp.PARAMS), len(bp.PARAMS)), p_k.dtype)
+        idx = jnp.asarray(free)
+        return out.at[idx[:, None], idx[None, :]].set(var * inner)
+
+    return jax.vmap(one)(p, R)
 
 
 def write_csv(result: SkinFit, path) -> None:
-    """`fit.csv`: name, the six parameters, rms, dE2000, converged, steps; one row each."""
-    header = ["name", *bp.PARAMS, "rms", "dE2000", "converged", "steps"]
+    """`fit.csv`, one row per spectrum: name, the six parameters, rms, dE2000, converged,
+    steps, then each parameter's linearised standard deviation (`<name>_sd`) and the
+    melanin–epidermis correlation."""
+    header = ["name", *bp.PARAMS, "rms", "dE2000", "converged", "steps",
+              *(f"{p}_sd" for p in bp.PARAMS), "corr_melanin_epidermis"]
     lines = [",".join(header)]
     for k, name in enumerate(result.names):
         values = [f"{result.params[p][k]:.6g}" for p in bp.PARAMS]
+        sds = [f"{result.sd[p][k]:.3g}" for p in bp.PARAMS]
+        corr = result.corr_melanin_epidermis[k]
         lines.append(",".join([_cell(name), *values, f"{result.rms[k]:.6g}",
                                f"{result.dE2000[k]:.4f}", str(bool(result.converged[k])).lower(),
-                               str(int(result.steps[k]))]))
+                               str(int(result.steps[k])), *sds,
+                               f"{corr:.4f}" if np.isfinite(corr) else ""]))
     with atomic_write(path, "w") as fh:
         fh.write("\n".join(lines) + "\n")
 
