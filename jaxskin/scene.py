@@ -14,7 +14,7 @@ k_noise = 0.0                      # 0–1
 k_bump = 0.5                       # 0–1
 seed = 0
 [material]
-model = "blinn"                    # blinn | lafortune
+model = "blinn"                    # blinn | lafortune | spectral | biophysical
 melanin = 0.2                      # Blinn: melanin, blood 0–1 (shading.blinn); specular 0–1;
 blood = 0.5                        #   shininess 0–10000
 specular = 0.2
@@ -257,7 +257,7 @@ class SceneConfig:
     """The static part of a scene (hashable; the jit cache key)."""
 
     texture: TextureConfig
-    material: str  # blinn | lafortune | spectral
+    material: str  # blinn | lafortune | spectral | biophysical
     brdf: str  # the Lafortune preset or file
     camera: str  # orthographic | perspective
     image: int
