@@ -282,6 +282,7 @@ def _parser() -> argparse.ArgumentParser:
     k.add_argument("--percent", action="store_true",
                    help="reflectance is in percent (0-100) instead of 0-1")
     k.add_argument("--no-report", action="store_true", help="write fit.csv only, no PNG")
+    cluster.add_option(k, "chunk of 10 spectra")
     return p
 
 

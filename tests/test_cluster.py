@@ -177,6 +177,26 @@ def test_fit_brdf_on_the_cluster_matches_the_local_bytes(tmp_path, capsys, dask_
     capsys.readouterr()
 
 
+@pytest.mark.slow  # a float64 LM compile on each worker: about a minute under load
+def test_fit_skin_on_the_cluster_matches_the_local_bytes(tmp_path, capsys, dask_cluster):
+    """12 NIST subjects, two chunks of 10 (the second padded): two tasks; the same fit.csv."""
+    from jaxskin import formats
+
+    lc, _ = dask_cluster
+    names, wl, R = formats.read_spectra(formats.data_dir() / "spectra" / formats.NIST_FILE)
+    rows = ["wavelength_nm," + ",".join(names[:12])]
+    rows += [f"{x:g}," + ",".join(f"{r:.4f}" for r in R[:12, i]) for i, x in enumerate(wl)]
+    (tmp_path / "twelve.csv").write_text("\n".join(rows) + "\n")
+    outs = []
+    for where, extra in (("local", []), ("cluster", ["--cluster", lc.scheduler_address])):
+        assert main(["fit-skin", str(tmp_path / "twelve.csv"), "--starts", "2", "--no-report",
+                     "-o", str(tmp_path / where), *extra]) == 0
+        outs.append(digests(tmp_path / where))
+    assert list(outs[0]) == ["fit.csv"] and outs[0] == outs[1]
+    assert (tmp_path / "local" / "fit.csv").read_text().count("\n") == 13
+    capsys.readouterr()
+
+
 def exit_code(argv) -> int:
     try:
         return main(argv)
