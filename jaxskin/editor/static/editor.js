@@ -179,12 +179,20 @@ const GROUPS = ["material", "skin", "layer", "wrinkles", "light", "camera", "vie
   "spectral", "texture", "mesh"];
 const BLINN = ["material.melanin", "material.blood", "material.specular", "material.shininess"];
 
+const BIOPHYSICAL = ["skin.melanin_fraction", "skin.eumelanin", "skin.haemoglobin",
+  "skin.oxygenation", "skin.epidermis_mm", "skin.scattering"];
+
 function relevant(key) {
   const model = S.values["material.model"];
+  const spectral = model === "spectral" || model === "biophysical";
+  const skin = model === "biophysical" ? "biophysical" : S.values["skin.model"];
   if (key === "name") return false;
   if (BLINN.includes(key)) return model === "blinn";
   if (key === "material.brdf") return model === "lafortune";
-  if (/^(skin|spectral|sss)\./.test(key) || key === "mesh.unit_mm") return model === "spectral";
+  if (BIOPHYSICAL.includes(key)) return spectral && skin === "biophysical";
+  if (key === "skin.melanin" || key === "skin.subject") return spectral && skin !== "biophysical";
+  if (key === "skin.model") return model === "spectral";
+  if (/^(skin|spectral|sss)\./.test(key) || key === "mesh.unit_mm") return spectral;
   if (key === "camera.fov") return S.values["camera.projection"] === "perspective";
   return true;
 }
@@ -370,7 +378,7 @@ async function loadArrows() {
 // --- layers and painting -----------------------------------------------------------------
 
 function buildLayers() {
-  const spectral = S.values["material.model"] === "spectral";
+  const spectral = ["spectral", "biophysical"].includes(S.values["material.model"]);
   const sel = $("paint-layer");
   const keep = sel.value;
   sel.innerHTML = "";
@@ -388,8 +396,8 @@ function buildLayers() {
   if (layer) mats.value = layer.material;
   $("paint-note").textContent = spectral ? (S.layers.length ? "Drag on the face to paint; " +
     "a painted layer is saved as a 16-bit map beside the scene." : "Add a layer to paint.") :
-    "Painting needs the cosmetics model: set material → model to spectral (the face or " +
-    "makeup scene has it).";
+    "Painting needs the cosmetics model: set material → model to spectral or biophysical " +
+    "(the face and makeup scenes have it).";
 }
 
 let files = null;  // the scenes and materials the server offers (refreshed on open and save)
