@@ -453,9 +453,9 @@ class Session:
         config, view = self._view()
         if config.spectral is None or layer not in [s.name for s in config.spectral.layers]:
             names = [s.name for s in config.spectral.layers] if config.spectral else []
+            none = "none; material.model must be spectral or biophysical"
             raise EditorError(f"no cosmetic layer {layer!r} to paint (this scene's layers: "
-                              f"{', '.join(names) or 'none; material.model must be spectral'})",
-                              400, "layer")
+                              f"{', '.join(names) or none})", 400, "layer")
         if not (isinstance(points, list) and 0 < len(points) <= 10000 and all(
                 isinstance(p, list) and len(p) == 2 and all(
                     isinstance(c, (int, float)) and not isinstance(c, bool)
