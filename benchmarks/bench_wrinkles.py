@@ -1,6 +1,8 @@
-"""Furrow height field benchmark: the jitted program against its NumPy transcription.
+"""Furrow height field benchmark: the jitted program against its NumPy transcription, and
+the sequential program against the parallel (lockstep) one.
 
-    python benchmarks/bench_wrinkles.py        # about 2 minutes on 2 cores
+    python benchmarks/bench_wrinkles.py        # about 3 minutes on 2 cores
+    python benchmarks/bench_wrinkles.py --parallel   # only sequential against parallel
 
 The built-in hand scene (Bando 2001 fig. 6.1: planar, k_scale 1.1) at 512² and 2048²
 texels: cold (trace + compile + run) and warm times of `jaxskin.wrinkles.height_field`, and
@@ -11,6 +13,7 @@ a GeForce, 2001). Writes the `wrinkles` section of RESULTS.md.
 
 from __future__ import annotations
 
+import functools
 import sys
 import time
 from pathlib import Path
@@ -23,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy_furrows  # noqa: E402
 from common import HERE, machine, table, timeit, write_section  # noqa: E402
 
-from jaxskin import texture, wrinkles  # noqa: E402
+from jaxskin import furrow_stats, lockstep, texture, wrinkles  # noqa: E402
 from jaxskin.scene import load_scene  # noqa: E402
 
 
@@ -85,8 +88,84 @@ step, and removing it (the seed search scans rows from a cursor inside the step 
 the times above.
 """
     write_section("wrinkles", body)
+    parallel()
     print(f"wrote {HERE / 'RESULTS.md'}")
 
 
+def side_by_side(size, repeat=3):
+    """Warm times of both programs on the hand at `size`² (interleaved, best of `repeat`
+    each, so both see the same load), their cold times, and the character figures."""
+    sc, s, cent, radius = inputs(size)
+    k, key = sc.config.texture.k_scale, jax.random.key(sc.config.texture.seed)
+    records = 65536
+    args = (s.mask, s.field1, s.field2)  # arguments, not constants folded into the program
+    seq = functools.partial(wrinkles.height_field, *args, cent, k, key, radius=radius,
+                            records=records)
+    par = functools.partial(lockstep.height_field, *args, k, key, records=records)
+    cold, warm, out = {}, {"seq": [], "par": []}, {}
+    for name, fn in (("seq", seq), ("par", par)):
+        t0 = time.perf_counter()
+        out[name] = jax.block_until_ready(fn())
+        cold[name] = time.perf_counter() - t0
+    for _ in range(repeat):
+        for name, fn in (("seq", seq), ("par", par)):
+            t0 = time.perf_counter()
+            jax.block_until_ready(fn())
+            warm[name].append(time.perf_counter() - t0)
+    stats = furrow_stats.compare(np.asarray(s.mask), np.asarray(out["seq"][0]),
+                                 wrinkles.to_numpy_record(out["seq"][1], records),
+                                 np.asarray(out["par"][0]),
+                                 wrinkles.to_numpy_record(out["par"][1], records))
+    counts = {n: [int(c) for c in out[n][1].count] for n in out}
+    return cold, {n: min(t) for n, t in warm.items()}, stats, counts
+
+
+def parallel():
+    rows, char = [], []
+    for size in (512, 2048):
+        cold, warm, st, counts = side_by_side(size)
+        rows.append((f"{size}²", lockstep.slots_for(size, size),
+                     f"{cold['seq']:.1f} / {cold['par']:.1f}",
+                     f"{warm['seq']:.3f}", f"{warm['par']:.3f}",
+                     f"{warm['seq'] / warm['par']:.2f}"))
+        cov = st["coverage"]
+        for p in range(2):
+            tj, ln = st["t_junctions"][p], st["lengths"][p]
+            char.append((f"{size}²", f"F{p + 1}", f"{counts['seq'][p]} / {counts['par'][p]}",
+                         f"{cov[0]:.3f} / {cov[1]:.3f}" if p == 0 else "",
+                         f"{st['orientation'][p]:.3f}", f"{tj[0]:.2f} / {tj[1]:.2f}",
+                         f"{ln[0]:.0f} / {ln[1]:.0f}", f"{ln[2]:.0f} / {ln[3]:.0f}",
+                         f"{ln[4]:.3f}"))
+        print(rows[-1], char[-2:], flush=True)
+    t = table(["texture", "slots", "cold s seq / par", "warm s sequential", "warm s parallel",
+               "sequential / parallel"], rows)
+    c = table(["texture", "pass", "furrows seq / par", "coverage seq / par",
+               "orientation histogram distance", "ends at a furrow (T) seq / par",
+               "median length seq / par", "90th pct length", "KS distance of lengths"], char)
+    body = f"""## Parallel furrow program (issue 19)
+
+Command: `python benchmarks/bench_wrinkles.py` (this section: `parallel()`). Machine:
+{machine()}. Pictures: `python benchmarks/furrow_pictures.py` →
+`benchmarks/furrows_side_by_side.png`.
+
+The sequential program (`wrinkles.height_field`) against the lockstep one
+(`lockstep.height_field`, `wrinkles.method = "parallel"`) on the hand (k_scale 1.1), in one
+run: cold (trace + compile + run), then warm runs interleaved (best of 3 each, so both see
+the same load on a shared machine).
+
+{t}
+
+Their character, the same runs (`jaxskin.furrow_stats.compare`): coverage is the share of
+mesh texels a furrow lowered; the orientation histogram distance is the total variation
+distance (0–1) of the two programs' structure-tensor orientation histograms (18 bins) of
+each pass's furrows; "ends at a furrow" is the share of furrow halves that stopped on
+another furrow of their pass (T-junctions); lengths are whole furrows in texels, with the
+two-sample Kolmogorov–Smirnov distance of their distributions.
+
+{c}
+"""
+    write_section("wrinkles-parallel", body)
+
+
 if __name__ == "__main__":
-    main()
+    parallel() if "--parallel" in sys.argv else main()  # --parallel: that section only

@@ -63,9 +63,10 @@ def cells_for(k_scale: float) -> tuple[int, ...]:
 
 
 def slots_for(height: int, width: int) -> int:
-    """Furrows in flight: one per 2048 texels (128 at 512², 2048 at 2048²), so those
-    growing at once are far apart compared with the furrow spacing."""
-    return int(np.clip(height * width // 2048, 32, 8192))
+    """Furrows in flight: one per 4096 texels (64 at 512², 1024 at 2048²), so those
+    growing at once are far apart compared with the furrow spacing: more cut each other's
+    long furrows short (the 90th percentile of lengths falls by a third at one per 2048)."""
+    return int(np.clip(height * width // 4096, 32, 8192))
 
 
 def _hash(v):
