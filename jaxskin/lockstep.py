@@ -126,18 +126,30 @@ def height_field(mask, field1, field2, k_scale: float, key, records: int = 1,
     cells = cells or cells_for(k_scale)
     run = functools.partial(_pass, mask, k_scale=k_scale, records=max(records, 1), wrap=wrap,
                             slots=slots, cells=cells)
-    fields = jnp.stack([field1, field2]).astype(jnp.float32)
-    keys = jnp.stack([jax.random.fold_in(key, 1), jax.random.fold_in(key, 2)])
-    # The two passes one after the other (one compiled body), each a loop of lockstep steps.
-    _, (img, rec) = jax.lax.scan(lambda _, fk: (None, run(*fk)), None, (fields, keys))
-    return jnp.where(mask, jnp.minimum(img[0], img[1]), 1.0), rec
+    fields = (field1.astype(jnp.float32).reshape(-1, 2), field2.astype(jnp.float32).reshape(-1, 2))
+    # The two passes one after the other, one compiled body (a loop over the pass; its
+    # field read where needed rather than the two stacked: a copy of both, 64 MB at 2048²).
+    shapes = jax.eval_shape(lambda: run(fields, 0, key))
+
+    def one(p, c):
+        h, rec = c
+        img, r = run(fields, p, jax.random.fold_in(key, p + 1))
+        rec = jax.tree.map(lambda a, b: jax.lax.dynamic_update_index_in_dim(a, b, p, 0), rec, r)
+        return jnp.minimum(h, img), rec
+
+    rec = jax.tree.map(lambda a: jnp.zeros((2, *a.shape), a.dtype), shapes[1])
+    h, rec = jax.lax.fori_loop(0, 2, one, (jnp.ones(mask.shape, jnp.float32), rec))
+    return jnp.where(mask, h, 1.0), rec
 
 
-def _pass(mask, field, key, *, k_scale, records, wrap, slots, cells):
+def _pass(mask, fields, p, key, *, k_scale, records, wrap, slots, cells):
     H, W = mask.shape
     n = H * W
     inside = mask.reshape(-1)
-    fflat = field.reshape(n, 2)
+
+    def field_at(idx):
+        """The pass's field at flat texels `idx` (0 where idx = n)."""
+        return jnp.where(p == 0, read(fields[0], idx, 0.0), read(fields[1], idx, 0.0))
     A, b = _band(k_scale)
     along, across = (jnp.asarray(a.ravel()) for a in np.meshgrid(
         np.arange(A) - (A - int(math.ceil(6.0 * k_scale))) // 2, np.arange(-b, b + 1),
@@ -163,9 +175,11 @@ def _pass(mask, field, key, *, k_scale, records, wrap, slots, cells):
         disc of radius f_density/2 − f_width/2 − 1/2."""
         ip = jnp.floor(pts).astype(jnp.int32)
         here = flat(ip[:, 0], ip[:, 1])
-        x = jnp.linalg.norm(read(fflat, here, 0.0), axis=-1)
+        x = jnp.linalg.norm(field_at(here), axis=-1)
         _, _, density, width, _, _ = furrow(x, k_scale)
-        rho = jnp.maximum(density / 2 - width / 2 - 0.5, 0.0)
+        # Materialised: fused into the reads below, this was recomputed per ring point.
+        pts, rho = jax.lax.optimization_barrier((pts, jnp.maximum(density / 2 - width / 2 - 0.5,
+                                                                    0.0)))
         around = jnp.floor(pts[:, None] + rho[:, None, None] * ring).astype(jnp.int32)
         taken = read(owner, flat(around[..., 0], around[..., 1]), _NONE) < _NONE
         return read(inside, here, False) & ~jnp.any(taken, axis=1)
@@ -186,7 +200,7 @@ def _pass(mask, field, key, *, k_scale, records, wrap, slots, cells):
         more = (head >= n_queue) & (rnd + 1 < len(cells))
         rnd = rnd + more
         queue, n_queue, head = jax.lax.cond(
-            more, lambda: (*jax.lax.switch(rnd, branches, owner, jax.random.fold_in(key, rnd)),
+            more, lambda: (*jax.lax.switch(rnd, branches, owner, salt + rnd.astype(jnp.uint32)),
                            jnp.int32(0)), lambda: (queue, n_queue, head))
         idle = ~alive
         pos = head + jnp.cumsum(idle) - 1
@@ -207,7 +221,7 @@ def _pass(mask, field, key, *, k_scale, records, wrap, slots, cells):
         # 2. Every live furrow moves one step (the sequential program's step, vectorised).
         ip = jnp.floor(P).astype(jnp.int32)
         at = flat(jnp.clip(ip[:, 0], 0, W - 1), jnp.clip(ip[:, 1], 0, H - 1))
-        d = jnp.where(half[:, None] == 0, 1.0, -1.0) * read(fflat, at, 0.0)
+        d = jnp.where(half[:, None] == 0, 1.0, -1.0) * field_at(at)
         x = jnp.linalg.norm(d, axis=-1)
         zero = x < 1e-6
         angle, f_len, _, width, depth, limit = furrow(x, k_scale)
@@ -296,7 +310,8 @@ def _pass(mask, field, key, *, k_scale, records, wrap, slots, cells):
         nx = -(-W // cell)
         j = _scramble(jnp.arange(count, dtype=jnp.int32), count)
         corner = jnp.stack([j % nx, j // nx], -1).astype(jnp.float32) * cell
-        jitter = jax.random.uniform(rkey, (count, 2))
+        jitter = _uniform(_hash(rkey ^ _hash(jnp.arange(2 * count, dtype=jnp.uint32))))
+        jitter = jitter.reshape(count, 2)
         pts = jnp.minimum(corner + jitter * cell, jnp.asarray([W, H], jnp.float32) - 0.5)
         # A cheap first sieve (a third of the ring's points); a seed is read again in full
         # when a slot takes it.
@@ -306,7 +321,7 @@ def _pass(mask, field, key, *, k_scale, records, wrap, slots, cells):
 
     branches = [functools.partial(queue_of, c, n) for c, n in zip(cells, counts, strict=True)]
 
-    queue, n_queue = branches[0](owner, jax.random.fold_in(key, 0))
+    queue, n_queue = branches[0](owner, salt)
     c = (img, owner, rec, jnp.int32(0), queue, n_queue, jnp.int32(0), jnp.int32(0), *state)
     c = jax.lax.while_loop(
         lambda c: (c[6] < c[5]) | (c[3] + 1 < len(cells)) | jnp.any(c[8]), step, c)

@@ -187,6 +187,7 @@ def test_bad_method_is_a_one_line_error(tmp_path):
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
 
 
+@pytest.mark.slow  # compiles the render's texture maps in float64: 10–30 s
 def test_parallel_scene_differentiable_in_k_noise_and_k_bump(x64):
     """The height field is a constant of the render (as the sequential one is); the
     parameters after it are gradient-checked, float64, on the parallel program's field."""
