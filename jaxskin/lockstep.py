@@ -102,7 +102,6 @@ def _band(k_scale: float) -> tuple[int, int]:
             int(math.ceil(half * math.sqrt(2.0) + 0.5)))
 
 
-@functools.partial(jax.jit, static_argnames=("k_scale", "records", "wrap", "slots", "cells"))
 def height_field(mask, field1, field2, k_scale: float, key, records: int = 1,
                  wrap: bool = False, slots: int = 0, cells: tuple[int, ...] = ()):
     """The wrinkle height field before noise, grown in lockstep (see the module doc).
@@ -119,8 +118,15 @@ def height_field(mask, field1, field2, k_scale: float, key, records: int = 1,
     - `cells`: the seed grid per round (empty: `cells_for(k_scale)`).
 
     **Returns:** `(h (H, W) float32 in [0, 1] with 1 off the mesh, FurrowRecord)`, the record
-    as `wrinkles.height_field`'s (furrow ids in the order their seeds were taken).
+    as `wrinkles.height_field`'s (furrow ids in the order their seeds were taken). An
+    int32/float32 program, the same under a caller's float64 (`jax.enable_x64`).
     """
+    with jax.enable_x64(False):
+        return _height_field(mask, field1, field2, k_scale, key, records, wrap, slots, cells)
+
+
+@functools.partial(jax.jit, static_argnames=("k_scale", "records", "wrap", "slots", "cells"))
+def _height_field(mask, field1, field2, k_scale, key, records, wrap, slots, cells):
     H, W = mask.shape
     slots = slots or slots_for(H, W)
     cells = cells or cells_for(k_scale)
