@@ -160,9 +160,44 @@ mesh texels a furrow lowered; the orientation histogram distance is the total va
 distance (0–1) of the two programs' structure-tensor orientation histograms (18 bins) of
 each pass's furrows; "ends at a furrow" is the share of furrow halves that stopped on
 another furrow of their pass (T-junctions); lengths are whole furrows in texels, with the
-two-sample Kolmogorov–Smirnov distance of their distributions.
+two-sample Kolmogorov–Smirnov distance of their distributions. The pictures (rows: hand,
+arm, face; columns: sequential and parallel at 512², then the middle 512² of each at 2048²):
+
+![sequential against parallel furrows](furrows_side_by_side.png)
 
 {c}
+
+How it is built (`jaxskin/lockstep.py`): `slots` furrows (one per 4096 texels) each take a
+step per iteration of one `lax.while_loop` per pass; a slot whose furrow ended takes the
+next seed of a queue (seeds in four rounds, one jittered point per cell of grids of
+48, 12, 6 and 3 texels at k_scale 1.1, in a scrambled order, each taken only if B is free
+around it); each step draws its segment with one flat scatter-min into the image and one
+into the owner image, over a band-shaped window along the segment (91 texels at k_scale
+1.1; the sequential program's square window is 729). What it took, measured with the
+profiler at 2048²: `jnp.hypot` in the window made the step 3x slower than `sqrt`; threefry
+per step (the random turn) cost as much as the rest of the step, replaced by an integer
+hash; a sort per round, by a fixed scrambled order; waiting for every furrow of a round
+before the next (tails of up to 64 steps), by making the next round's queue as soon as the
+last one is used up (the seeds' positions are also materialised before the B test, which
+XLA had fused into every ring point's read). More slots cut long furrows short (at one
+per 2048 texels the 90th percentile of lengths on the 512² hand fell from 132 to 94
+texels), so the slot count is a trade of speed for likeness.
+
+**GPU: not measured** (no GPU in this session). What to expect: the program is fixed-shape,
+one while loop per pass with no host round trip other than XLA's loop condition; counted
+with the profiler on the hand, about 75 iterations per pass at 512² (64 slots) and 83 at
+2048² (1024 slots), each some 20 fused kernels over (slots × 91) elements. On an H100 that
+should be launch-bound at roughly 0.1–0.2 ms per iteration: some 15–35 ms at 512² and
+20–40 ms at 2048², against the sequential program's 0.64 s and 8.5 s there — some 20–40x
+at 512² (the 20 ms aim at the edge) and 200x or more at 2048². More slots would shorten
+the loop at 512² at a cost in likeness (above). The
+scene's `wrinkles.method = "auto"` picks this program on a GPU or TPU; on a CPU it keeps the
+sequential one although the parallel one is faster here too (the first table): switching
+the CPU default changes the look the golden images pin, a change to make deliberately
+(regenerate them) rather than in passing. The machine was shared and loaded while these
+figures were taken (load average 10–16 on 2 cores): the sequential program suffers more
+from it (1.04 s at 2048² unloaded, above); an earlier run of this section in the same
+session gave 0.114 / 0.046 s at 512² (2.5x) and 4.83 / 2.68 s at 2048² (1.8x).
 """
     write_section("wrinkles-parallel", body)
 

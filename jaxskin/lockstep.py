@@ -10,19 +10,23 @@ merged by minimum — with three changes that make it parallel:
 
 - **seeds in rounds, coarse to fine.** For the paper's "centroids, then every texel"
   (sparse cover first, gaps stuffed after), round r takes one jittered point per cell of a
-  grid of `cells[r]` texels, in a random order; a seed is taken when no furrow is yet
-  within f_density/2 of it (the buffer B, read at `_RING` points around the seed). Round
-  0's furrows run long over an empty texture, later rounds fill the gaps with short ones;
+  grid of `cells[r]` texels, in a scrambled order; a seed is taken when no furrow line is
+  yet within f_density/2 of it (the buffer B, read in the owner image at `_RING` points
+  around the seed). Round 0's furrows run long over an empty texture, later rounds fill
+  the gaps with short ones;
 - **a work queue.** Each of the `slots` holds one furrow (its +d half, then its −d half);
-  a slot whose furrow ended takes the round's next seed at the next iteration, so no slot
-  waits for the longest furrow. Ids are given in the order seeds are taken (the priority:
-  where two furrows draw the same texel the earlier keeps it);
+  a slot whose furrow ended takes the queue's next seed at the next iteration, so no slot
+  waits for the longest furrow; when a round's queue is used up the next round's is made
+  at once (from the furrows drawn so far). Ids are given in the order seeds are taken
+  (the priority: where two furrows draw the same texel the earlier keeps it);
 - **stops see the furrows drawn up to the previous iteration.** Two furrows that meet in
   the same iteration both see each other one step later (a texel's overlap, then a T).
 
-Each step draws its segment into a (2r + 1)² window (r from the longest step and widest
-furrow) with one flat scatter-min into the image and one into the owner image (the
-furrow id per texel, which the stop rule reads). Not texel for texel the sequential
+Each step draws its segment (box-filtered, as the sequential program does) into a window
+along it (`_band`: columns or rows along the segment's major axis, a few texels across)
+with one flat scatter-min into the image and one into the owner image (the furrow id per
+texel, which the stop rule reads). The random turns come from an integer hash of (furrow,
+half, step), not threefry (as costly as the rest of a step). Not texel for texel the sequential
 program, but its character: `benchmarks/bench_wrinkles.py` and `tests/test_lockstep.py`
 compare coverage, orientation histograms, T-junctions and furrow lengths.
 """

@@ -260,10 +260,10 @@ class SceneConfig:
 
 
 def furrow_method(method: str) -> str:
-    """`wrinkles.method` resolved: "auto" is whichever program is faster on JAX's default
-    device — the sequential one on a CPU (measured: the parallel one is no faster on 2
-    cores, benchmarks/RESULTS.md), the parallel one on a GPU or TPU (the sequential one
-    took 0.64 s at 512² on an H100, slower than on the CPU)."""
+    """`wrinkles.method` resolved: "auto" is the parallel program on a GPU or TPU (the
+    sequential one took 0.64 s at 512² on an H100, slower than on a CPU) and the sequential
+    one on a CPU — there the parallel one measured 2–5x faster too (benchmarks/RESULTS.md),
+    but the CPU default keeps the look the golden images pin; ask for "parallel"."""
     if method != "auto":
         return method
     import jax
