@@ -88,13 +88,17 @@ def _uniform(v):
 
 
 def _scramble(j, count: int):
-    """A fixed permutation of `0 … count − 1` (count < 2²⁰): j·p mod count with p coprime to
-    count near 0.618·count, in int32 without overflow."""
+    """A fixed permutation of `0 … count − 1` (count <= 2²⁴, an 8192² texture's 2-texel
+    cells): j·p mod count with p coprime to count near 0.618·count, four bits of p at a
+    time so that uint32 never overflows."""
     p = max(int(0.6180339887 * count), 1)
     while math.gcd(p, count) != 1:
         p += 1
-    hi = (j * (p >> 10)) % count
-    return (hi * 1024 + j * (p & 1023)) % count
+    j = j.astype(jnp.uint32)
+    acc = jnp.zeros_like(j)
+    for shift in range(20, -1, -4):
+        acc = (acc * 16 + j * ((p >> shift) & 15)) % count
+    return acc.astype(jnp.int32)
 
 
 def _band(k_scale: float) -> tuple[int, int]:

@@ -206,3 +206,13 @@ def test_parallel_scene_differentiable_in_k_noise_and_k_bump(x64):
     check_grads_scaled(f, [0.2, 0.5], [0.05, 0.05], order=1)
     h0, _ = texture.furrows(sc.config.texture)
     assert h0.dtype == jnp.float32 and np.mean(np.asarray(h0) < 1) > 0.2
+
+
+@pytest.mark.parametrize("count", [1, 7, 1849, 466489, 2**24])
+def test_seed_order_is_a_permutation(count):
+    """The rounds' scrambled order visits every cell once, up to an 8192² texture's 2²⁴
+    cells of 2 texels (where j·p would overflow 32 bits if multiplied at once)."""
+    order = np.asarray(lockstep._scramble(jnp.arange(count, dtype=jnp.int32), count))
+    np.testing.assert_array_equal(np.sort(order), np.arange(count))
+    if count > 7:
+        assert np.mean(np.abs(np.diff(order)) > 1) > 0.9  # neighbours in the queue are apart
