@@ -13,6 +13,8 @@ k_scale = 1.1                      # 0.5–2 (lengths, in texels; static)
 k_noise = 0.0                      # 0–1
 k_bump = 0.5                       # 0–1
 seed = 0
+method = "auto"                    # auto | parallel | sequential: the furrow program (static;
+                                   #   auto: sequential on a CPU, parallel on a GPU/TPU)
 [material]
 model = "blinn"                    # blinn | lafortune | spectral | biophysical
 melanin = 0.2                      # Blinn: melanin, blood 0–1 (shading.blinn); specular 0–1;
@@ -143,6 +145,7 @@ SCHEMA: dict[str, _Key] = {
     "wrinkles.k_noise": _Key(float, 0.0, 0.0, 1.0, param=True),
     "wrinkles.k_bump": _Key(float, 0.5, 0.0, 1.0, param=True),
     "wrinkles.seed": _Key(int, 0, 0, 2**31 - 1),
+    "wrinkles.method": _Key(str, "auto", choices=("auto", "parallel", "sequential")),
     "material.model": _Key(str, "blinn", choices=("blinn", "lafortune", "spectral",
                                                   "biophysical")),
     "material.melanin": _Key(float, 0.2, 0.0, 1.0, param=True),
@@ -220,6 +223,9 @@ class TextureConfig:
     k_scale: float
     seed: int
     edits: tuple[EditSpec, ...]
+    # The furrow program: "sequential" (wrinkles.height_field) or "parallel"
+    # (lockstep.height_field); the scene's "auto" is resolved by `furrow_method`.
+    method: str = "sequential"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -276,6 +282,18 @@ class SceneConfig:
         return self.texture.wrinkles and self.mode in ("wrinkles", "height")
 
 
+def furrow_method(method: str) -> str:
+    """`wrinkles.method` resolved: "auto" is the parallel program on a GPU or TPU (the
+    sequential one took 0.64 s at 512² on an H100, slower than on a CPU) and the sequential
+    one on a CPU — there the parallel one measured 2–5x faster too (benchmarks/RESULTS.md),
+    but the CPU default keeps the look the golden images pin; ask for "parallel"."""
+    if method != "auto":
+        return method
+    import jax
+
+    return "sequential" if jax.default_backend() == "cpu" else "parallel"
+
+
 @dataclasses.dataclass(frozen=True)
 class Scene:
     name: str
@@ -289,7 +307,7 @@ class Scene:
         v = self.values
         tex = TextureConfig(v["mesh.file"], v["mesh.projection"], v["texture.size"],
                             v["wrinkles.enabled"], v["wrinkles.k_scale"], v["wrinkles.seed"],
-                            self.edits)
+                            self.edits, furrow_method(v["wrinkles.method"]))
         spectral = None
         if v["material.model"] in SPECTRAL_MODELS:
             spectral = SpectralConfig(v["skin.subject"], v["spectral.step"],

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import bump, wrinkles
+from . import bump, lockstep, wrinkles
 from .fields import Edit, interpolate_fields
 from .io import InputError
 from .mesh import Mesh, load_mesh
@@ -105,11 +105,16 @@ RECORDS = 4096
 
 @functools.lru_cache(maxsize=8)
 def furrows(config: TextureConfig):
-    """The furrow height field before noise, `(H, W)`, and the furrow records."""
+    """The furrow height field before noise, `(H, W)`, and the furrow records, from the
+    configuration's furrow program (`config.method`: sequential or parallel)."""
     s = setup(config)
     # The furrow program is an int32/float32 program, not differentiable: the same under
     # a caller's float64 (jax.enable_x64), as in a gradient check of a wrinkled scene.
     with jax.enable_x64(False):
+        if config.method == "parallel":
+            return lockstep.height_field(
+                s.mask, s.field1, s.field2, config.k_scale, jax.random.key(config.seed),
+                records=RECORDS, wrap=s.tmap.wrap_x)
         return wrinkles.height_field(
             s.mask, s.field1, s.field2, jnp.asarray(s.tmap.centroids(), jnp.float32),
             config.k_scale, jax.random.key(config.seed),
