@@ -52,6 +52,7 @@ unit_mm = 10.0                     # millimetres per mesh unit (the face is in c
 [skin]
 subject = 1                        # NIST skin spectrum, subjects 1–100
 melanin = 0.0                      # added melanin, optical depth at 500 nm (0–3)
+melanin_image = "melanin.png"      # optional: a greyscale map, melanin × its value (0–1)
 roughness = 0.3                    # Kelemen m and rho_s of the skin's own highlight
 specular = 0.18
 [spectral]
@@ -152,6 +153,7 @@ SCHEMA: dict[str, _Key] = {
     "skin.melanin": _Key(float, 0.0, 0.0, 3.0, param=True),
     "skin.roughness": _Key(float, 0.3, 0.01, 1.0, param=True),
     "skin.specular": _Key(float, 0.18, 0.0, 1.0, param=True),
+    "skin.melanin_image": _Key(str, None),  # a greyscale map (0–1 × skin.melanin) per texel
     "spectral.step": _Key(int, 10, choices=STEPS),
     "spectral.illuminant": _Key(str, "D65", choices=ILLUMINANTS),
     "sss.enabled": _Key(bool, True),
@@ -224,6 +226,7 @@ class SpectralConfig:
     sss: str | None  # the blur method, or None: no subsurface scattering
     texel_mm: float  # 0: from the mesh
     layers: tuple[LayerSpec, ...]
+    melanin_image: str | None = None  # skin.melanin × this greyscale map, per texel
 
     @property
     def grid(self) -> Grid:
@@ -272,7 +275,8 @@ class Scene:
             spectral = SpectralConfig(v["skin.subject"], v["spectral.step"],
                                       v["spectral.illuminant"], v["mesh.unit_mm"],
                                       v["sss.method"] if v["sss.enabled"] else None,
-                                      v["sss.texel_mm"], self.layers)
+                                      v["sss.texel_mm"], self.layers,
+                                      v["skin.melanin_image"])
         return SceneConfig(tex, v["material.model"], v["material.brdf"], v["camera.projection"],
                            v["camera.size"], v["camera.supersample"], v["camera.fov"],
                            tuple(v["camera.rotate"]), v["view.mode"], spectral,
@@ -375,6 +379,14 @@ def load_scene(name_or_path, overrides=()) -> Scene:
                              f"written by jaxskin fit-brdf); no file {brdf_path}", path,
                              key="material.brdf")
         values["material.brdf"] = str(brdf_path)
+    image = values["skin.melanin_image"]
+    if image is not None:
+        image_path = Path(image) if Path(image).is_absolute() else (
+            base("skin.melanin_image") / image).resolve()
+        if not image_path.is_file():
+            raise InputError(f"expected a greyscale image file, got {image!r}", path,
+                             key="skin.melanin_image")
+        values["skin.melanin_image"] = str(image_path)
     edits = tuple(_edit(i, e, path) for i, e in enumerate(edits_raw))
     return Scene(values["name"], str(path), values, edits, layers)
 
