@@ -75,7 +75,7 @@ MAP_SOLVER_NOTE = (
     "a lower loss in the same number of gradients than optimistix.LBFGS and NonlinearCG, "
     "whose line searches spend extra renders per step and stall on the prior's kinks "
     "(benchmarks/RESULTS.md, 'fit-image')")
-ADAM_RATE = 0.05  # per step, in the transformed (z) coordinates
+ADAM_RATE = 0.3  # per step, in the transformed (log-like) coordinates: ~35 % at most
 PRIOR_EPS = 0.01  # the total variation's smoothing, in map units: sqrt(d² + ε²) − ε
 
 
@@ -132,9 +132,7 @@ def fit_keys(scene: Scene, text: str, where: str = "--fit") -> tuple[FitKey, ...
                 raise InputError(f"fit the map or its scalar '{scalar}', not both: the map "
                                  "multiplies it, so only their product is seen", where, key=key)
             spec = _schema(scalar)
-            bounded = key in MAP_SCALARS
-            out.append(FitKey(key, "map", spec.lo, spec.hi, scalar,
-                              "sigmoid" if bounded else "softplus"))
+            out.append(FitKey(key, "map", spec.lo, spec.hi, scalar, "sigmoid"))
             continue
         spec = _schema(key)
         if key not in params or key == "material.lafortune":
@@ -168,16 +166,15 @@ def fit_keys(scene: Scene, text: str, where: str = "--fit") -> tuple[FitKey, ...
 # --- the parameter transforms -------------------------------------------------------------
 
 def _unit(fk: FitKey, params: dict) -> float:
-    """A map's fitting scale: its scalar's value, or for a map with a bounded transform the
-    schema's top (the map then spans [0, 1])."""
-    if fk.transform == "sigmoid":
-        return float(fk.hi)
-    return float(params[fk.scalar])
+    """A map's fitting scale: its scalar's value (the schema's top when that is 0)."""
+    value = float(params[fk.scalar])
+    return value if value > 0 else float(fk.hi)
 
 
 def _to_z(fk: FitKey, value, unit: float = 1.0):
     """The unconstrained coordinate of a value (inverse of `_from_z`), kept off the bounds
-    by 1e-3 of the range so that it is finite."""
+    so that it is finite: by 1e-3 of the range for a scalar, 1e-7 for a map (whose range,
+    up to the schema's top in units of its scalar, is wide: 0.01 mm of 10 mm)."""
     x = np.asarray(value, np.float64)
     if fk.kind == "vector":
         return x
@@ -185,7 +182,8 @@ def _to_z(fk: FitKey, value, unit: float = 1.0):
         m = np.maximum(x, 1e-3)
         return m + np.log(-np.expm1(-m))
     lo, hi = (0.0, fk.hi / unit) if fk.kind == "map" else (fk.lo, fk.hi)
-    f = np.clip((x - lo) / (hi - lo), 1e-3, 1 - 1e-3)
+    eps = 1e-7 if fk.kind == "map" else 1e-3
+    f = np.clip((x - lo) / (hi - lo), eps, 1 - eps)
     return np.log(f) - np.log1p(-f)
 
 
@@ -286,7 +284,7 @@ def _solve(solver, fn, z0, steps: int, progress: Callable | None):
 
 
 def fit(config, params: dict, target, w, keys: tuple[FitKey, ...], steps: int = 100,
-        smooth: float = 1e-3, progress: Callable | None = None, solver: str = "auto",
+        smooth: float = 1e-5, progress: Callable | None = None, solver: str = "auto",
         rate: float = ADAM_RATE) -> ImageFit:
     """Fit `keys` of a scene (`config`, `params`: the start) to `target`.
 
@@ -346,13 +344,13 @@ def fit(config, params: dict, target, w, keys: tuple[FitKey, ...], steps: int = 
 
     name = solver if solver != "auto" else ("adam" if maps else "lm")
     if name == "lm":
-        s = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-8)
+        s = optx.LevenbergMarquardt(rtol=1e-5, atol=1e-6)
         fn = residual
     else:
         fn = loss
         s = {"adam": lambda: optx.OptaxMinimiser(optax.adam(rate), rtol=0.0, atol=0.0),
-             "lbfgs": lambda: optx.LBFGS(rtol=1e-7, atol=1e-9),
-             "ncg": lambda: optx.NonlinearCG(rtol=1e-7, atol=1e-9)}[name]()
+             "lbfgs": lambda: optx.LBFGS(rtol=0.0, atol=0.0),
+             "ncg": lambda: optx.NonlinearCG(rtol=0.0, atol=0.0)}[name]()
     z, history, n = _solve(s, fn, z0, steps, progress)
     fitted = unpack(z)
     image = np.asarray(render.render_prepared(config, fitted, arrays))

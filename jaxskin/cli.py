@@ -253,8 +253,8 @@ def _parser() -> argparse.ArgumentParser:
                    "ignore), the target's size")
     f.add_argument("--steps", type=_number(int, 1, 100000), default=100, metavar="N",
                    help="at most N optimiser steps (100)")
-    f.add_argument("--smooth", type=_number(lo=0.0, hi=1e6), default=1e-3, metavar="W",
-                   help="weight of the maps' total-variation prior (1e-3)")
+    f.add_argument("--smooth", type=_number(lo=0.0, hi=1e6), default=1e-5, metavar="W",
+                   help="weight of the maps' total-variation prior (1e-5)")
     f.add_argument("-D", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene value (the fit's start), as for render")
 
