@@ -93,8 +93,8 @@ def maps(size, steps, solvers, smooth, rate=fi.ADAM_RATE, noise=0.01, seed=0, na
                      {n: float(seen[f"layer.{n}.map"].mean()) for n in names}))
     print(f"makeup face, texture {size}², image {2 * size}², noise σ {noise}, smooth {smooth}")
     print(f"{'solver':<7} {'time s':>7} {'steps':>5} {'loss':>10} {'rms':>7}  "
-          + "  ".join(f"{n:>10}" for n in MAPS))
-    for solver, dt, n, loss, rms, errs, frac in rows:
+          + "  ".join(f"{n:>10}" for n in names))
+    for solver, dt, n, loss, rms, errs, _ in rows:
         print(f"{solver:<7} {dt:>7.1f} {n:>5} {loss:>10.3e} {rms:>7.4f}  "
               + "  ".join(f"{100 * errs[m]:>9.1f}%" for m in names))
     print("visible fraction of texels: " + ", ".join(f"{n} {100 * f:.0f}%"

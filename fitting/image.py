@@ -256,25 +256,26 @@ def _loss_of(state) -> jax.Array:
     return state.f
 
 
-def _solve(solver, fn, z0, steps: int, progress: Callable | None):
+def _solve(solver, fn, z0, args, steps: int, progress: Callable | None):
     """Run an optimistix `solver` on `fn(z, args) -> (out, aux)` from `z0` for at most
-    `steps` steps, one jitted step at a time; `progress(loss)` after each. Returns the last
-    accepted `z`, the loss history and the number of steps."""
+    `steps` steps, one jitted step at a time (`args`, the render's prepared arrays, passed
+    as arguments: closed over, XLA would fold them in as constants); `progress(loss)` after
+    each. Returns the last accepted `z`, the loss history and the number of steps."""
     options, tags = {}, frozenset()
-    f_struct, aux_struct = jax.eval_shape(lambda z: fn(z, None), z0)
-    state = solver.init(fn, z0, None, options, f_struct, aux_struct, tags)
+    f_struct, aux_struct = jax.eval_shape(fn, z0, args)
+    state = solver.init(fn, z0, args, options, f_struct, aux_struct, tags)
     dynamic, static = eqx.partition(state, eqx.is_array)
 
     @jax.jit
-    def step(z, dynamic):
+    def step(z, dynamic, args):
         state = eqx.combine(dynamic, static)
-        z, state, _ = solver.step(fn, z, None, options, state, tags)
-        done, _ = solver.terminate(fn, z, None, options, state, tags)
+        z, state, _ = solver.step(fn, z, args, options, state, tags)
+        done, _ = solver.terminate(fn, z, args, options, state, tags)
         return z, eqx.filter(state, eqx.is_array), done, _loss_of(state)
 
     history, z = [], z0
     while len(history) < steps:
-        z, dynamic, done, loss = step(z, dynamic)
+        z, dynamic, done, loss = step(z, dynamic, args)
         history.append(float(loss))
         if progress is not None:
             progress(history[-1])
@@ -334,12 +335,12 @@ def fit(config, params: dict, target, w, keys: tuple[FitKey, ...], steps: int = 
         return p
 
     def residual(z, args):
-        image = render.render_prepared(config, unpack(z), arrays)
-        return (jnp.clip(image, 0.0, 1.0) - target) * sqrt_w, None
+        image = render.render_prepared(config, unpack(z), args["arrays"])
+        return (jnp.clip(image, 0.0, 1.0) - args["target"]) * args["sqrt_w"], None
 
     def loss(z, args):
         r, _ = residual(z, args)
-        prior = sum(total_variation(unpack(z)[fk.key], pairs) for fk in maps)
+        prior = sum(total_variation(unpack(z)[fk.key], args["pairs"]) for fk in maps)
         return jnp.sum(r * r) + smooth * prior, None
 
     name = solver if solver != "auto" else ("adam" if maps else "lm")
@@ -351,7 +352,8 @@ def fit(config, params: dict, target, w, keys: tuple[FitKey, ...], steps: int = 
         s = {"adam": lambda: optx.OptaxMinimiser(optax.adam(rate), rtol=0.0, atol=0.0),
              "lbfgs": lambda: optx.LBFGS(rtol=0.0, atol=0.0),
              "ncg": lambda: optx.NonlinearCG(rtol=0.0, atol=0.0)}[name]()
-    z, history, n = _solve(s, fn, z0, steps, progress)
+    args = {"arrays": arrays, "target": target, "sqrt_w": sqrt_w, "pairs": pairs}
+    z, history, n = _solve(s, fn, z0, args, steps, progress)
     fitted = unpack(z)
     image = np.asarray(render.render_prepared(config, fitted, arrays))
     r = (np.clip(image, 0, 1) - np.asarray(target)) * np.asarray(sqrt_w)
