@@ -2,7 +2,7 @@
 hand, and the optimiser comparison for maps (Adam, L-BFGS, nonlinear CG).
 
     python benchmarks/bench_fit_image.py maps [--size 64] [--steps 100] [--solvers adam,lbfgs]
-    python benchmarks/bench_fit_image.py scalars [--size 128]
+    python benchmarks/bench_fit_image.py ambiguity      # writes fit_image_ambiguity.png
 
 Targets are rendered with known values, plus Gaussian noise (σ = 0.01 in display values);
 the fits start from other values (maps: each layer everywhere at its thickness). Printed:
@@ -102,9 +102,48 @@ def maps(size, steps, solvers, smooth, rate=fi.ADAM_RATE, noise=0.01, seed=0, na
     return rows
 
 
+def ambiguity(size=48, n=21, out="benchmarks/fit_image_ambiguity.png"):
+    """The loss over two pairs of keys around the truth, on the hand (Blinn): albedo against
+    intensity (material.melanin × light.intensity: a valley) and an exact one
+    (camera.exposure × light.intensity, with ambient 0: a line of zero loss)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = [("material.melanin", (0.05, 0.6), "light.intensity", (0.3, 1.2), []),
+              ("camera.exposure", (-1.0, 1.0), "light.intensity", (0.3, 1.2),
+               ["light.ambient=0.0"])]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), constrained_layout=True)
+    for ax, (kx, rx, ky, ry, extra) in zip(axes, panels, strict=True):
+        sc = load_scene("hand", [f"texture.size={size}", f"camera.size={size}", *extra])
+        arrays = render.prepare(sc.config).arrays
+        target = render.render(sc.config, sc.params)
+        w = jnp.asarray(fi.weights(sc.config, sc.params))[..., None]
+        xs, ys = np.linspace(*rx, n), np.linspace(*ry, n)
+
+        def loss(x, y, sc=sc, kx=kx, ky=ky, arrays=arrays, target=target, w=w):
+            p = {**sc.params, kx: x, ky: y}
+            return jnp.sum(w * (render.render_prepared(sc.config, p, arrays) - target) ** 2) \
+                / jnp.sum(w)
+
+        grid = jax.jit(jax.vmap(jax.vmap(loss, (0, None)), (None, 0)))(
+            jnp.asarray(xs, jnp.float32), jnp.asarray(ys, jnp.float32))
+        im = ax.contourf(xs, ys, np.log10(np.asarray(grid) + 1e-8), 20, cmap="viridis")
+        ax.plot(float(sc.params[kx]), float(sc.params[ky]), "r*", ms=12, label="truth")
+        ax.set_xlabel(kx)
+        ax.set_ylabel(ky)
+        ax.legend(loc="upper right")
+        fig.colorbar(im, ax=ax, label="log10 loss")
+    axes[0].set_title("albedo against intensity: a valley")
+    axes[1].set_title("exposure against intensity (ambient 0): exact")
+    fig.savefig(out, dpi=90)
+    print(f"wrote {out}")
+
+
 def main():
     p = argparse.ArgumentParser()
-    p.add_argument("what", choices=("maps", "scalars"))
+    p.add_argument("what", choices=("maps", "ambiguity"))
     p.add_argument("--size", type=int, default=64)
     p.add_argument("--steps", type=int, default=100)
     p.add_argument("--solvers", default="adam")
@@ -113,6 +152,8 @@ def main():
     p.add_argument("--maps", default=",".join(MAPS))
     p.add_argument("--noise", type=float, default=0.01)
     a = p.parse_args()
+    if a.what == "ambiguity":
+        ambiguity()
     if a.what == "maps":
         maps(a.size, a.steps, a.solvers.split(","), a.smooth, a.rate,
              noise=a.noise, names=tuple(a.maps.split(",")))

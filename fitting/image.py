@@ -155,7 +155,15 @@ def fit_keys(scene: Scene, text: str, where: str = "--fit") -> tuple[FitKey, ...
         else:
             out.append(FitKey(key, "scalar", spec.lo, spec.hi))
     keys = {k.key for k in out}
-    for pair, why in DEGENERATE.items():
+    pairs = dict(DEGENERATE)
+    melanin = keys & {"skin.melanin", "skin.melanin_map"}
+    thickness = {k for k in keys if k.startswith("layer.") and k.endswith(("thickness_mm",
+                                                                          ".map"))}
+    for a in melanin:
+        for b in thickness:
+            pairs[frozenset({a, b})] = ("melanin against thickness: more melanin and a "
+                                        "thicker tinted layer both darken the skin")
+    for pair, why in pairs.items():
         if pair <= keys:
             a, b = sorted(pair)
             warnings.warn(f"fitting {a} and {b} together: {why}; fix one of them (the fit "

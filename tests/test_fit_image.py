@@ -188,6 +188,9 @@ def test_degenerate_pairs_warn():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         fi.fit_keys(sc, "material.melanin,material.blood")
+    face = load_scene("makeup", ["texture.size=16", "camera.size=16"])
+    with pytest.warns(UserWarning, match="melanin against thickness"):
+        fi.fit_keys(face, "skin.melanin,layer.foundation.map")
 
 
 def test_image_map_reads_16_bit_at_full_scale(tmp_path):
@@ -238,3 +241,35 @@ def test_bad_inputs_exit_2_with_one_line(tmp_path, case, capsys, monkeypatch):
     assert len(errors) == 1 and words in errors[0], err
     assert "Traceback" not in "\n".join(err)
     assert _files(tmp_path) == before
+
+
+@pytest.mark.slow
+def test_melanin_map_recovered_on_the_face():
+    """A smooth melanin map (a ramp across the face, 0.2-1.2 optical depth at 500 nm) from
+    a render of it with σ = 0.005 noise, starting from a uniform 0.3: the RMS relative error
+    over the texels the camera sees well (sensitivity above 10 % of its 99th percentile) is
+    under 5 % (measured: 2.2 %, 80 steps)."""
+    overrides = ["texture.size=24", "camera.size=48", "camera.supersample=1",
+                 "wrinkles.enabled=false", "light.shadows=false", "skin.melanin=1.0"]
+    sc = load_scene("face", overrides)
+    arrays = render.prepare(sc.config).arrays
+    mask = np.asarray(arrays["mask"])
+    H, W = mask.shape
+    truth = 0.2 + np.tile(np.linspace(0.0, 1.0, W), (H, 1))
+    target_scene = {**sc.params, "skin.melanin_map": jnp.asarray(truth, jnp.float32)}
+    image = np.asarray(render.render(sc.config, target_scene))
+    target = np.clip(image + np.random.default_rng(0).normal(0, 0.005, image.shape), 0, 1)
+    start = load_scene("face", [*overrides[:-1], "skin.melanin=0.3"])
+    keys = fi.fit_keys(start, "skin.melanin_map")
+    w = fi.weights(start.config, start.params)
+    r = fi.fit(start.config, start.params, target, w, keys, steps=80)
+    fitted = np.asarray(r.params["skin.melanin_map"]) * float(r.params["skin.melanin"])
+    wj = jnp.asarray(w, jnp.float32)[..., None]
+    g = np.max([np.abs(np.asarray(jax.grad(lambda m, c=c: jnp.sum(wj * render.render(
+        sc.config, {**sc.params, "skin.melanin_map": m})[..., c]))(jnp.asarray(truth,
+                                                                            jnp.float32))))
+        for c in range(3)], axis=0)
+    seen = g > 0.1 * np.percentile(g[g > 0], 99)
+    err = np.sqrt(np.mean((fitted[seen] - truth[seen]) ** 2) / np.mean(truth[seen] ** 2))
+    print(f"melanin map: {err:.4f} relative RMS over {seen.mean():.0%} of texels")
+    assert seen.mean() > 0.2 and err < 0.05, err
