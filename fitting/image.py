@@ -264,11 +264,15 @@ def _loss_of(state) -> jax.Array:
     return state.f
 
 
-def _solve(solver, fn, z0, args, steps: int, progress: Callable | None):
+def _solve(solver, fn, z0, args, steps: int, progress: Callable | None,
+           stall: int | None = None):
     """Run an optimistix `solver` on `fn(z, args) -> (out, aux)` from `z0` for at most
     `steps` steps, one jitted step at a time (`args`, the render's prepared arrays, passed
     as arguments: closed over, XLA would fold them in as constants); `progress(loss)` after
-    each. Returns the last accepted `z`, the loss history and the number of steps."""
+    each. `stall`: also stop when the loss has not fallen by 1e-4 of itself in this many
+    steps (Levenberg–Marquardt at the noise floor rejects step after step in float32, and
+    its own test only runs on accepted steps). Returns the last accepted `z`, the loss
+    history and the number of steps."""
     options, tags = {}, frozenset()
     f_struct, aux_struct = jax.eval_shape(fn, z0, args)
     state = solver.init(fn, z0, args, options, f_struct, aux_struct, tags)
@@ -288,6 +292,8 @@ def _solve(solver, fn, z0, args, steps: int, progress: Callable | None):
         if progress is not None:
             progress(history[-1])
         if not np.isfinite(history[-1]) or bool(done):
+            break
+        if stall and len(history) > stall and history[-1] > (1 - 1e-4) * history[-1 - stall]:
             break
     return z, history, len(history)
 
@@ -353,7 +359,7 @@ def fit(config, params: dict, target, w, keys: tuple[FitKey, ...], steps: int = 
 
     name = solver if solver != "auto" else ("adam" if maps else "lm")
     if name == "lm":
-        s = optx.LevenbergMarquardt(rtol=1e-5, atol=1e-6)
+        s = optx.LevenbergMarquardt(rtol=1e-4, atol=1e-4)  # |Δz| < 1e-4: x to 2.5e-5 of its range
         fn = residual
     else:
         fn = loss
@@ -361,7 +367,7 @@ def fit(config, params: dict, target, w, keys: tuple[FitKey, ...], steps: int = 
              "lbfgs": lambda: optx.LBFGS(rtol=0.0, atol=0.0),
              "ncg": lambda: optx.NonlinearCG(rtol=0.0, atol=0.0)}[name]()
     args = {"arrays": arrays, "target": target, "sqrt_w": sqrt_w, "pairs": pairs}
-    z, history, n = _solve(s, fn, z0, args, steps, progress)
+    z, history, n = _solve(s, fn, z0, args, steps, progress, stall=5 if name == "lm" else None)
     fitted = unpack(z)
     image = np.asarray(render.render_prepared(config, fitted, arrays))
     r = (np.clip(image, 0, 1) - np.asarray(target)) * np.asarray(sqrt_w)
