@@ -86,6 +86,7 @@ def test_fit_image_command_writes_a_scene_that_renders_the_fit(tmp_path):
     assert report.shape[0] > 300 and report.shape[1] > 1000
 
 
+@pytest.mark.slow
 def test_written_scene_reproduces_the_fitted_params(tmp_path):
     """`fit` then the files the command writes: the scene's render equals the render of the
     fit's params (maps as float32 arrays) to the 16-bit quantisation of the map (< 1e-3)."""
@@ -117,11 +118,14 @@ def _float64(tree):
                         if jnp.issubdtype(jnp.asarray(a).dtype, jnp.floating) else a, tree)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("key", ["layer.blush.map", "skin.melanin_map"])
 def test_render_gradient_with_respect_to_a_map(x64, key):
     """check_grads (float64, fwd and rev) of a makeup render with SSS w.r.t. a whole
     texture-space map, at an ordinary map and at one with zeros (no blush, no melanin)."""
-    sc = load_scene("makeup", ["texture.size=16", "camera.size=16", "skin.melanin=0.5"])
+    sc = load_scene("makeup", ["texture.size=16", "camera.size=16", "skin.melanin=0.5",
+                               "camera.supersample=1", "wrinkles.enabled=false",
+                               "light.shadows=false"])
     arrays = _float64(render.prepare(sc.config).arrays)
     params = _float64(sc.params)
     H, W = np.asarray(arrays["mask"]).shape
