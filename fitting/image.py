@@ -7,11 +7,13 @@ moves some of its parameters:
 - **Scalars** (`FitKey.kind == "scalar"` or `"vector"`): any differentiable scene value the
   scene's model uses (`Scene.params`: melanin, blood, light, exposure, k_bump, layer
   thickness, roughness, specular …). Each is bounded by its schema range through
-  x = lo + (hi − lo) σ(z); `light.direction` is free (the renderer normalises it).
+  x = lo + (hi − lo) σ(z); `light.direction` is free (the renderer normalises it);
+  `material.lafortune`, a Lafortune scene's lobes, with ρd and n through exp.
 - **Maps** (`"map"`): per-texel factors in texture space, `(H, W)` like the texture, that
   multiply their scalar as a scene's greyscale image does (`render.texel_map`):
-  `layer.NAME.map` (× the layer's thickness_mm; softplus: ≥ 0) and `skin.melanin_map`
-  (× skin.melanin; σ: the product stays within the schema's range). A smoothness prior,
+  `layer.NAME.map` (× the layer's thickness_mm) and `skin.melanin_map` (× skin.melanin),
+  kept in [0, the schema's top] by a sigmoid, log-like near 0 (a step changes a texel by
+  a fraction of its value: thicknesses span decades). A smoothness prior,
   a smoothed total variation between neighbouring texels on the mesh, fills the texels the
   camera does not see and damps the noise.
 
@@ -82,8 +84,9 @@ PRIOR_EPS = 0.01  # the total variation's smoothing, in map units: sqrt(d² + ε
 @dataclasses.dataclass(frozen=True)
 class FitKey:
     """One fitted value: `key` (a `Scene.params` key or a map key), `kind` (`"scalar"`,
-    `"vector"` or `"map"`), its bounds `lo`, `hi` (None: free) and, for a map, the scalar
-    it multiplies and its transform (`"softplus"`: ≥ 0; `"sigmoid"`: in [0, hi/scalar])."""
+    `"vector"`, `"map"` or `"lafortune"`: the lobes, ρd and n kept positive), its bounds
+    `lo`, `hi` (None: free) and, for a map, the scalar it multiplies and its transform
+    (`"sigmoid"`: in [0, hi/scalar], log-like near 0)."""
 
     key: str
     kind: str
@@ -135,8 +138,11 @@ def fit_keys(scene: Scene, text: str, where: str = "--fit") -> tuple[FitKey, ...
             out.append(FitKey(key, "map", spec.lo, spec.hi, scalar, "sigmoid"))
             continue
         spec = _schema(key)
-        if key not in params or key == "material.lafortune":
-            fittable = [k for k in params if k != "material.lafortune"] + list(maps)
+        if key == "material.lafortune" and key in params:
+            out.append(FitKey(key, "lafortune"))
+            continue
+        if key not in params:
+            fittable = list(params) + list(maps)
             if spec is not None and not spec.param:
                 why = ("is not differentiable: it is static (it decides which stages run or "
                        "their sizes)")
@@ -180,15 +186,19 @@ def _unit(fk: FitKey, params: dict) -> float:
 
 
 def _to_z(fk: FitKey, value, unit: float = 1.0):
+    if fk.kind == "lafortune":  # ρd and the exponents n positive (log), Cxy and Cz free
+        return value._replace(diffuse=jnp.log(jnp.maximum(value.diffuse, 1e-6)),
+                              n=jnp.log(jnp.maximum(value.n, 1e-6)))
+    return _to_z_array(fk, value, unit)
+
+
+def _to_z_array(fk: FitKey, value, unit: float = 1.0):
     """The unconstrained coordinate of a value (inverse of `_from_z`), kept off the bounds
     so that it is finite: by 1e-3 of the range for a scalar, 1e-7 for a map (whose range,
     up to the schema's top in units of its scalar, is wide: 0.01 mm of 10 mm)."""
     x = np.asarray(value, np.float64)
     if fk.kind == "vector":
         return x
-    if fk.kind == "map" and fk.transform == "softplus":
-        m = np.maximum(x, 1e-3)
-        return m + np.log(-np.expm1(-m))
     lo, hi = (0.0, fk.hi / unit) if fk.kind == "map" else (fk.lo, fk.hi)
     eps = 1e-7 if fk.kind == "map" else 1e-3
     f = np.clip((x - lo) / (hi - lo), eps, 1 - eps)
@@ -196,10 +206,10 @@ def _to_z(fk: FitKey, value, unit: float = 1.0):
 
 
 def _from_z(fk: FitKey, z, unit: float = 1.0):
+    if fk.kind == "lafortune":
+        return z._replace(diffuse=jnp.exp(z.diffuse), n=jnp.exp(z.n))
     if fk.kind == "vector":
         return z
-    if fk.kind == "map" and fk.transform == "softplus":
-        return jax.nn.softplus(z)
     lo, hi = (0.0, fk.hi / unit) if fk.kind == "map" else (fk.lo, fk.hi)
     return lo + (hi - lo) * jax.nn.sigmoid(z)
 
@@ -337,6 +347,9 @@ def fit(config, params: dict, target, w, keys: tuple[FitKey, ...], steps: int = 
             start[fk.scalar] = jnp.float32(units[fk.key])
             m0 = _start_map(config, params, fk, units[fk.key], arrays, mask)
             z0[fk.key] = jnp.asarray(_to_z(fk, m0, units[fk.key]), jnp.float32)
+        elif fk.kind == "lafortune":
+            z0[fk.key] = jax.tree.map(lambda a: jnp.asarray(a, jnp.float32),
+                                      _to_z(fk, params[fk.key]))
         else:
             z0[fk.key] = jnp.asarray(_to_z(fk, params[fk.key]), jnp.float32)
     pairs = jnp.asarray(np.stack(_pairs(mask)), jnp.int32)
@@ -373,9 +386,11 @@ def fit(config, params: dict, target, w, keys: tuple[FitKey, ...], steps: int = 
     r = (np.clip(image, 0, 1) - np.asarray(target)) * np.asarray(sqrt_w)
     values = {}
     for fk in keys:
-        if fk.kind != "map":
+        if fk.kind in ("scalar", "vector"):
             v = np.asarray(fitted[fk.key], np.float64)
             values[fk.key] = v.tolist() if v.ndim else float(v)
+        elif fk.kind == "lafortune":
+            values[fk.key] = jax.tree.map(np.asarray, fitted[fk.key])
     return ImageFit(fitted, values, history, float(np.sqrt(np.sum(r * r))), n,
                     time.perf_counter() - t0, name, image)
 
@@ -492,6 +507,8 @@ def run_command(args, run) -> int:
     report_path = outputs.plan(f"{name}_fit.png", "the report")
     map_paths = {fk.key: outputs.plan(f"{name}_{fk.key}.png", fk.key)
                  for fk in keys if fk.kind == "map"}
+    brdf_path = (outputs.plan(f"{name}_brdf.json", "the fitted lobes")
+                 if any(fk.kind == "lafortune" for fk in keys) else None)
     params = scene.params
     w = weights(config, params, target_alpha, mask)
     if w.sum() <= 0:
@@ -512,6 +529,13 @@ def run_command(args, run) -> int:
     run.stage = "writing"
     tmask = np.asarray(render.prepare(config).arrays["mask"])
     values = dict(result.values)
+    if brdf_path is not None:
+        from jaxskin.formats import write_lafortune
+
+        write_lafortune(values.pop("material.lafortune"), brdf_path,
+                        fit={"source": Path(args.target).name, "rms": result.rms})
+        outputs.done(brdf_path)
+        values["material.brdf"] = brdf_path.name
     images, shown = {}, {}
     for fk in keys:
         if fk.kind != "map":
@@ -539,7 +563,9 @@ def run_command(args, run) -> int:
     outputs.done(report_path)
     print(f"{'key':<28} {'start':>12} {'fitted':>12}")
     for fk in keys:
-        if fk.kind != "map":
+        if fk.kind == "lafortune":
+            print(f"{fk.key:<28} {'(lobes)':>12} {brdf_path.name:>12}")
+        elif fk.kind != "map":
             print(f"{fk.key:<28} {_fmt(params[fk.key]):>12} {_fmt(values[fk.key]):>12}")
         else:
             print(f"{fk.key:<28} {'(map)':>12} {'× ' + _fmt(values[fk.scalar]):>12}")
