@@ -477,6 +477,9 @@ def _check_scene(sc, count: int) -> list:
                              "reflects no light; expected a fit from jaxskin fit-brdf",
                              config.brdf)
     sp = config.spectral
+    if sp is not None and sp.melanin_image is not None:
+        inputs.append(sp.melanin_image)
+        _check_image(sp.melanin_image, sc.source, "skin.melanin_image")
     for layer in sp.layers if sp is not None else ():
         inputs.append(layer.material)
         with _reading(layer.material):

@@ -220,6 +220,8 @@ BAD = {
     "mask": (["hand", "t.png", "--fit", "light.ambient", "--mask", "T"], "the mask is"),
     "unreadable": (["hand", "bad.png", "--fit", "light.ambient"], "cannot read"),
     "empty": (["hand", "t.png", "--fit", ","], "expected KEY"),
+    "melanin-image": (["makeup", "f.png", "--fit", "skin.melanin", "-D",
+                       "skin.melanin_image=bad.png"], "cannot read"),
     "output-is-input": (["hand", "out/hand_fit.png", "--fit", "light.ambient"],
                         "overwrite this input"),
 }
