@@ -107,7 +107,8 @@ def map_keys(scene: Scene) -> dict[str, str]:
         return {}
     out = {f"layer.{layer.name}.map": f"layer.{layer.name}.thickness_mm"
            for layer in scene.layers}
-    out.update({k: s for k, s in MAP_SCALARS.items() if s in scene.params})
+    if scene.config.spectral.skin == "nist":  # the biophysical skin has no maps yet
+        out.update({k: s for k, s in MAP_SCALARS.items() if s in scene.params})
     return out
 
 
