@@ -103,7 +103,7 @@ class FitKey:
 
 def map_keys(scene: Scene) -> dict[str, str]:
     """The map keys a scene has, each → the scalar it multiplies."""
-    if scene.values["material.model"] != "spectral":
+    if scene.config.spectral is None:
         return {}
     out = {f"layer.{layer.name}.map": f"layer.{layer.name}.thickness_mm"
            for layer in scene.layers}
