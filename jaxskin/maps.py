@@ -12,9 +12,9 @@ import numpy as np
 
 from .io import InputError, atomic_write
 
-__all__ = ["FORMATS", "exr_available", "png16_bytes", "png_bytes", "read_exr", "write_exr",
-           "write_field_plot", "write_height", "write_image", "write_normals",
-           "write_render"]
+__all__ = ["FORMATS", "exr_available", "image_bytes", "png16_bytes", "png_bytes", "quantize",
+           "read_exr", "read_image", "write_exr", "write_field_plot", "write_grey16",
+           "write_height", "write_image", "write_normals", "write_render"]
 
 FORMATS = ("png", "png16", "exr")
 
@@ -33,13 +33,23 @@ def _write(path, data: bytes) -> None:
 def write_image(image, path, bits: int = 8) -> None:
     """A PNG of display values in [0, 1] (clipped), `(H, W, 3)` RGB or `(H, W, 4)` RGBA
     (straight alpha, as PNG defines it), 8 or 16 bits per channel."""
-    image = np.clip(np.asarray(image, np.float64), 0.0, 1.0)
+    _write(path, image_bytes(image, bits))
+
+
+def image_bytes(image, bits: int = 8) -> bytes:
+    """The PNG file `write_image` writes, as bytes (the editor sends these to the page)."""
     if bits not in (8, 16):
         raise ValueError(f"bits must be 8 or 16, got {bits}")
     if bits == 8:
-        _write(path, png_bytes(np.round(image * 255).astype(np.uint8)))
-    else:
-        _write(path, png16_bytes(np.round(image * 65535).astype(np.uint16)))
+        return png_bytes(quantize(image, 8))
+    return png16_bytes(quantize(image, 16))
+
+
+def quantize(image, bits: int = 8) -> np.ndarray:
+    """Display values in [0, 1] (clipped) as the 8- or 16-bit samples a PNG holds."""
+    image = np.clip(np.asarray(image, np.float64), 0.0, 1.0)
+    top, kind = (255, np.uint8) if bits == 8 else (65535, np.uint16)
+    return np.round(image * top).astype(kind)
 
 
 def png16_bytes(image) -> bytes:
@@ -98,6 +108,38 @@ def read_exr(path) -> np.ndarray:
     with OpenEXR.File(str(path), separate_channels=True) as f:
         channels = f.channels()
         return np.stack([channels[c].pixels for c in "RGBA"], axis=-1).astype(np.float32)
+
+
+def read_image(path, what: str = "image"):
+    """A PNG (or any image imageio reads) as display values in [0, 1]: `(rgb (H, W, 3),
+    alpha (H, W) or None)`; grey is repeated to RGB; 8- and 16-bit at their full scale.
+    `InputError` naming the file if it is not a readable 2-D image of finite values."""
+    import imageio.v3 as iio
+
+    try:
+        img = np.asarray(iio.imread(path))
+    except Exception as e:  # noqa: BLE001  (imageio raises many kinds; all mean unreadable)
+        raise InputError(f"cannot read as an {what} ({e.__class__.__name__})", path) from None
+    if img.dtype.kind not in "uifb" or img.size == 0 or not (
+            img.ndim == 2 or (img.ndim == 3 and img.shape[-1] in (1, 2, 3, 4))):
+        raise InputError(f"expected an {what} (H, W) or (H, W, 1-4 channels), got an array of "
+                         f"shape {img.shape} and type {img.dtype}", path)
+    if img.dtype.kind in "ui":
+        img = img.astype(np.float64) / float(np.iinfo(img.dtype).max)
+    img = np.asarray(img, np.float64)
+    if not np.all(np.isfinite(img)):
+        raise InputError(f"the {what} has non-finite values", path)
+    if img.ndim == 2:
+        img = img[..., None]
+    alpha = img[..., -1] if img.shape[-1] in (2, 4) else None
+    grey_or_rgb = img[..., :3] if img.shape[-1] >= 3 else img[..., :1]
+    return np.broadcast_to(grey_or_rgb, (*img.shape[:2], 3)).copy(), alpha
+
+
+def write_grey16(values, path) -> None:
+    """A 16-bit grey PNG of `values (H, W)` in [0, 1] (clipped): a map a scene loads."""
+    v = np.clip(np.asarray(values, np.float64), 0.0, 1.0)
+    _write(path, png16_bytes(np.round(v * 65535).astype(np.uint16)))
 
 
 def write_render(image, path, fmt: str) -> None:

@@ -10,7 +10,8 @@ we light the texels the camera sees, which is the same map read at the same plac
 Stages a scene does not use are not traced: no furrows without wrinkles
 or in the overview mode, no Lafortune code in a Blinn scene and the reverse.
 
-The cosmetics model (`material.model = "spectral"`, Huang et al. 2013) shades in texture
+The cosmetics model (`material.model = "spectral"`, Huang et al. 2013; `"biophysical"`: the
+same over the biophysical skin of `jaxskin.biophysical`) shades in texture
 space instead, as the paper's SSS needs: irradiance, the Kubelka–Munk layers, the skin
 profile's blur over the texture, the highlights (`shading.layered`), then the finished
 colour is sampled into the view. No layers: no KM; `sss.enabled = false`: no blur.
@@ -34,15 +35,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import cosmetics, formats, shadow, skin, sss, texture
+from . import biophysical, cosmetics, formats, shadow, skin, sss, texture
 from .precision import matmul
 from .raster import interpolate
-from .scene import SceneConfig
+from .scene import BIOPHYSICAL_KEYS, SceneConfig
 from .shading import blinn, lafortune, layered
 from .view import View, coverage, downsample, make_view, pad_index, sample
 
 __all__ = ["OUTPUTS", "Prepared", "albedo", "decode_srgb", "encode_srgb", "expose", "prepare",
-           "render", "render_prepared"]
+           "render", "render_prepared", "skin_reflectance", "texel_map"]
 
 OUTPUTS = ("display", "rgba", "linear_rgba")
 SHADOW_MAX = 2048  # texels across the shadow map, at most
@@ -83,7 +84,12 @@ def _prepare(config: SceneConfig) -> Prepared:
     sp, texel_mm = config.spectral, 0.0
     if sp is not None:
         grid = sp.grid
-        arrays["skin"] = jnp.asarray(formats.nist_reflectance(sp.subject, grid), jnp.float32)
+        if sp.skin == "biophysical":  # μa, μs' of the absorbers on the grid, (6, n)
+            arrays["chromophores"] = jnp.asarray(np.stack(biophysical.chromophores(
+                grid.wavelengths, formats.haemoglobin_table())), jnp.float32)
+        else:
+            arrays["skin"] = jnp.asarray(formats.nist_reflectance(sp.subject, grid),
+                                         jnp.float32)
         texel_mm = sp.texel_mm or sp.unit_mm * s.tmap.texel_size()
         # The model shades the texels on the mesh only, as a list (the rest stay black).
         texels = np.flatnonzero(np.asarray(s.mask))
@@ -101,6 +107,9 @@ def _prepare(config: SceneConfig) -> Prepared:
                      for layer in sp.layers]
             arrays["cover"] = jnp.asarray(np.stack(cover).reshape(len(cover), -1)[:, texels],
                                           jnp.float32)
+        if sp.melanin_image is not None:  # skin.melanin × this map, per texel
+            factor = cosmetics.image_map(sp.melanin_image, s.tmap.height, s.tmap.width, 1.0)
+            arrays["melanin_cover"] = jnp.asarray(factor.reshape(-1)[texels], jnp.float32)
     if config.shadow is not None and config.mode != "height":
         arrays["lit"] = _visibility(config, s, view)
     return Prepared(s, view, arrays, texel_mm)
@@ -269,20 +278,50 @@ def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: d
         def blur(colour):
             return to_list(sss.blur(to_image(colour), p.texel_mm, mask, sp.sss,
                                     norm=arrays.get("sss_norm")))
-    skin_R = skin.reflectance(arrays["skin"], params["skin.melanin"], sp.grid)
+    skin_R = skin_reflectance(sp, params, arrays, texels)
     layers = {}
     if sp.layers:
         def per_layer(key):
             return jnp.stack([params[f"layer.{layer.name}.{key}"] for layer in sp.layers])
 
+        cover = jnp.stack([texel_map(params, f"layer.{layer.name}.map", texels,
+                                     arrays["cover"][i]) for i, layer in enumerate(sp.layers)])
         layers = {"S": arrays["S"] * per_layer("s_scale")[:, None],
                   "K": arrays["K"] * per_layer("k_scale")[:, None],
-                  "X": arrays["cover"] * per_layer("thickness_mm")[:, None],
+                  "X": cover * per_layer("thickness_mm")[:, None],
                   "roughness": per_layer("roughness"), "rho": per_layer("specular")}
     colour = layered.radiance(sp.grid, normals, L, V, params["light.ambient"], light, skin_R,
                               params["skin.roughness"], params["skin.specular"], blur=blur,
                               **layers)
     return to_image(colour)
+
+
+def skin_reflectance(sp, params: dict, arrays: dict, texels=None):
+    """The spectral model's skin reflectance on its grid, `(n,)`: the NIST subject darkened
+    by `skin.melanin` (`jaxskin.skin`), or the biophysical model (`jaxskin.biophysical`) of
+    the `skin.*` parameters (`scene.BIOPHYSICAL_KEYS`). With `texels` (flat indices of the
+    texels on the mesh) and a melanin map (`skin.melanin_map` in the params, or the scene's
+    `skin.melanin_image`), the NIST skin's melanin varies per texel: `(P, n)`."""
+    if sp.skin == "biophysical":
+        c = biophysical.Chromophores(*arrays["chromophores"])
+        return biophysical.reflectance(c, biophysical.Skin(
+            *(params[BIOPHYSICAL_KEYS[name]] for name in biophysical.PARAMS)))
+    melanin = params["skin.melanin"]
+    factor = None if texels is None else texel_map(params, "skin.melanin_map", texels,
+                                                   arrays.get("melanin_cover"))
+    if factor is not None:  # a melanin map: the skin's spectrum per texel, (P, n)
+        melanin = melanin * factor[:, None]
+    return skin.reflectance(arrays["skin"], melanin, sp.grid)
+
+
+def texel_map(params: dict, key: str, texels, default=None):
+    """A per-texel factor for the texels on the mesh, `(P,)`: the texture-space map
+    `params[key]` `(H, W)` when the params carry one (a fit's map, `jaxskin.fitting.image`),
+    else `default` (the scene's map, from its image or regions; or `None`: no map). A map
+    multiplies its scalar, as a scene's image does: `layer.NAME.map` × thickness_mm,
+    `skin.melanin_map` × skin.melanin."""
+    value = params.get(key)
+    return default if value is None else value.reshape(-1)[texels]
 
 
 def encode_srgb(linear):

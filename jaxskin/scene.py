@@ -13,8 +13,10 @@ k_scale = 1.1                      # 0.5–2 (lengths, in texels; static)
 k_noise = 0.0                      # 0–1
 k_bump = 0.5                       # 0–1
 seed = 0
+method = "auto"                    # auto | parallel | sequential: the furrow program (static;
+                                   #   auto: sequential on a CPU, parallel on a GPU/TPU)
 [material]
-model = "blinn"                    # blinn | lafortune
+model = "blinn"                    # blinn | lafortune | spectral | biophysical
 melanin = 0.2                      # Blinn: melanin, blood 0–1 (shading.blinn); specular 0–1;
 blood = 0.5                        #   shininess 0–10000
 specular = 0.2
@@ -50,8 +52,16 @@ The cosmetics model (Huang et al. 2013, `material.model = "spectral"`) adds:
 [mesh]
 unit_mm = 10.0                     # millimetres per mesh unit (the face is in cm)
 [skin]
+model = "nist"                     # nist (a measured subject) | biophysical
 subject = 1                        # NIST skin spectrum, subjects 1–100
 melanin = 0.0                      # added melanin, optical depth at 500 nm (0–3)
+melanin_fraction = 0.06            # biophysical (jaxskin.biophysical; material.model =
+eumelanin = 0.1                    #   "biophysical" is this with the spectral model):
+haemoglobin = 0.02                 #   melanosome fraction 0.005–0.5, eumelanin share 0–1,
+oxygenation = 0.6                  #   blood fraction 0.001–0.1, saturation 0–1,
+epidermis_mm = 0.035               #   epidermis 0.01–0.15 mm, scattering factor 0.5–6
+scattering = 2.5
+melanin_image = "melanin.png"      # optional: a greyscale map, melanin × its value (0–1)
 roughness = 0.3                    # Kelemen m and rho_s of the skin's own highlight
 specular = 0.18
 [spectral]
@@ -89,6 +99,7 @@ arrays: everything differentiable) are the split the renderer uses.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import difflib
 import functools
@@ -99,14 +110,14 @@ from typing import Any
 
 import jax.numpy as jnp
 
-from . import cosmetics
+from . import biophysical, cosmetics
 from .io import InputError, data_dir
 from .mesh import BUILTIN as BUILTIN_MESHES
 from .projection import KINDS
 from .spectral import ILLUMINANTS, STEPS, Grid
 
 __all__ = ["BUILTIN_SCENES", "Scene", "SceneConfig", "TextureConfig", "builtin_scenes",
-           "load_scene", "scene_at_width"]
+           "load_scene", "parse_scene", "scene_at_width"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -119,6 +130,11 @@ class _Key:
     param: bool = False  # differentiable (in Scene.params) rather than static
 
 
+# The biophysical skin's parameters (`biophysical.Skin` fields) as scene keys.
+BIOPHYSICAL_KEYS = {"melanin": "skin.melanin_fraction", "eumelanin": "skin.eumelanin",
+                    "haemoglobin": "skin.haemoglobin", "oxygenation": "skin.oxygenation",
+                    "epidermis_mm": "skin.epidermis_mm", "scattering": "skin.scattering"}
+
 SCHEMA: dict[str, _Key] = {
     "name": _Key(str, None),
     "mesh.file": _Key(str, "hand"),
@@ -130,7 +146,9 @@ SCHEMA: dict[str, _Key] = {
     "wrinkles.k_noise": _Key(float, 0.0, 0.0, 1.0, param=True),
     "wrinkles.k_bump": _Key(float, 0.5, 0.0, 1.0, param=True),
     "wrinkles.seed": _Key(int, 0, 0, 2**31 - 1),
-    "material.model": _Key(str, "blinn", choices=("blinn", "lafortune", "spectral")),
+    "wrinkles.method": _Key(str, "auto", choices=("auto", "parallel", "sequential")),
+    "material.model": _Key(str, "blinn", choices=("blinn", "lafortune", "spectral",
+                                                  "biophysical")),
     "material.melanin": _Key(float, 0.2, 0.0, 1.0, param=True),
     "material.blood": _Key(float, 0.5, 0.0, 1.0, param=True),
     "material.specular": _Key(float, 0.2, 0.0, 1.0, param=True),
@@ -148,10 +166,16 @@ SCHEMA: dict[str, _Key] = {
     "camera.exposure": _Key(float, 0.0, -20.0, 20.0, param=True),
     "camera.rotate": _Key("vec3", (0.0, 0.0, 0.0)),
     "view.mode": _Key(str, "wrinkles", choices=("wrinkles", "overview", "height")),
+    "skin.model": _Key(str, "nist", choices=("nist", "biophysical")),
     "skin.subject": _Key(int, 1, 1, 100),
     "skin.melanin": _Key(float, 0.0, 0.0, 3.0, param=True),
     "skin.roughness": _Key(float, 0.3, 0.01, 1.0, param=True),
     "skin.specular": _Key(float, 0.18, 0.0, 1.0, param=True),
+    "skin.melanin_image": _Key(str, None),  # a greyscale map (0–1 × skin.melanin) per texel
+    # The biophysical skin (`jaxskin.biophysical`): its parameters, ranges and defaults.
+    **{key: _Key(float, float(getattr(biophysical.DEFAULT, name)),
+                 *biophysical.RANGES[name], param=True)
+       for name, key in BIOPHYSICAL_KEYS.items()},
     "spectral.step": _Key(int, 10, choices=STEPS),
     "spectral.illuminant": _Key(str, "D65", choices=ILLUMINANTS),
     "sss.enabled": _Key(bool, True),
@@ -170,9 +194,12 @@ LAYER_KEYS = {"name", "material", "image", "ellipse", "polygon", *LAYER_SCHEMA}
 ELLIPSE_KEYS = {"center", "radii", "angle", "feather"}
 POLYGON_KEYS = {"points", "vertices", "feather"}
 # Parameters that only one material model uses: the other model's are left out.
+_SPECTRAL_PARAMS = {"skin.melanin", "skin.roughness", "skin.specular",
+                    *BIOPHYSICAL_KEYS.values()}
 _MODEL_PARAMS = {"blinn": {"material.melanin", "material.blood", "material.specular",
                            "material.shininess"}, "lafortune": set(),
-                 "spectral": {"skin.melanin", "skin.roughness", "skin.specular"}}
+                 "spectral": _SPECTRAL_PARAMS, "biophysical": _SPECTRAL_PARAMS}
+SPECTRAL_MODELS = ("spectral", "biophysical")  # the models that shade through the spectra
 EDIT_KEYS = {"at", "vertex", "d1", "d2", "weight"}
 
 
@@ -198,6 +225,9 @@ class TextureConfig:
     k_scale: float
     seed: int
     edits: tuple[EditSpec, ...]
+    # The furrow program: "sequential" (wrinkles.height_field) or "parallel"
+    # (lockstep.height_field); the scene's "auto" is resolved by `furrow_method`.
+    method: str = "sequential"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -224,6 +254,8 @@ class SpectralConfig:
     sss: str | None  # the blur method, or None: no subsurface scattering
     texel_mm: float  # 0: from the mesh
     layers: tuple[LayerSpec, ...]
+    skin: str = "nist"  # the skin under the layers: a NIST subject, or "biophysical"
+    melanin_image: str | None = None  # skin.melanin × this greyscale map, per texel
 
     @property
     def grid(self) -> Grid:
@@ -235,7 +267,7 @@ class SceneConfig:
     """The static part of a scene (hashable; the jit cache key)."""
 
     texture: TextureConfig
-    material: str  # blinn | lafortune | spectral
+    material: str  # blinn | lafortune | spectral | biophysical
     brdf: str  # the Lafortune preset or file
     camera: str  # orthographic | perspective
     image: int
@@ -253,6 +285,18 @@ class SceneConfig:
         return self.texture.wrinkles and self.mode in ("wrinkles", "height")
 
 
+def furrow_method(method: str) -> str:
+    """`wrinkles.method` resolved: "auto" is the parallel program on a GPU or TPU (the
+    sequential one took 0.64 s at 512² on an H100, slower than on a CPU) and the sequential
+    one on a CPU — there the parallel one measured 2–5x faster too (benchmarks/RESULTS.md),
+    but the CPU default keeps the look the golden images pin; ask for "parallel"."""
+    if method != "auto":
+        return method
+    import jax
+
+    return "sequential" if jax.default_backend() == "cpu" else "parallel"
+
+
 @dataclasses.dataclass(frozen=True)
 class Scene:
     name: str
@@ -266,18 +310,26 @@ class Scene:
         v = self.values
         tex = TextureConfig(v["mesh.file"], v["mesh.projection"], v["texture.size"],
                             v["wrinkles.enabled"], v["wrinkles.k_scale"], v["wrinkles.seed"],
-                            self.edits)
+                            self.edits, furrow_method(v["wrinkles.method"]))
         spectral = None
-        if v["material.model"] == "spectral":
+        if v["material.model"] in SPECTRAL_MODELS:
             spectral = SpectralConfig(v["skin.subject"], v["spectral.step"],
                                       v["spectral.illuminant"], v["mesh.unit_mm"],
                                       v["sss.method"] if v["sss.enabled"] else None,
-                                      v["sss.texel_mm"], self.layers)
+                                      v["sss.texel_mm"], self.layers, self.skin_model,
+                                      v["skin.melanin_image"])
         return SceneConfig(tex, v["material.model"], v["material.brdf"], v["camera.projection"],
                            v["camera.size"], v["camera.supersample"], v["camera.fov"],
                            tuple(v["camera.rotate"]), v["view.mode"], spectral,
                            v["camera.height"],
                            tuple(v["light.direction"]) if v["light.shadows"] else None)
+
+    @property
+    def skin_model(self) -> str:
+        """The skin of a spectral scene: "biophysical" (`material.model = "biophysical"`,
+        or `skin.model = "biophysical"`) or "nist" (a measured subject)."""
+        v = self.values
+        return "biophysical" if v["material.model"] == "biophysical" else v["skin.model"]
 
     @functools.cached_property
     def params(self) -> dict:
@@ -285,6 +337,10 @@ class Scene:
         the scene uses (no Blinn parameters in a Lafortune scene, no lobes in a Blinn one)."""
         model = self.values["material.model"]
         unused = set().union(*(p for m, p in _MODEL_PARAMS.items() if m != model))
+        unused -= _MODEL_PARAMS[model]
+        if model in SPECTRAL_MODELS:  # one skin: the measured one's or the biophysical's
+            unused |= ({"skin.melanin"} if self.skin_model == "biophysical" else
+                       set(BIOPHYSICAL_KEYS.values()))
         out = {k: jnp.asarray(self.values[k], jnp.float32) for k, spec in SCHEMA.items()
                if spec.param and k not in unused}
         for layer in self.layers:
@@ -333,6 +389,16 @@ def load_scene(name_or_path, overrides=()) -> Scene:
         raise InputError(f"cannot read ({e.__class__.__name__})", path) from None
     except tomllib.TOMLDecodeError as e:
         raise InputError(f"not valid TOML: {e}", path) from None
+    return parse_scene(doc, path, overrides)
+
+
+def parse_scene(doc: dict, path, overrides=()) -> Scene:
+    """A scene from its parsed TOML document `doc` (as `tomllib` gives it; not changed), read
+    as if from the file `path` (relative paths are taken from its folder), with `-D`
+    `overrides`: what `load_scene` does after reading the file (the editor builds scenes
+    from documents it holds)."""
+    path = Path(path)
+    doc = copy.deepcopy(doc)
     edits_raw = doc.get("fields", {}).pop("edit", []) if isinstance(doc.get("fields"), dict) \
         else []
     layers_raw = doc.pop("layer", [])
@@ -353,10 +419,10 @@ def load_scene(name_or_path, overrides=()) -> Scene:
         k, v = _parse_override(item)
         values[k] = _check(k, v, f"-D {item}", names)
         from_command_line.add(k)
-    if layers and values["material.model"] != "spectral":
-        raise InputError("cosmetic layers need material.model = \"spectral\" (the Huang et "
-                         f"al. model); this scene's is {values['material.model']!r}", path,
-                         key="layer")
+    if layers and values["material.model"] not in SPECTRAL_MODELS:
+        raise InputError("cosmetic layers need material.model = \"spectral\" or "
+                         "\"biophysical\" (the Huang et al. model); this scene's is "
+                         f"{values['material.model']!r}", path, key="layer")
 
     def base(key):  # a path in the file is relative to it; one given with -D, to the cwd
         return Path.cwd() if key in from_command_line else path.parent
@@ -375,6 +441,14 @@ def load_scene(name_or_path, overrides=()) -> Scene:
                              f"written by jaxskin fit-brdf); no file {brdf_path}", path,
                              key="material.brdf")
         values["material.brdf"] = str(brdf_path)
+    image = values["skin.melanin_image"]
+    if image is not None:
+        image_path = Path(image) if Path(image).is_absolute() else (
+            base("skin.melanin_image") / image).resolve()
+        if not image_path.is_file():
+            raise InputError(f"expected a greyscale image file, got {image!r}", path,
+                             key="skin.melanin_image")
+        values["skin.melanin_image"] = str(image_path)
     edits = tuple(_edit(i, e, path) for i, e in enumerate(edits_raw))
     return Scene(values["name"], str(path), values, edits, layers)
 
