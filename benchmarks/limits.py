@@ -102,23 +102,31 @@ def stages(quick: bool = False):
                     jnp.float32)
     out.append((f"SSS blur by FFT, {sss_size}², 0.2 mm texels",
                 jax.jit(lambda e: sss.blur(e, 0.2)), [E], False))
-    out.append(furrow_stage(32 if quick else 512))
+    out += furrow_stages(32 if quick else 512)
     return out
 
 
-def furrow_stage(size: int):
-    """The furrow program on the hand at `size`²: the texels it touches once are its
-    inputs (mask, two direction fields, centroids) and its height field."""
+def furrow_stages(size: int):
+    """The furrow programs on the hand at `size`², sequential and parallel (lockstep): the
+    texels they touch once are their inputs (mask, two direction fields, centroids) and
+    their height field."""
     import bench_wrinkles
 
-    sc, s, cent, radius = bench_wrinkles.inputs(size)
-    args = [s.mask, s.field1, s.field2, cent, sc.config.texture.k_scale,
-            jax.random.key(sc.config.texture.seed)]
+    from jaxskin import lockstep
 
-    def f(mask, f1, f2, cent, k, key):
+    sc, s, cent, radius = bench_wrinkles.inputs(size)
+    k, key = sc.config.texture.k_scale, jax.random.key(sc.config.texture.seed)
+
+    def sequential(mask, f1, f2, cent, key):
         return wrinkles.height_field(mask, f1, f2, cent, k, key, radius=radius)[0]
 
-    return (f"furrows: hand {size}² (program of loops)", f, args, True)
+    def parallel(mask, f1, f2, key):
+        return lockstep.height_field(mask, f1, f2, k, key)[0]
+
+    return [(f"furrows, sequential: hand {size}² (program of loops)", sequential,
+             [s.mask, s.field1, s.field2, cent, key], True),
+            (f"furrows, parallel: hand {size}² (program of loops)", parallel,
+             [s.mask, s.field1, s.field2, key], True)]
 
 
 def _nbytes(tree) -> int:
