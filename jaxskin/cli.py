@@ -616,6 +616,8 @@ def _fit_brdf(args, run: _Run) -> int:
 
 
 def main(argv=None) -> int:
+    """The `jaxskin` command: parse `argv` (default `sys.argv[1:]`), run the command, and
+    return its exit code (0 done, 2 bad input, 1 failure, 130 SIGINT, 143 SIGTERM)."""
     parser = _parser()
     args = parser.parse_args(argv)
     if args.command is None:
