@@ -1,317 +1,34 @@
-"""Generate the reference pages from the code (run by mkdocs-gen-files at every build).
-
-- `reference/api/<module>.md`: one page per public module of `jaxskin` and `jaxskin.fitting`
-  (found by walking the packages, so a new module gets its page), rendered by mkdocstrings;
-  the API section of the navigation is filled in here.
-- `reference/scene.md`: every scene key from `jaxskin.scene.SCHEMA` / `LAYER_SCHEMA` (type,
-  default, range or choices, differentiable or static, the material models that use it), with
-  its description taken from the commented TOML example in `jaxskin/scene.py`'s docstring.
-- `reference/cli.md`: every command and option from `jaxskin.cli._parser()`.
-
-Any public function, class or method without a docstring, and any scene key without a
-description, is logged as a warning, which fails `mkdocs build --strict`.
-"""
+"""Generate the reference pages from the code (run by mkdocs-gen-files at every build):
+the API pages, the scene format and the command line (`docs/_ext/reference.py` makes
+them). A public name without a docstring, or a scene key without a description, is logged
+as a warning, which fails `mkdocs build --strict`."""
 
 from __future__ import annotations
 
-import argparse
-import importlib
 import logging
-import pkgutil
-import re
 import sys
 from pathlib import Path
 
-import griffe
 import mkdocs_gen_files
 
-ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).resolve().parent / "_ext"))
-from griffe_fitting import MountFitting  # noqa: E402
+import reference  # noqa: E402
 
 log = logging.getLogger("mkdocs.plugins.jaxskin_reference")
 
-
-# --- The API: one page per module -------------------------------------------------------------
-
-def modules() -> list[str]:
-    """Every public module and package under jaxskin (fitting included), `__main__` left out."""
-    import jaxskin
-    import jaxskin.fitting
-
-    names = ["jaxskin"]
-    for pkg in (jaxskin, jaxskin.fitting):
-        for m in pkgutil.walk_packages(pkg.__path__, prefix=pkg.__name__ + "."):
-            parts = m.name.split(".")
-            if any(p.startswith("_") for p in parts) or m.name in names:
-                continue
-            names.append(m.name)
-    return names
-
-
-def summary(doc: str | None) -> str:
-    """The first sentence of a docstring, on one line."""
-    first = (doc or "").strip().split("\n\n")[0]
-    return " ".join(first.split())
-
-
-def api_pages() -> list:
-    nav = []
-    rows = []
-    for name in modules():
-        module = importlib.import_module(name)
-        is_package = hasattr(module, "__path__")
-        path = f"reference/api/{name}.md"
-        with mkdocs_gen_files.open(path, "w") as f:
-            options = "    options:\n      members: false\n" if is_package else ""
-            f.write(f"::: {name}\n{options}")
-            if is_package:
-                subs = [m for m in modules() if m.rsplit(".", 1)[0] == name]
-                if subs:
-                    f.write("\n**Modules:**\n\n")
-                    for m in subs:
-                        doc = summary(importlib.import_module(m).__doc__)
-                        f.write(f"- [`{m}`]({m}.md): {doc}\n")
-        nav.append({name: path})
-        rows.append(f"| [`{name}`]({name}.md) | {summary(module.__doc__)} |")
-    with mkdocs_gen_files.open("reference/api/index.md", "w") as f:
-        f.write("# API\n\nEvery public module of `jaxskin` and `jaxskin.fitting`, each page "
-                "generated from the docstrings (Markdown, with **Arguments** / **Returns**; "
-                "array shapes as jaxtyping annotations such as `Float[Array, \"*shape n\"]`).\n"
-                "Everything numeric follows the dtype of its inputs and is jit-, vmap- and "
-                "grad-safe unless its docstring says otherwise.\n\n"
-                "| module | what it holds |\n|---|---|\n" + "\n".join(rows) + "\n")
-    return [{"API": ["reference/api/index.md", *nav]}]
-
-
-def check_docstrings() -> int:
-    """Warn about each public function, class or method without a docstring."""
-    loader = griffe.GriffeLoader(extensions=griffe.load_extensions(MountFitting()),
-                                 search_paths=[str(ROOT)])
-    package = loader.load("jaxskin")
-    loader.resolve_aliases(implicit=False, external=False)
-    missing = []
-
-    def visit(obj):
-        for member in obj.members.values():
-            if member.is_alias or member.name.startswith("_"):
-                continue
-            if member.is_module:
-                if member.name != "__main__":
-                    if not member.docstring:
-                        missing.append(member.path)
-                    visit(member)
-                continue
-            if not member.is_public:
-                continue
-            if member.is_function or member.is_class:
-                if not member.docstring:
-                    missing.append(member.path)
-                if member.is_class:
-                    visit(member)
-
-    visit(package)
-    for path in missing:
-        log.warning(f"public name without a docstring: {path}")
-    return len(missing)
-
-
-# --- The scene format, from the schema --------------------------------------------------------
-
-def toml_descriptions(doc: str) -> dict[str, str]:
-    """`{dotted key: comment}` from the commented TOML examples in a docstring. A comment
-    starting with more than one space continues the previous one; a table header's comment
-    describes the table (`fields.edit`, `layer`, `layer.ellipse`)."""
-    out: dict[str, str] = {}
-    last = None
-    prefix = ""
-    for block in re.findall(r"```toml\n(.*?)```", doc, re.S):
-        for line in block.splitlines():
-            code, _, comment = line.partition("#")
-            code = code.strip()
-            header = re.fullmatch(r"\[\[?([\w.]+)\]\]?", code)
-            key = re.match(r"([\w]+)\s*=", code)
-            if header:
-                prefix = header.group(1) + "."
-                name = header.group(1)
-            elif key:
-                name = prefix + key.group(1) if prefix else key.group(1)
-            else:
-                name = None
-            continues = comment.startswith("  ")
-            text = " ".join(comment.split())
-            if text and (continues or name is None) and last is not None:
-                out[last] = f"{out[last]} {text}".strip()
-            elif name is not None:
-                out.setdefault(name, text)
-                last = name if text else last
-            if name is not None and continues:
-                out.setdefault(name, "")
-    return out
-
-
-def fmt(value) -> str:
-    if isinstance(value, bool):
-        return "`true`" if value else "`false`"
-    if isinstance(value, str):
-        return f'`"{value}"`'
-    if isinstance(value, tuple):
-        return "`[" + ", ".join(map(str, value)) + "]`"
-    return "—" if value is None else f"`{value}`"
-
-
-def key_type(kind) -> str:
-    return "3 numbers" if kind == "vec3" else {bool: "boolean", int: "integer", float: "number",
-                                                str: "string"}[kind]
-
-
-def key_range(spec) -> str:
-    if spec.choices is not None:
-        return " \\| ".join(fmt(c) for c in spec.choices)
-    if spec.lo is not None:
-        return f"{spec.lo:g} – {spec.hi:g}"
-    return ""
-
-
-def scene_page() -> int:
-    from jaxskin import scene
-
-    described = toml_descriptions(scene.__doc__)
-    unused = 0
-    model_of = {k: m for m, keys in scene._MODEL_PARAMS.items() for k in keys}
-
-    def describe(key: str) -> str:
-        nonlocal unused
-        text = described.get(key, "")
-        if not text:
-            unused += 1
-            log.warning(f"scene key '{key}' has no description: give it a comment in the TOML "
-                        "example of jaxskin/scene.py's docstring")
-        return text.replace("|", "\\|")
-
-    lines = [
-        "# Scene files",
-        "",
-        "A scene is a TOML file (or a built-in name: "
-        + ", ".join(f"`{n}`" for n in scene.BUILTIN_SCENES)
-        + ", in `data/scenes/`). Every key below may be left out (its default applies), set in "
-        "the file, or overridden on the command line with `-D key=value` (e.g. "
-        "`-D material.melanin=0.4`, `-D layer.blush.thickness_mm=0.02`) or in Python with "
-        "`load_scene(name, [\"key=value\", ...])`, with the same checks: an unknown key is an "
-        "error that suggests the nearest valid key, an out-of-range value one that gives the "
-        "range.",
-        "",
-        "**Differentiable** keys become arrays in `Scene.params`: `jax.grad`, `--sweep` and "
-        "`jaxskin fit-...` work on them, and changing one does not recompile. **Static** keys "
-        "make up `Scene.config`, the jit cache key: they choose which stages run and the "
-        "shapes. A scene gets only the parameters its material model uses (the *model* "
-        "column); see [What a scene does not need](../explanations/traced.md).",
-        "",
-        "This page is generated from `jaxskin.scene.SCHEMA` and `LAYER_SCHEMA` when the site "
-        "is built; the descriptions are the comments of the example in `jaxskin/scene.py`.",
-        "",
-        "## Keys",
-        "",
-        "| key | type | default | range | | model | description |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for key, spec in scene.SCHEMA.items():
-        kind = "**differentiable**" if spec.param else "static"
-        lines.append(f"| `{key}` | {key_type(spec.kind)} | {fmt(spec.default)} | "
-                     f"{key_range(spec)} | {kind} | {model_of.get(key, '')} | "
-                     f"{describe(key)} |")
-    lines += [
-        "",
-        "## `[[layer]]`: cosmetic layers",
-        "",
-        f"{describe('layer')} Only with `material.model = \"spectral\"`. Each layer's values are "
-        "addressed as `layer.<name>.<key>`.",
-        "",
-        "| key | type | default | range | | description |",
-        "|---|---|---|---|---|---|",
-    ]
-    for key, spec in scene.LAYER_SCHEMA.items():
-        kind = "**differentiable**" if spec.param else "static"
-        lines.append(f"| `{key}` | {key_type(spec.kind)} | {fmt(spec.default)} | "
-                     f"{key_range(spec)} | {kind} | {describe('layer.' + key)} |")
-    for key in sorted(scene.LAYER_KEYS - set(scene.LAYER_SCHEMA)):
-        lines.append(f"| `{key}` | | | | static | {describe('layer.' + key)} |")
-    for table, keys in (("layer.ellipse", scene.ELLIPSE_KEYS),
-                        ("layer.polygon", scene.POLYGON_KEYS),
-                        ("fields.edit", scene.EDIT_KEYS)):
-        lines += ["", f"## `[[{table}]]`", "", describe(table), "",
-                  "| key | description |", "|---|---|"]
-        lines += [f"| `{k}` | {describe(f'{table}.{k}')} |" for k in sorted(keys)]
-    lines += ["", "## The examples this page reads", "",
-              "The commented TOML in `jaxskin/scene.py`'s docstring, as it stands:", ""]
-    for block in re.findall(r"```toml\n(.*?)```", scene.__doc__, re.S):
-        lines += ["```toml", block.rstrip(), "```", ""]
-    with mkdocs_gen_files.open("reference/scene.md", "w") as f:
-        f.write("\n".join(lines) + "\n")
-    return unused
-
-
-# --- The command line, from argparse ----------------------------------------------------------
-
-def cli_page() -> None:
-    from jaxskin.cli import _parser
-
-    parser = _parser()
-    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    helps = {c.dest: c.help for c in sub._choices_actions}
-
-    def section(p: argparse.ArgumentParser, title: str, level: str) -> list[str]:
-        formatter = p._get_formatter()
-        out = [f"{level} {title}", ""]
-        if title in helps:
-            out += [f"*{helps[title]}*", ""]
-        if p.description:
-            out += [p.description, ""]
-        out += ["```text", p.format_usage().strip(), "```", "",
-                "| argument | | description |", "|---|---|---|"]
-        for a in p._actions:
-            if isinstance(a, argparse._SubParsersAction):
-                continue
-            names = ", ".join(f"`{s}`" for s in a.option_strings) or f"`{a.metavar or a.dest}`"
-            if a.option_strings and a.nargs != 0:
-                names += f" `{a.metavar or a.dest.upper()}`"
-            extra = []
-            if a.required and a.option_strings:
-                extra.append("required")
-            if a.choices:
-                extra.append("one of " + ", ".join(f"`{c}`" for c in a.choices))
-            if a.default not in (None, False, [], argparse.SUPPRESS):
-                extra.append(f"default `{a.default}`")
-            if a.nargs == "+":
-                extra.append("one or more")
-            text = formatter._expand_help(a) if a.help else ""
-            lines = [text.replace("|", "\\|").replace("\n", " ")]
-            out.append(f"| {names} | {'; '.join(extra)} | {lines[0]} |")
-        out.append("")
-        if p.epilog:
-            out += [p.epilog, ""]
-        return out
-
-    lines = ["# Command line", "",
-             "Generated from `jaxskin.cli._parser()`, the parser the `jaxskin` command uses, "
-             "when the site is built. `jaxskin COMMAND --help` prints the same text. "
-             "`python -m jaxskin` is the same command line. How outputs are named and the exit "
-             "codes: [Outputs and exit codes](outputs.md).", ""]
-    lines += section(parser, "jaxskin", "##")
-    for name, p in sub.choices.items():
-        lines += section(p, name, "##")
-    with mkdocs_gen_files.open("reference/cli.md", "w") as f:
-        f.write("\n".join(lines) + "\n")
-
-
-# --- Build ------------------------------------------------------------------------------------
-
-api_nav = api_pages()
-scene_page()
-cli_page()
-check_docstrings()
-config = mkdocs_gen_files.config
-for section in config.nav:
+pages, api_nav = reference.api_pages()
+scene_md, undescribed = reference.scene_page()
+pages["reference/scene.md"] = scene_md
+pages["reference/cli.md"] = reference.cli_page()
+for path, text in pages.items():
+    with mkdocs_gen_files.open(path, "w") as f:
+        f.write(text)
+for key in undescribed:
+    log.warning(f"scene key '{key}' has no description: give it a comment in the TOML "
+                "example of jaxskin/scene.py's docstring")
+for name in reference.missing_docstrings():
+    log.warning(f"public name without a docstring: {name}")
+for section in mkdocs_gen_files.config.nav:
     if isinstance(section, dict) and "Reference" in section:
         section["Reference"] = [e for e in section["Reference"]
                                 if not (isinstance(e, dict) and "API" in e)] + api_nav
