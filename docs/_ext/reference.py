@@ -157,8 +157,19 @@ def key_range(spec) -> str:
     if spec.choices is not None:
         return " \\| ".join(fmt(c) for c in spec.choices)
     if spec.lo is not None:
-        return f"{spec.lo:g} – {spec.hi:g}"
+        return f"{number(spec.lo)} – {number(spec.hi)}"
     return ""
+
+
+def number(x) -> str:
+    return str(int(x)) if float(x).is_integer() and abs(x) < 1e12 else f"{x:g}"
+
+
+def values(spec) -> str:
+    """The key's type, and its range or choices."""
+    span = key_range(spec)
+    return f"{key_type(spec.kind)}, {span}" if span and spec.choices is None else (
+        span or key_type(spec.kind))
 
 
 def scene_page() -> tuple[str, list[str]]:
@@ -190,21 +201,22 @@ def scene_page() -> tuple[str, list[str]]:
         "**Differentiable** keys become arrays in `Scene.params`: `jax.grad`, `--sweep` and "
         "`jaxskin fit-...` work on them, and changing one does not recompile. **Static** keys "
         "make up `Scene.config`, the jit cache key: they choose which stages run and the "
-        "shapes. A scene gets only the parameters its material model uses (the *model* "
-        "column); see [What a scene does not need](../explanations/traced.md).",
+        "shapes. A scene gets only the parameters its material model uses (marked *only*); "
+        "see [What a scene does not need](../explanations/traced.md).",
         "",
         "This page is generated from `jaxskin.scene.SCHEMA` and `LAYER_SCHEMA` when the site "
         "is built; the descriptions are the comments of the example in `jaxskin/scene.py`.",
         "",
         "## Keys",
         "",
-        "| key | type | default | range | | model | description |",
-        "|---|---|---|---|---|---|---|",
+        "| key | default | values | kind | description |",
+        "|---|---|---|---|---|",
     ]
     for key, spec in scene.SCHEMA.items():
         kind = "**differentiable**" if spec.param else "static"
-        lines.append(f"| `{key}` | {key_type(spec.kind)} | {fmt(spec.default)} | "
-                     f"{key_range(spec)} | {kind} | {model_of.get(key, '')} | "
+        if key in model_of:
+            kind += f" ({model_of[key]} only)"
+        lines.append(f"| `{key}` | {fmt(spec.default)} | {values(spec)} | {kind} | "
                      f"{describe(key)} |")
     lines += [
         "",
@@ -213,15 +225,15 @@ def scene_page() -> tuple[str, list[str]]:
         f"{describe('layer')} Only with `material.model = \"spectral\"`. Each layer's values are "
         "addressed as `layer.<name>.<key>`.",
         "",
-        "| key | type | default | range | | description |",
-        "|---|---|---|---|---|---|",
+        "| key | default | values | kind | description |",
+        "|---|---|---|---|---|",
     ]
     for key, spec in scene.LAYER_SCHEMA.items():
         kind = "**differentiable**" if spec.param else "static"
-        lines.append(f"| `{key}` | {key_type(spec.kind)} | {fmt(spec.default)} | "
-                     f"{key_range(spec)} | {kind} | {describe('layer.' + key)} |")
+        lines.append(f"| `{key}` | {fmt(spec.default)} | {values(spec)} | {kind} | "
+                     f"{describe('layer.' + key)} |")
     for key in sorted(scene.LAYER_KEYS - set(scene.LAYER_SCHEMA)):
-        lines.append(f"| `{key}` | | | | static | {describe('layer.' + key)} |")
+        lines.append(f"| `{key}` | | | static | {describe('layer.' + key)} |")
     for table, keys in (("layer.ellipse", scene.ELLIPSE_KEYS),
                         ("layer.polygon", scene.POLYGON_KEYS),
                         ("fields.edit", scene.EDIT_KEYS)):
