@@ -1,7 +1,8 @@
 """Generate the reference pages from the code (run by mkdocs-gen-files at every build):
 the API pages, the scene format and the command line (`docs/_ext/reference.py` makes
-them). A public name without a docstring, or a scene key without a description, is logged
-as a warning, which fails `mkdocs build --strict`."""
+them); the benchmarks' plots are copied in as `benchmarks/*.png`, as they are now. A
+public name without a docstring, or a scene key without a description, is logged as a
+warning, which fails `mkdocs build --strict`."""
 
 from __future__ import annotations
 
@@ -20,6 +21,9 @@ pages, api_nav = reference.api_pages()
 scene_md, undescribed = reference.scene_page()
 pages["reference/scene.md"] = scene_md
 pages["reference/cli.md"] = reference.cli_page()
+for png in sorted((reference.ROOT / "benchmarks").glob("*.png")):  # the benchmarks' plots
+    with mkdocs_gen_files.open(f"benchmarks/{png.name}", "wb") as f:
+        f.write(png.read_bytes())
 for path, text in pages.items():
     with mkdocs_gen_files.open(path, "w") as f:
         f.write(text)

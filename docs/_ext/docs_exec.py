@@ -106,15 +106,19 @@ def slug(text: str) -> str:
     return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-")
 
 
-def results(marker: str, root: str = ".") -> str:
-    """The section of `benchmarks/RESULTS.md` between `<!-- marker:start -->` and the next
-    `<!-- ...:end -->`, as the benchmark last wrote it: its headings moved down to level 3,
-    its plots embedded."""
+def results(marker: str | None = None, images: str = "../benchmarks/",
+            root: str = ".") -> str:
+    """`benchmarks/RESULTS.md` as the benchmarks last wrote it (`marker`: only the section
+    between `<!-- marker:start -->` and the next `<!-- ...:end -->`), its headings moved down
+    a level (to level 3 for a section), its plots linked under `images` (the site holds a
+    copy of `benchmarks/*.png`, made by docs/gen_ref.py at each build)."""
     text = (Path(root) / "benchmarks" / "RESULTS.md").read_text()
-    start = text.index(f"<!-- {marker}:start -->")
-    end = text.index(":end -->", start)
-    body = text[start:end].split("\n", 1)[1].rsplit("\n", 1)[0]
-    body = re.sub(r"^#+ ", "### ", body, flags=re.M)
-    return re.sub(r"!\[([^]]*)\]\(([^)]+\.png)\)",
-                  lambda m: show(Path(root) / "benchmarks" / m.group(2), caption=m.group(1)),
-                  body)
+    if marker is None:
+        body = re.sub(r"^(#+) ", r"#\1 ", text.split("\n", 1)[1], flags=re.M)
+    else:
+        start = text.index(f"<!-- {marker}:start -->")
+        end = text.index(":end -->", start)
+        body = text[start:end].split("\n", 1)[1].rsplit("\n", 1)[0]
+        body = re.sub(r"^#+ ", "### ", body, flags=re.M)
+    body = re.sub(r"<!-- [\w-]+:(start|end) -->\n?", "", body)
+    return re.sub(r"!\[([^]]*)\]\(([^)/]+\.png)\)", rf"![\1]({images}\2)", body)
