@@ -84,9 +84,11 @@ def show(*images, caption: str = "", width: int = 0) -> str:
     they are."""
     style = f' style="width:{width}px;image-rendering:pixelated"' if width else ""
     tags = "".join(f'<img alt="{html.escape(caption)}" src="data:image/png;base64,'
-                   f'{base64.b64encode(_png(im)).decode()}"{style}> ' for im in images)
+                   f'{base64.b64encode(_png(im)).decode()}"{style}>' for im in images)
     cap = f"<figcaption>{html.escape(caption)}</figcaption>" if caption else ""
-    return f"<figure markdown>{tags}{cap}</figure>\n"
+    row = ('<div style="display:flex;flex-wrap:wrap;gap:6px;justify-content:center">'
+           f"{tags}</div>")
+    return f"<figure>{row}{cap}</figure>\n"
 
 
 def head(path, lines: int = 8) -> str:
