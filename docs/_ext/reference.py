@@ -240,11 +240,28 @@ def scene_page() -> tuple[str, list[str]]:
         lines += ["", f"## `[[{table}]]`", "", describe(table), "",
                   "| key | description |", "|---|---|"]
         lines += [f"| `{k}` | {describe(f'{table}.{k}')} |" for k in sorted(keys)]
+    lines += ["", "## Built-in names", "",
+              "What a scene can name without a path (`jaxskin list` prints the same):", "",
+              "```text", builtin_names().rstrip(), "```"]
     lines += ["", "## The examples this page reads", "",
               "The commented TOML in `jaxskin/scene.py`'s docstring, as it stands:", ""]
     for block in re.findall(r"```toml\n(.*?)```", scene.__doc__, re.S):
         lines += ["```toml", block.rstrip(), "```", ""]
     return "\n".join(lines) + "\n", undescribed
+
+
+def builtin_names() -> str:
+    """What `jaxskin list` prints: the built-in scenes, meshes, materials, BRDF presets,
+    illuminants and spectral steps."""
+    import contextlib
+    import io
+
+    from jaxskin.cli import _list
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        _list(None)
+    return out.getvalue()
 
 
 # --- The command line, from argparse ----------------------------------------------------------
