@@ -138,6 +138,13 @@ def toml_descriptions(doc: str) -> dict[str, str]:
     return out
 
 
+def prose(text: str) -> str:
+    """Plain text (a help string, a comment) made safe in Markdown: `<name>` is not a tag,
+    `*` not emphasis, `|` not a table column."""
+    return (text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+            .replace("*", "\\*").replace("|", "\\|"))
+
+
 def fmt(value) -> str:
     if isinstance(value, bool):
         return "`true`" if value else "`false`"
@@ -184,7 +191,7 @@ def scene_page() -> tuple[str, list[str]]:
         text = described.get(key, "")
         if not text and key not in undescribed:
             undescribed.append(key)
-        return text.replace("|", "\\|")
+        return prose(text)
 
     lines = [
         "# Scene files",
@@ -277,11 +284,11 @@ def cli_page() -> str:
         formatter = p._get_formatter()
         out = [f"{level} {title}", ""]
         if title in helps:
-            out += [f"*{helps[title]}*", ""]
+            out += [f"*{prose(helps[title])}*", ""]
         if p.description:
-            out += [p.description, ""]
+            out += [prose(p.description), ""]
         out += ["```text", p.format_usage().strip(), "```", "",
-                "| argument | | description |", "|---|---|---|"]
+                "| argument | notes | description |", "|---|---|---|"]
         for a in p._actions:
             if isinstance(a, argparse._SubParsersAction):
                 continue
@@ -298,11 +305,10 @@ def cli_page() -> str:
             if a.nargs == "+":
                 extra.append("one or more")
             text = formatter._expand_help(a) if a.help else ""
-            lines = [text.replace("|", "\\|").replace("\n", " ")]
-            out.append(f"| {names} | {'; '.join(extra)} | {lines[0]} |")
+            out.append(f"| {names} | {'; '.join(extra)} | {prose(' '.join(text.split()))} |")
         out.append("")
         if p.epilog:
-            out += [p.epilog, ""]
+            out += [prose(p.epilog), ""]
         return out
 
     lines = ["# Command line", "",
