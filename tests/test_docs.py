@@ -4,6 +4,7 @@ fails the suite. The fast checks here run the same code the build runs (docs/_ex
 reference.py); the slow one builds the whole site, executing every tutorial."""
 
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -123,4 +124,15 @@ def test_the_site_builds_in_strict_mode(tmp_path):
     assert "Kubelka" in api and "compose" in api
     assert "jaxskin.fitting.km" in (site / "reference" / "api" / "jaxskin.fitting.km" /
                                     "index.html").read_text()
+    broken = []
+    for page in site.rglob("*.html"):  # every image and page a built page points to exists
+        if page.name == "404.html":  # served from any depth, so its links are absolute
+            continue
+        for target in re.findall(r'(?:src|href)="([^"#?]+)', page.read_text()):
+            if "://" in target or target.startswith(("data:", "mailto:", "javascript:")):
+                continue
+            path = (page.parent / target).resolve()
+            if not (path.exists() or (path / "index.html").exists()):
+                broken.append(f"{page.relative_to(site)}: {target}")
+    assert broken == []
     print(f"docs built in {seconds:.0f} s")

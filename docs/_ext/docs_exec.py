@@ -108,12 +108,13 @@ def slug(text: str) -> str:
     return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-")
 
 
-def results(marker: str | None = None, images: str = "../benchmarks/",
-            root: str = ".") -> str:
+def results(marker: str | None = None, *, images: str, root: str = ".") -> str:
     """`benchmarks/RESULTS.md` as the benchmarks last wrote it (`marker`: only the section
     between `<!-- marker:start -->` and the next `<!-- ...:end -->`), its headings moved down
     a level (to level 3 for a section), its plots linked under `images` (the site holds a
-    copy of `benchmarks/*.png`, made by docs/gen_ref.py at each build)."""
+    copy of `benchmarks/*.png`, made by docs/gen_ref.py at each build). markdown-exec
+    renders this Markdown itself, so MkDocs does not rewrite these links: `images` is
+    relative to the page's URL (`../../benchmarks/` from `explanations/sss/`)."""
     text = (Path(root) / "benchmarks" / "RESULTS.md").read_text()
     if marker is None:
         body = re.sub(r"^(#+) ", r"#\1 ", text.split("\n", 1)[1], flags=re.M)
