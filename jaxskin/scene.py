@@ -231,6 +231,7 @@ class SpectralConfig:
 
     @property
     def grid(self) -> Grid:
+        """The spectral `Grid` of `step` and `illuminant`."""
         return Grid(self.step, illuminant=self.illuminant)
 
 
@@ -254,6 +255,8 @@ class SceneConfig:
 
     @property
     def needs_furrows(self) -> bool:
+        """Whether the render runs the furrow program (wrinkles on and a mode that shows
+        them)."""
         return self.texture.wrinkles and self.mode in ("wrinkles", "height")
 
 
@@ -270,6 +273,7 @@ class Scene:
 
     @functools.cached_property
     def config(self) -> SceneConfig:
+        """The static part of the scene, hashable: the jit cache key."""
         v = self.values
         tex = TextureConfig(v["mesh.file"], v["mesh.projection"], v["texture.size"],
                             v["wrinkles.enabled"], v["wrinkles.k_scale"], v["wrinkles.seed"],

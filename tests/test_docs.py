@@ -30,10 +30,11 @@ def test_a_public_name_without_a_docstring_is_found(tmp_path):
     (pkg / "__init__.py").write_text('"""A package."""\n__all__ = ["f", "C"]\n\n'
                                      'def f():\n    pass\n\n\ndef _g():\n    pass\n\n\n'
                                      'class C:\n    """A class."""\n\n'
-                                     '    def m(self):\n        pass\n')
+                                     '    def m(self):\n        pass\n\n'
+                                     '    @property\n    def p(self):\n        return 1\n')
     (pkg / "mod.py").write_text("def h():\n    '''Documented.'''\n")
     assert sorted(reference.missing_docstrings("pkgx", [tmp_path])) == [
-        "pkgx.C.m", "pkgx.f", "pkgx.mod"]
+        "pkgx.C.m", "pkgx.C.p", "pkgx.f", "pkgx.mod"]
 
 
 def test_every_scene_key_is_described_in_the_generated_page():

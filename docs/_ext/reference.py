@@ -74,8 +74,8 @@ def api_pages() -> tuple[dict[str, str], list]:
 
 
 def missing_docstrings(package: str = "jaxskin", search_paths=(ROOT,)) -> list[str]:
-    """Each public module, function, class or method (of a public class) of `package`
-    without a docstring, as griffe (what mkdocstrings renders from) sees the source."""
+    """Each public module, function, class, method or property (of a public class) of
+    `package` without a docstring, as griffe (what mkdocstrings renders from) sees the source."""
     loader = griffe.GriffeLoader(extensions=griffe.load_extensions(MountFitting()),
                                  search_paths=[str(p) for p in search_paths])
     root = loader.load(package)
@@ -94,7 +94,8 @@ def missing_docstrings(package: str = "jaxskin", search_paths=(ROOT,)) -> list[s
                 continue
             if not member.is_public:
                 continue
-            if member.is_function or member.is_class:
+            if member.is_function or member.is_class or (
+                    member.is_attribute and "property" in member.labels):
                 if not member.docstring:
                     missing.append(member.path)
                 if member.is_class:
