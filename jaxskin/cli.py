@@ -5,6 +5,7 @@
     jaxskin calibrate FILE.csv [FILE.csv ...] -o OUTDIR   # S(λ), K(λ) of cosmetics
     jaxskin fit-brdf FILE.csv -o OUT.json [--lobes N]     # Lafortune lobes
     jaxskin render SCENE [SCENE ...] -o DIR --maps        # wrinkle height and normal maps
+    jaxskin fit-skin SPECTRA.csv -o DIR                   # the biophysical skin, fitted
 
 (`python -m jaxskin …` is the same.) Exit codes: 0 done; 2 bad input (a file, a column, a
 value, an option, an output path, a run that cannot fit in memory), reported as one line
@@ -252,6 +253,31 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--seed", type=_number(int, 0, 2147483647), default=0,
                    help="seed of the random starts (0)")
     b.add_argument("--no-report", action="store_true", help="write the JSON only, no PNG")
+
+    k = sub.add_parser(
+        "fit-skin",
+        help="fit the biophysical skin model to measured reflectance spectra",
+        description="Fit melanin (fraction, eumelanin share), haemoglobin (fraction, "
+        "oxygenation), epidermis thickness and scattering of the biophysical skin model "
+        "(material.model = \"biophysical\") to each spectrum of a CSV: a wide table "
+        "(wavelength_nm, then one column per spectrum, 0-1) or the NIST skin file's layout "
+        "(each subject's Average). Fits 380-780 nm (needs at least 400-700). Writes "
+        "DIR/fit.csv (name, parameters, RMS reflectance error, dE2000 under D65 between "
+        "measured and fitted spectra) and DIR/fit.png (a sample of fits, histograms).",
+    )
+    k.add_argument("file", metavar="SPECTRA.csv", help="reflectance spectra")
+    k.add_argument("-o", "--output", required=True, metavar="DIR",
+                   help="folder for fit.csv and fit.png (created if missing)")
+    k.add_argument("--starts", type=_number(int, 1, 256), default=4, metavar="S",
+                   help="starts per spectrum: the default skin, then random (4)")
+    k.add_argument("--seed", type=_number(int, 0, 2147483647), default=0,
+                   help="seed of the random starts (0)")
+    k.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
+                   help="hold a parameter at a value, e.g. --fix epidermis_mm=0.06 "
+                   "(repeatable)")
+    k.add_argument("--percent", action="store_true",
+                   help="reflectance is in percent (0-100) instead of 0-1")
+    k.add_argument("--no-report", action="store_true", help="write fit.csv only, no PNG")
     return p
 
 
@@ -616,6 +642,12 @@ def _fit_brdf(args, run: _Run) -> int:
     return 0
 
 
+def _fit_skin(args, run: _Run) -> int:
+    from jaxskin.fitting import skin
+
+    return skin.command(args, run)
+
+
 def main(argv=None) -> int:
     """The `jaxskin` command: parse `argv` (default `sys.argv[1:]`), run the command, and
     return its exit code (0 done, 2 bad input, 1 failure, 130 SIGINT, 143 SIGTERM)."""
@@ -628,7 +660,8 @@ def main(argv=None) -> int:
         return _list(args)
     _enable_compilation_cache()
     run = _Run()
-    commands = {"calibrate": _calibrate, "fit-brdf": _fit_brdf, "render": _render}
+    commands = {"calibrate": _calibrate, "fit-brdf": _fit_brdf, "render": _render,
+                "fit-skin": _fit_skin}
     with _signals():
         try:
             return commands[args.command](args, run)

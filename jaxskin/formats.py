@@ -21,6 +21,7 @@ Every problem is an `InputError` naming the file, the line and the column.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import functools
@@ -32,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from .io import InputError, atomic_write, data_dir
+from .outputs import slug
 
 __all__ = ["MaterialFile", "Table", "nist_reflectance", "nist_spectrum", "read_json",
            "read_lafortune", "read_material", "read_table", "read_text", "write_json",
@@ -68,9 +70,11 @@ class Table:
         return InputError(message, self.path, line, column)
 
 
-def read_text(path) -> str:
+def read_text(path, fallback: str | None = None) -> str:
     """A text file's contents (UTF-8, a byte-order mark dropped); `InputError` if it is not
-    one: missing, unreadable, binary, not UTF-8 or larger than `MAX_BYTES`."""
+    one: missing, unreadable, binary, not UTF-8 (unless it decodes as the `fallback`
+    encoding, e.g. "cp1252" for Windows exports such as the NIST file) or larger than
+    `MAX_BYTES`."""
     path = Path(path)
     try:
         size = path.stat().st_size
@@ -90,6 +94,9 @@ def read_text(path) -> str:
     try:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError as e:
+        if fallback is not None:
+            with contextlib.suppress(UnicodeDecodeError):
+                return raw.decode(fallback)
         line = raw[:e.start].count(b"\n") + 1
         raise InputError(f"not UTF-8 text (byte 0x{raw[e.start]:02x})", path, line) from None
 
@@ -329,3 +336,93 @@ def read_material(path) -> MaterialFile:
                          key="extrapolate")
     name = doc.get("name", path.stem)
     return MaterialFile(path, str(name), wl, S, K, extrapolate)
+
+
+# ---------------------------------------------------------------- haemoglobin, spectra to fit
+
+HAEMOGLOBIN_FILE = "hemoglobin_prahl.csv"
+
+
+@functools.cache
+def haemoglobin_table() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Prahl's molar extinction of oxy- and deoxy-haemoglobin (OMLC; the shipped
+    `data/spectra/hemoglobin_prahl.csv`): `(wavelengths nm, e_HbO2, e_Hb)` in cm⁻¹/M."""
+    t = read_table(data_dir() / "spectra" / HAEMOGLOBIN_FILE, lambda c: c == "wavelength_nm",
+                   "wavelength_nm,e_HbO2,e_Hb")
+    return t.column("wavelength_nm"), t.column("e_HbO2"), t.column("e_Hb")
+
+
+_WAVELENGTH_NAMES = ("wavelength_nm", "wavelength (nm)", "wavelength", "lambda_nm", "nm")
+
+
+def read_spectra(path, percent: bool = False) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """Reflectance spectra to fit, one per column: `(names, wavelengths (n,), R (m, n))`.
+
+    Two layouts: a wide CSV (`wavelength_nm` — or `Wavelength (nm)` — then one column per
+    spectrum, named by its header), and the NIST skin file's (`Wavelength (nm)` then groups
+    `R1, R2, R3, Average` under a row naming `Subject k`: each subject's `Average` is read,
+    named `subject_k`). Reflectance in 0–1 (`percent`: 0–100); wavelengths increasing.
+    `InputError` names the file, line and column of anything else.
+    """
+    path = Path(path)
+    text = read_text(path, fallback="cp1252")
+    lines = text.splitlines()
+    header_at = None
+    for i, raw in enumerate(lines):
+        cells = _split(raw.strip(), ",") if raw.strip() and not raw.startswith("#") else []
+        if cells and cells[0].strip().lower() in _WAVELENGTH_NAMES:
+            header_at = i
+            break
+    if header_at is not None and "Average" in _split(lines[header_at], ","):
+        header = _split(lines[header_at], ",")
+        above = next((_split(lines[j], ",") for j in range(header_at - 1, -1, -1)
+                      if lines[j].strip().strip(",")), [])
+        columns, names = [], []
+        for c, name in enumerate(header):
+            if name == "Average":
+                label = next((above[j] for j in range(min(c, len(above) - 1), 0, -1)
+                              if j < len(above) and above[j]), f"column {c + 1}")
+                names.append(slug(label.strip().lower().replace(" ", "_")))
+                columns.append(c)
+        rows, wl = [], []
+        for number, raw in enumerate(lines[header_at + 1:], start=header_at + 2):
+            cells = _split(raw.strip(), ",")
+            if not raw.strip() or raw.startswith("#"):
+                continue
+            if len(cells) < len(header):
+                raise InputError(f"{len(cells)} cells where the header has {len(header)}",
+                                 path, number)
+            wl.append(_number(cells[0], path, number, header[0]))
+            rows.append([_number(cells[c], path, number, f"{names[k]} Average")
+                         for k, c in enumerate(columns)])
+        if len(wl) < 2:
+            raise InputError("needs at least 2 rows of spectra", path, header_at + 1)
+        wavelengths, R = np.asarray(wl), np.asarray(rows).T
+        header_line, line_of = header_at + 1, None
+    else:
+        t = read_table(path, lambda c: c.lower() in _WAVELENGTH_NAMES,
+                       "wavelength_nm,<spectrum name>,...", min_rows=2)
+        if len(t.header) < 2:
+            raise t.error("no spectra: expected wavelength_nm and one column per spectrum")
+        names, wavelengths, R = t.header[1:], t.data[:, 0], t.data[:, 1:].T
+        header_line, line_of = t.header_line, t.lines
+    if np.any(np.diff(wavelengths) <= 0):
+        row = int(np.flatnonzero(np.diff(wavelengths) <= 0)[0]) + 1
+        raise InputError("wavelengths must increase", path,
+                         None if line_of is None else line_of[row], "wavelength")
+    if percent:
+        R = R / 100.0
+    top = 100.0 if percent else 1.0
+    for k, name in enumerate(names):
+        bad = np.flatnonzero((R[k] < 0) | (R[k] > 1.0))
+        if bad.size:
+            raise InputError(f"reflectance must be in [0, {top:g}]"
+                             + ("" if percent else " (use --percent for 0-100)")
+                             + f", got {R[k, bad[0]] * top:g} at {wavelengths[bad[0]]:g} nm",
+                             path, None if line_of is None else line_of[bad[0]], name)
+    seen = set()
+    for name in names:
+        if name in seen:
+            raise InputError("two spectra have this name", path, header_line, name)
+        seen.add(name)
+    return list(names), wavelengths, R

@@ -10,7 +10,8 @@ we light the texels the camera sees, which is the same map read at the same plac
 Stages a scene does not use are not traced: no furrows without wrinkles
 or in the overview mode, no Lafortune code in a Blinn scene and the reverse.
 
-The cosmetics model (`material.model = "spectral"`, Huang et al. 2013) shades in texture
+The cosmetics model (`material.model = "spectral"`, Huang et al. 2013; `"biophysical"`: the
+same over the biophysical skin of `jaxskin.biophysical`) shades in texture
 space instead, as the paper's SSS needs: irradiance, the Kubelka–Munk layers, the skin
 profile's blur over the texture, the highlights (`shading.layered`), then the finished
 colour is sampled into the view. No layers: no KM; `sss.enabled = false`: no blur.
@@ -34,14 +35,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import cosmetics, formats, shadow, skin, sss, texture
+from . import biophysical, cosmetics, formats, shadow, skin, sss, texture
 from .raster import interpolate
-from .scene import SceneConfig
+from .scene import BIOPHYSICAL_KEYS, SceneConfig
 from .shading import blinn, lafortune, layered
 from .view import View, coverage, downsample, make_view, pad_index, sample
 
 __all__ = ["OUTPUTS", "Prepared", "albedo", "decode_srgb", "encode_srgb", "expose", "prepare",
-           "render", "render_prepared"]
+           "render", "render_prepared", "skin_reflectance"]
 
 OUTPUTS = ("display", "rgba", "linear_rgba")
 SHADOW_MAX = 2048  # texels across the shadow map, at most
@@ -85,7 +86,12 @@ def _prepare(config: SceneConfig) -> Prepared:
     sp, texel_mm = config.spectral, 0.0
     if sp is not None:
         grid = sp.grid
-        arrays["skin"] = jnp.asarray(formats.nist_reflectance(sp.subject, grid), jnp.float32)
+        if sp.skin == "biophysical":  # μa, μs' of the absorbers on the grid, (6, n)
+            arrays["chromophores"] = jnp.asarray(np.stack(biophysical.chromophores(
+                grid.wavelengths, formats.haemoglobin_table())), jnp.float32)
+        else:
+            arrays["skin"] = jnp.asarray(formats.nist_reflectance(sp.subject, grid),
+                                         jnp.float32)
         texel_mm = sp.texel_mm or sp.unit_mm * s.tmap.texel_size()
         # The model shades the texels on the mesh only, as a list (the rest stay black).
         texels = np.flatnonzero(np.asarray(s.mask))
@@ -271,7 +277,7 @@ def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: d
         def blur(colour):
             return to_list(sss.blur(to_image(colour), p.texel_mm, mask, sp.sss,
                                     norm=arrays.get("sss_norm")))
-    skin_R = skin.reflectance(arrays["skin"], params["skin.melanin"], sp.grid)
+    skin_R = skin_reflectance(sp, params, arrays)
     layers = {}
     if sp.layers:
         def per_layer(key):
@@ -285,6 +291,17 @@ def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: d
                               params["skin.roughness"], params["skin.specular"], blur=blur,
                               **layers)
     return to_image(colour)
+
+
+def skin_reflectance(sp, params: dict, arrays: dict):
+    """The spectral model's skin reflectance on its grid, `(n,)`: the NIST subject darkened
+    by `skin.melanin` (`jaxskin.skin`), or the biophysical model (`jaxskin.biophysical`) of
+    the `skin.*` parameters (`scene.BIOPHYSICAL_KEYS`)."""
+    if sp.skin == "biophysical":
+        c = biophysical.Chromophores(*arrays["chromophores"])
+        return biophysical.reflectance(c, biophysical.Skin(
+            *(params[BIOPHYSICAL_KEYS[name]] for name in biophysical.PARAMS)))
+    return skin.reflectance(arrays["skin"], params["skin.melanin"], sp.grid)
 
 
 def encode_srgb(linear):

@@ -14,7 +14,8 @@ k_noise = 0.0                      # 0–1: noise added to the height field
 k_bump = 0.5                       # 0–1: depth of the bump mapping
 seed = 0                           # the furrows' random numbers
 [material]
-model = "blinn"                    # blinn | lafortune | spectral (the cosmetics model)
+model = "blinn"                    # blinn | lafortune | spectral (the cosmetics model) |
+                                   #   biophysical (the cosmetics model over a biophysical skin)
 melanin = 0.2                      # Blinn's skin colour: melanin 0–1 (shading.blinn)
 blood = 0.5                        # Blinn's skin colour: blood 0–1
 specular = 0.2                     # Blinn's specular reflectance 0–1
@@ -51,8 +52,16 @@ The cosmetics model (Huang et al. 2013, `material.model = "spectral"`) adds:
 [mesh]
 unit_mm = 10.0                     # millimetres per mesh unit (the face is in cm)
 [skin]
+model = "nist"                     # nist (a measured subject) | biophysical
 subject = 1                        # NIST skin spectrum, subjects 1–100
 melanin = 0.0                      # added melanin, optical depth at 500 nm (0–3)
+melanin_fraction = 0.06            # biophysical skin (jaxskin.biophysical): melanosome
+                                   #   volume fraction 0.005–0.5
+eumelanin = 0.1                    # biophysical: the eumelanin share 0–1 (the rest pheomelanin)
+haemoglobin = 0.02                 # biophysical: dermal blood volume fraction 0.001–0.1
+oxygenation = 0.6                  # biophysical: the blood's oxygen saturation 0–1
+epidermis_mm = 0.035               # biophysical: epidermis thickness 0.01–0.15 mm
+scattering = 2.5                   # biophysical: scattering factor 0.5–6
 roughness = 0.3                    # Kelemen m of the skin's own highlight
 specular = 0.18                    # Kelemen rho_s of the skin's own highlight
 [spectral]
@@ -103,7 +112,7 @@ from typing import Any
 
 import jax.numpy as jnp
 
-from . import cosmetics
+from . import biophysical, cosmetics
 from .io import InputError, data_dir
 from .mesh import BUILTIN as BUILTIN_MESHES
 from .projection import KINDS
@@ -123,6 +132,11 @@ class _Key:
     param: bool = False  # differentiable (in Scene.params) rather than static
 
 
+# The biophysical skin's parameters (`biophysical.Skin` fields) as scene keys.
+BIOPHYSICAL_KEYS = {"melanin": "skin.melanin_fraction", "eumelanin": "skin.eumelanin",
+                    "haemoglobin": "skin.haemoglobin", "oxygenation": "skin.oxygenation",
+                    "epidermis_mm": "skin.epidermis_mm", "scattering": "skin.scattering"}
+
 SCHEMA: dict[str, _Key] = {
     "name": _Key(str, None),
     "mesh.file": _Key(str, "hand"),
@@ -134,7 +148,8 @@ SCHEMA: dict[str, _Key] = {
     "wrinkles.k_noise": _Key(float, 0.0, 0.0, 1.0, param=True),
     "wrinkles.k_bump": _Key(float, 0.5, 0.0, 1.0, param=True),
     "wrinkles.seed": _Key(int, 0, 0, 2**31 - 1),
-    "material.model": _Key(str, "blinn", choices=("blinn", "lafortune", "spectral")),
+    "material.model": _Key(str, "blinn", choices=("blinn", "lafortune", "spectral",
+                                                  "biophysical")),
     "material.melanin": _Key(float, 0.2, 0.0, 1.0, param=True),
     "material.blood": _Key(float, 0.5, 0.0, 1.0, param=True),
     "material.specular": _Key(float, 0.2, 0.0, 1.0, param=True),
@@ -152,10 +167,15 @@ SCHEMA: dict[str, _Key] = {
     "camera.exposure": _Key(float, 0.0, -20.0, 20.0, param=True),
     "camera.rotate": _Key("vec3", (0.0, 0.0, 0.0)),
     "view.mode": _Key(str, "wrinkles", choices=("wrinkles", "overview", "height")),
+    "skin.model": _Key(str, "nist", choices=("nist", "biophysical")),
     "skin.subject": _Key(int, 1, 1, 100),
     "skin.melanin": _Key(float, 0.0, 0.0, 3.0, param=True),
     "skin.roughness": _Key(float, 0.3, 0.01, 1.0, param=True),
     "skin.specular": _Key(float, 0.18, 0.0, 1.0, param=True),
+    # The biophysical skin (`jaxskin.biophysical`): its parameters, ranges and defaults.
+    **{key: _Key(float, float(getattr(biophysical.DEFAULT, name)),
+                 *biophysical.RANGES[name], param=True)
+       for name, key in BIOPHYSICAL_KEYS.items()},
     "spectral.step": _Key(int, 10, choices=STEPS),
     "spectral.illuminant": _Key(str, "D65", choices=ILLUMINANTS),
     "sss.enabled": _Key(bool, True),
@@ -174,9 +194,12 @@ LAYER_KEYS = {"name", "material", "image", "ellipse", "polygon", *LAYER_SCHEMA}
 ELLIPSE_KEYS = {"center", "radii", "angle", "feather"}
 POLYGON_KEYS = {"points", "vertices", "feather"}
 # Parameters that only one material model uses: the other model's are left out.
+_SPECTRAL_PARAMS = {"skin.melanin", "skin.roughness", "skin.specular",
+                    *BIOPHYSICAL_KEYS.values()}
 _MODEL_PARAMS = {"blinn": {"material.melanin", "material.blood", "material.specular",
                            "material.shininess"}, "lafortune": set(),
-                 "spectral": {"skin.melanin", "skin.roughness", "skin.specular"}}
+                 "spectral": _SPECTRAL_PARAMS, "biophysical": _SPECTRAL_PARAMS}
+SPECTRAL_MODELS = ("spectral", "biophysical")  # the models that shade through the spectra
 EDIT_KEYS = {"at", "vertex", "d1", "d2", "weight"}
 
 
@@ -228,6 +251,7 @@ class SpectralConfig:
     sss: str | None  # the blur method, or None: no subsurface scattering
     texel_mm: float  # 0: from the mesh
     layers: tuple[LayerSpec, ...]
+    skin: str = "nist"  # the skin under the layers: a NIST subject, or "biophysical"
 
     @property
     def grid(self) -> Grid:
@@ -240,7 +264,7 @@ class SceneConfig:
     """The static part of a scene (hashable; the jit cache key)."""
 
     texture: TextureConfig
-    material: str  # blinn | lafortune | spectral
+    material: str  # blinn | lafortune | spectral | biophysical
     brdf: str  # the Lafortune preset or file
     camera: str  # orthographic | perspective
     image: int
@@ -279,16 +303,23 @@ class Scene:
                             v["wrinkles.enabled"], v["wrinkles.k_scale"], v["wrinkles.seed"],
                             self.edits)
         spectral = None
-        if v["material.model"] == "spectral":
+        if v["material.model"] in SPECTRAL_MODELS:
             spectral = SpectralConfig(v["skin.subject"], v["spectral.step"],
                                       v["spectral.illuminant"], v["mesh.unit_mm"],
                                       v["sss.method"] if v["sss.enabled"] else None,
-                                      v["sss.texel_mm"], self.layers)
+                                      v["sss.texel_mm"], self.layers, self.skin_model)
         return SceneConfig(tex, v["material.model"], v["material.brdf"], v["camera.projection"],
                            v["camera.size"], v["camera.supersample"], v["camera.fov"],
                            tuple(v["camera.rotate"]), v["view.mode"], spectral,
                            v["camera.height"],
                            tuple(v["light.direction"]) if v["light.shadows"] else None)
+
+    @property
+    def skin_model(self) -> str:
+        """The skin of a spectral scene: "biophysical" (`material.model = "biophysical"`,
+        or `skin.model = "biophysical"`) or "nist" (a measured subject)."""
+        v = self.values
+        return "biophysical" if v["material.model"] == "biophysical" else v["skin.model"]
 
     @functools.cached_property
     def params(self) -> dict:
@@ -296,6 +327,10 @@ class Scene:
         the scene uses (no Blinn parameters in a Lafortune scene, no lobes in a Blinn one)."""
         model = self.values["material.model"]
         unused = set().union(*(p for m, p in _MODEL_PARAMS.items() if m != model))
+        unused -= _MODEL_PARAMS[model]
+        if model in SPECTRAL_MODELS:  # one skin: the measured one's or the biophysical's
+            unused |= ({"skin.melanin"} if self.skin_model == "biophysical" else
+                       set(BIOPHYSICAL_KEYS.values()))
         out = {k: jnp.asarray(self.values[k], jnp.float32) for k, spec in SCHEMA.items()
                if spec.param and k not in unused}
         for layer in self.layers:
@@ -365,10 +400,10 @@ def load_scene(name_or_path, overrides=()) -> Scene:
         k, v = _parse_override(item)
         values[k] = _check(k, v, f"-D {item}", names)
         from_command_line.add(k)
-    if layers and values["material.model"] != "spectral":
-        raise InputError("cosmetic layers need material.model = \"spectral\" (the Huang et "
-                         f"al. model); this scene's is {values['material.model']!r}", path,
-                         key="layer")
+    if layers and values["material.model"] not in SPECTRAL_MODELS:
+        raise InputError("cosmetic layers need material.model = \"spectral\" or "
+                         "\"biophysical\" (the Huang et al. model); this scene's is "
+                         f"{values['material.model']!r}", path, key="layer")
 
     def base(key):  # a path in the file is relative to it; one given with -D, to the cwd
         return Path.cwd() if key in from_command_line else path.parent

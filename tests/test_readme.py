@@ -80,8 +80,8 @@ def test_readme_shell_examples_run(tmp_path):
     sizes appended (-D wins in order). Files the examples name are made first: the README's
     scene file as my_scene.toml, a Lafortune file at out/skin_fit.json (the fit-brdf example
     comes later), the example measurements as foundation.csv and lipstick.csv, the BRDF
-    samples at data/brdf/. The benchmark scripts take minutes: for those lines the script is
-    imported and must have `main` (tests/test_benchmarks_smoke.py runs their parts)."""
+    samples at data/brdf/, the skin spectra at data/spectra/. The benchmark scripts take
+    minutes: for those lines the script is imported and must have `main` (tests/test_benchmarks_smoke.py runs their parts)."""
     from jaxskin.formats import write_lafortune
     from jaxskin.shading import lafortune
 
@@ -91,6 +91,7 @@ def test_readme_shell_examples_run(tmp_path):
         shutil.copy(ROOT / "data" / "measurements" / f"{src}.csv", tmp_path / f"{dst}.csv")
     (tmp_path / "data").mkdir()
     shutil.copytree(ROOT / "data" / "brdf", tmp_path / "data" / "brdf")
+    shutil.copytree(ROOT / "data" / "spectra", tmp_path / "data" / "spectra")
     ran = 0
     for line in shell_examples():
         words = shlex.split(line, comments=True)

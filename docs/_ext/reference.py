@@ -186,7 +186,10 @@ def scene_page() -> tuple[str, list[str]]:
 
     described = toml_descriptions(scene.__doc__)
     undescribed: list[str] = []
-    model_of = {k: m for m, keys in scene._MODEL_PARAMS.items() for k in keys}
+    model_of: dict[str, str] = {}  # a parameter only some material models use: which
+    for m, keys in scene._MODEL_PARAMS.items():
+        for k in sorted(keys):
+            model_of[k] = f"{model_of[k]}, {m}" if k in model_of else m
 
     def describe(key: str) -> str:
         text = described.get(key, "")
@@ -209,7 +212,7 @@ def scene_page() -> tuple[str, list[str]]:
         "**Differentiable** keys become arrays in `Scene.params`: `jax.grad`, `--sweep` and "
         "`jaxskin fit-...` work on them, and changing one does not recompile. **Static** keys "
         "make up `Scene.config`, the jit cache key: they choose which stages run and the "
-        "shapes. A scene gets only the parameters its material model uses (marked *only*); "
+        "shapes. A scene gets only the parameters its material model uses (named in brackets); "
         "see [What a scene does not need](../explanations/traced.md).",
         "",
         "This page is generated from `jaxskin.scene.SCHEMA` and `LAYER_SCHEMA` when the site "
@@ -223,15 +226,16 @@ def scene_page() -> tuple[str, list[str]]:
     for key, spec in scene.SCHEMA.items():
         kind = "**differentiable**" if spec.param else "static"
         if key in model_of:
-            kind += f" ({model_of[key]} only)"
+            kind += f" ({model_of[key]})"
         lines.append(f"| `{key}` | {fmt(spec.default)} | {values(spec)} | {kind} | "
                      f"{describe(key)} |")
     lines += [
         "",
         "## `[[layer]]`: cosmetic layers",
         "",
-        f"{describe('layer')} Only with `material.model = \"spectral\"`. Each layer's values are "
-        "addressed as `layer.<name>.<key>`.",
+        f"{describe('layer')}. Only with the cosmetics model (`material.model` "
+        + " or ".join(f'`"{m}"`' for m in getattr(scene, "SPECTRAL_MODELS", ("spectral",)))
+        + "). Each layer's values are addressed as `layer.<name>.<key>`.",
         "",
         "| key | default | values | kind | description |",
         "|---|---|---|---|---|",
