@@ -21,8 +21,9 @@ pages, api_nav = reference.api_pages()
 scene_md, undescribed = reference.scene_page()
 pages["reference/scene.md"] = scene_md
 pages["reference/cli.md"] = reference.cli_page()
-for png in sorted((reference.ROOT / "benchmarks").glob("*.png")):  # the benchmarks' plots
-    with mkdocs_gen_files.open(f"benchmarks/{png.name}", "wb") as f:
+bench = reference.ROOT / "benchmarks"
+for png in sorted(bench.rglob("*.png")):  # the benchmarks' plots, as they are now
+    with mkdocs_gen_files.open(f"benchmarks/{png.relative_to(bench).as_posix()}", "wb") as f:
         f.write(png.read_bytes())
 for path, text in pages.items():
     with mkdocs_gen_files.open(path, "w") as f:
