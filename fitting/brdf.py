@@ -181,6 +181,22 @@ def _solve_all(theta0, wi, wo, f, w_cos, scale, max_steps=200):
     return jax.vmap(per_start, in_axes=(0, 0, 0))(theta0, f, scale)
 
 
+def solve_channel(unit) -> tuple[np.ndarray, ...]:
+    """One channel's starts, a unit of `fit`'s work: `(theta0 (S, P), wi, wo, f (m,),
+    w_cos, scale)` → `(theta (S, P), loss (S,), converged (S,), steps (S,))`, in float64.
+    Channels solve apart (each stops when its own starts converge), here or on a worker."""
+    theta0, wi, wo, f_c, w_cos, scale_c = unit
+    with jax.enable_x64(True):
+        f64 = functools.partial(jnp.asarray, dtype=jnp.float64)
+        out = _solve_all(f64(theta0)[None], f64(wi), f64(wo), f64(f_c)[None], f64(w_cos),
+                         f64(scale_c)[None])
+        return tuple(np.asarray(a)[0] for a in out)
+
+
+def _map_here(fn, units):
+    return (fn(u) for u in units)
+
+
 # Lobe shapes the structured starts are built from (Cxy, Cz, n range): a sharp lobe about
 # the mirror direction, a broad forward-scattering one, a broad retro-reflecting one.
 _TEMPLATES = ((-1.0, 0.9, (20.0, 300.0)), (-1.1, -1.1, (2.0, 10.0)), (0.6, 0.6, (1.0, 8.0)))
@@ -209,7 +225,7 @@ def _starts(rng, starts, lobes, f_c):
 
 
 def fit(samples: BRDFSamples, lobes: int = 3, starts: int = 8, seed: int = 0,
-        initial: lafortune.Lafortune | None = None) -> BRDFFit:
+        initial: lafortune.Lafortune | None = None, map_units=None) -> BRDFFit:
     """Fit ρd and `lobes` Lafortune lobes per channel.
 
     **Arguments:**
@@ -218,6 +234,9 @@ def fit(samples: BRDFSamples, lobes: int = 3, starts: int = 8, seed: int = 0,
     - `lobes`: lobes per channel (default 3).
     - `starts`: random starts per channel (deterministic for a given `seed`).
     - `initial`: an optional guess, tried as one more start (e.g. `lafortune.skin()`).
+    - `map_units`: how the three channels' solves run, `map_units(solve_channel, units)` →
+      their results in order (`jaxskin.cluster.Pool.map` runs them on a cluster); default
+      here, one after the other.
 
     **Returns:** a `BRDFFit`.
     """
@@ -235,12 +254,11 @@ def fit(samples: BRDFSamples, lobes: int = 3, starts: int = 8, seed: int = 0,
             for c in range(3)])
         theta0 = np.concatenate([theta0, guess[:, None, :]], axis=1)
     w_cos = np.sqrt(samples.weight) * np.clip(samples.wi[:, 2], 0.0, 1.0)
-    with jax.enable_x64(True):
-        f64 = functools.partial(jnp.asarray, dtype=jnp.float64)
-        scale = np.sqrt(np.mean((w_cos[:, None] * samples.f) ** 2, axis=0)) + 1e-300
-        theta, loss, ok, steps = (np.asarray(a) for a in _solve_all(
-            f64(theta0), f64(samples.wi), f64(samples.wo), f64(samples.f.T), f64(w_cos),
-            f64(scale)))
+    scale = np.sqrt(np.mean((w_cos[:, None] * samples.f) ** 2, axis=0)) + 1e-300
+    units = [(theta0[c], samples.wi, samples.wo, samples.f[:, c], w_cos, scale[c])
+             for c in range(3)]
+    solved = list((map_units or _map_here)(solve_channel, units))
+    theta, loss, ok, steps = (np.stack(a) for a in zip(*solved, strict=True))
     loss = np.where(np.isfinite(loss) & np.all(np.isfinite(theta), axis=-1), loss, np.inf)
     if not np.all(np.isfinite(loss).any(axis=1)):
         raise FitError("every start failed for some channel; try more --starts",
@@ -251,6 +269,7 @@ def fit(samples: BRDFSamples, lobes: int = 3, starts: int = 8, seed: int = 0,
         diffuse=np.exp(chosen[:, 0]), Cxy=chosen[:, 1:1 + lobes].T,
         Cz=chosen[:, 1 + lobes:1 + 2 * lobes].T, n=np.exp(chosen[:, 1 + 2 * lobes:]).T)
     with jax.enable_x64(True):
+        f64 = functools.partial(jnp.asarray, dtype=jnp.float64)
         model = np.asarray(lafortune.brdf(lafortune.Lafortune(*(f64(a) for a in params)),
                                           f64(samples.wi), f64(samples.wo)))
     w = samples.weight[:, None]

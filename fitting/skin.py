@@ -146,8 +146,18 @@ def _starts(rng, m: int, starts: int) -> np.ndarray:
     return z
 
 
+def solve_chunk(unit) -> list[np.ndarray]:
+    """One chunk of `fit`'s work, `(z0 (CHUNK, S, 6), R (CHUNK, n), wavelengths (n,), free)`
+    → `[z, loss, converged, steps]` as NumPy arrays, in float64; here or on a worker."""
+    z0, R, wl, free = unit
+    with jax.enable_x64(True):
+        c = bp.Chromophores(*(jnp.asarray(a, jnp.float64)
+                              for a in bp.chromophores(wl, haemoglobin_table())))
+        return [np.asarray(a) for a in _solve(jnp.asarray(z0), jnp.asarray(R), c, free)]
+
+
 def fit(names, wavelengths, R, starts: int = 4, seed: int = 0, fixed=None, progress=None,
-        path=None) -> SkinFit:
+        path=None, map_units=None) -> SkinFit:
     """Fit the biophysical model to each spectrum.
 
     **Arguments:**
@@ -158,6 +168,9 @@ def fit(names, wavelengths, R, starts: int = 4, seed: int = 0, fixed=None, progr
     - `fixed`: `{name: value}` of parameters held at a value instead of fitted.
     - `progress`: called with the number of spectra done after each chunk (a progress bar).
     - `path`: the input file, for messages.
+    - `map_units`: how the chunks' solves run, `map_units(solve_chunk, units)` → their
+      results in order (`jaxskin.cluster.Pool.mapper` runs them on a cluster; `progress`
+      is then unused); default here, one after the other.
 
     **Returns:** a `SkinFit`. **Raises:** `InputError` if the spectra do not cover
     400–700 nm; `FitError` if every start of some spectrum failed.
@@ -185,15 +198,17 @@ def fit(names, wavelengths, R, starts: int = 4, seed: int = 0, fixed=None, progr
     pad, chunk = (-m) % CHUNK, CHUNK  # one shape: one compiled program for any m
     z0p = np.concatenate([z0, np.repeat(z0[-1:], pad, 0)])
     Rp = np.concatenate([Rm, np.repeat(Rm[-1:], pad, 0)])
-    out = []
-    with jax.enable_x64(True):
-        c = bp.Chromophores(*(jnp.asarray(a, jnp.float64) for a in bp.chromophores(wl, table)))
-        for i in range(0, m + pad, chunk):
-            got = _solve(jnp.asarray(z0p[i:i + chunk]), jnp.asarray(Rp[i:i + chunk]), c,
-                         free)
-            out.append([np.asarray(a) for a in got])
+    units = [(z0p[i:i + chunk], Rp[i:i + chunk], wl, free) for i in range(0, m + pad, chunk)]
+
+    def here(fn, units):
+        for i, unit in zip(range(0, m + pad, chunk), units, strict=True):
+            yield fn(unit)
             if progress is not None:
                 progress(min(chunk, m - i))
+
+    out = list((map_units or here)(solve_chunk, units))
+    with jax.enable_x64(True):
+        c = bp.Chromophores(*(jnp.asarray(a, jnp.float64) for a in bp.chromophores(wl, table)))
         z, loss, ok, steps = (np.concatenate(parts)[:m] for parts in zip(*out, strict=True))
         loss = np.where(np.isfinite(loss) & np.all(np.isfinite(z), axis=-1), loss, np.inf)
         failed = ~np.isfinite(loss).any(axis=1)
@@ -356,9 +371,17 @@ def command(args, run) -> int:
     run.outputs.append(outputs)
     run.stage = f"fitting {len(names)} spectra"
     t0 = time.perf_counter()
-    with tqdm(total=len(names), desc="fit-skin", unit="spectrum", disable=None) as bar:
-        result = fit(names, wavelengths, R, starts=args.starts, seed=args.seed, fixed=fixed,
-                     progress=bar.update, path=args.file)
+    if args.cluster:
+        from jaxskin import cluster
+
+        with cluster.pool(args.cluster) as pool:
+            result = fit(names, wavelengths, R, starts=args.starts, seed=args.seed,
+                         fixed=fixed, path=args.file,
+                         map_units=pool.mapper(desc="fit-skin", unit="chunk"))
+    else:
+        with tqdm(total=len(names), desc="fit-skin", unit="spectrum", disable=None) as bar:
+            result = fit(names, wavelengths, R, starts=args.starts, seed=args.seed,
+                         fixed=fixed, progress=bar.update, path=args.file)
     seconds = time.perf_counter() - t0
     write_csv(result, csv_path)
     outputs.done(csv_path)

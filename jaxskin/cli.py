@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import hashlib
 import math
 import os
@@ -31,7 +32,7 @@ import time
 import warnings
 from pathlib import Path
 
-from . import __version__
+from . import __version__, cluster
 from .io import FitError, InputError
 from .outputs import Outputs, check_name, slug
 
@@ -189,6 +190,7 @@ def _parser() -> argparse.ArgumentParser:
                    "linearly; without it a material that does not cover the grid is refused "
                    "at render time (calibrate warns)")
     c.add_argument("--no-report", action="store_true", help="write the JSON only, no PNG")
+    cluster.add_option(c, "file")
 
     r = sub.add_parser(
         "render",
@@ -206,8 +208,8 @@ def _parser() -> argparse.ArgumentParser:
         "leading dot or control character) or it is refused. Everything is checked before "
         "anything is written: every scene, override, sweep, mesh, material, BRDF file, layer "
         "image and polygon, the output folder, that no output is an input, and that the "
-        "render fits in memory. All scenes render in one process; each static configuration "
-        "compiles once.",
+        "render fits in memory. All scenes render in one process (or on a Dask cluster, "
+        "--cluster); each static configuration compiles once (per worker).",
     )
     r.add_argument("scenes", nargs="+", metavar="SCENE", help="built-in name or TOML file")
     r.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
@@ -226,11 +228,13 @@ def _parser() -> argparse.ArgumentParser:
                    "wrinkle normal map as textures (opens in Blender or any glTF viewer)")
     r.add_argument("--sweep", action="append", default=[], metavar="KEY=START:STOP:COUNT",
                    help="render COUNT images with a parameter from START to STOP, vmapped in "
-                   "one compiled program, e.g. --sweep material.melanin=0:1:5; writes "
+                   "batches of 8 values by one compiled program, e.g. --sweep "
+                   "material.melanin=0:1:5; writes "
                    "DIR/<scene>_sweep-<i>_<key>-<value>.png")
     r.add_argument("-D", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene value, e.g. -D wrinkles.k_scale=1.3 (repeatable; "
                    "applies to every scene)")
+    cluster.add_option(r, f"batch of {cluster.SWEEP_BATCH} sweep values, or scene")
 
     b = sub.add_parser(
         "fit-brdf",
@@ -253,6 +257,7 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--seed", type=_number(int, 0, 2147483647), default=0,
                    help="seed of the random starts (0)")
     b.add_argument("--no-report", action="store_true", help="write the JSON only, no PNG")
+    cluster.add_option(b, "RGB channel")
 
     k = sub.add_parser(
         "fit-skin",
@@ -278,6 +283,7 @@ def _parser() -> argparse.ArgumentParser:
     k.add_argument("--percent", action="store_true",
                    help="reflectance is in percent (0-100) instead of 0-1")
     k.add_argument("--no-report", action="store_true", help="write fit.csv only, no PNG")
+    cluster.add_option(k, "chunk of 10 spectra")
     return p
 
 
@@ -331,8 +337,6 @@ def _calibrate(args, run: _Run) -> int:
         paths.append((json_path, png_path))
     run.outputs.append(outputs)
 
-    from tqdm import tqdm
-
     from jaxskin.fitting.report import write_report
     from jaxskin.formats import write_json
     from jaxskin.spectral import Grid
@@ -348,17 +352,22 @@ def _calibrate(args, run: _Run) -> int:
                   "render time; pass --extrapolate hold|linear to allow it", file=sys.stderr)
 
     rows = []
-    for m, (json_path, png_path) in tqdm(list(zip(measurements, paths, strict=True)),
-                                         desc="calibrate", unit="file", disable=None):
-        run.stage = f"fitting {m.name}"
-        t0 = time.perf_counter()
-        result = fit_km.fit(m, smooth=args.smooth, noise=noise)
-        write_json(result.to_json(m, extrapolate=args.extrapolate), json_path)
-        outputs.done(json_path)
-        if png_path is not None:
-            write_report(m, result, png_path)
-            outputs.done(png_path)
-        rows.append((m.name, result, time.perf_counter() - t0))
+    fit = functools.partial(fit_km.fit, smooth=args.smooth, noise=noise)
+    with cluster.pool(args.cluster) as pool:
+        run.stage = f"fitting {measurements[0].name}"
+        results = pool.map(fit, measurements, desc="calibrate", unit="file")
+        for k, (m, (json_path, png_path), (result, dt)) in enumerate(
+                zip(measurements, paths, results, strict=True)):
+            t0 = time.perf_counter()
+            run.stage = f"writing {m.name}"
+            write_json(result.to_json(m, extrapolate=args.extrapolate), json_path)
+            outputs.done(json_path)
+            if png_path is not None:
+                write_report(m, result, png_path)
+                outputs.done(png_path)
+            rows.append((m.name, result, dt + time.perf_counter() - t0))
+            if k + 1 < len(measurements):
+                run.stage = f"fitting {measurements[k + 1].name}"
     print(f"{'material':<24} {'bands':>5} {'identifiable':>12} {'rmse':>9} {'steps':>5} "
           f"{'time s':>7}")
     for name, r, dt in rows:
@@ -511,11 +520,9 @@ def _check_image(path, scene, key) -> None:
 
 def _render(args, run: _Run) -> int:
     import jax
-    import jax.numpy as jnp
     import numpy as np
-    from tqdm import tqdm
 
-    from . import maps, render, texture
+    from . import maps
     from .scene import load_scene
 
     if args.format == "exr" and not maps.exr_available():
@@ -534,7 +541,7 @@ def _render(args, run: _Run) -> int:
     plans = []
     for sc in scenes:
         sweep = [_parse_sweep(text, sc) for text in args.sweep]
-        count = len(sweep[0][1]) if sweep else 1
+        count = min(len(sweep[0][1]), cluster.SWEEP_BATCH) if sweep else 1  # per batch
         outputs.inputs += [Path(p) for p in _check_scene(sc, count)]
         plans.append((sc, sweep, _base_name(sc, args.overrides)))
     files = []
@@ -556,50 +563,74 @@ def _render(args, run: _Run) -> int:
                 planned[kind] = outputs.plan(f"{base}_{kind}.png", sc.source)
         files.append(planned)
     run.outputs.append(outputs)
-    rows = []
-    for (sc, sweep, _), planned in tqdm(list(zip(plans, files, strict=True)), desc="render",
-                                        unit="scene", disable=None):
-        run.stage = f"rendering {sc.name}"
-        t0 = time.perf_counter()
-        n0 = len(outputs.written)
-        config, params = sc.config, sc.params
+    # The units of work: a scene's sweep in batches of cluster.SWEEP_BATCH values (one
+    # compiled program per configuration), or the scene's one image; run here or on the
+    # --cluster, the results come back in order and are written here.
+    units, targets = [], []  # targets: (scene index, the unit's output paths)
+    for i, ((sc, sweep, _), planned) in enumerate(zip(plans, files, strict=True)):
+        params = jax.tree.map(np.asarray, sc.params)
         if sweep:
             (key, values), = sweep
-            batch = jax.jit(jax.vmap(lambda v, a, key=key, params=params, config=config:
-                                     render.render_prepared(config, {**params, key: v}, a,
-                                                            output),
-                                     in_axes=(0, None)))
-            images = batch(jnp.asarray(values, jnp.float32), render.prepare(config).arrays)
-            for image, path in zip(np.asarray(images), planned["sweep"], strict=True):
-                maps.write_render(image, path, args.format)
-                outputs.done(path)
+            batches = cluster.sweep_batches(values)
+            for k, batch in enumerate(batches):
+                units.append(("images", sc.config, params, key, batch, output))
+                targets.append((i, planned["sweep"][k * len(batch):(k + 1) * len(batch)]))
         else:
-            image = np.asarray(render.render(config, params, output))
-            maps.write_render(image, planned["image"], args.format)
-            outputs.done(planned["image"])
+            units.append(("images", sc.config, params, None, None, output))
+            targets.append((i, [planned["image"]]))
         if args.maps or args.glb:
-            s = texture.setup(config.texture)
-            result = texture.texture_maps(config, params)
-        if args.glb:
-            from .export import write_glb
-
-            albedo = render.albedo(config, params)
-            write_glb(s, np.asarray(albedo), result["normals"], planned["glb"])
-            outputs.done(planned["glb"])
-        if args.maps:
-            maps.write_height(result["height"], planned["height"])
-            outputs.done(planned["height"])
-            maps.write_normals(result["normals"], s.mask, planned["normal"])
-            outputs.done(planned["normal"])
-            maps.write_field_plot(s, planned["field"])
-            outputs.done(planned["field"])
-        size = f"{config.image}x{config.image_height or config.image}"
-        rows.append((sc.name, size, len(outputs.written) - n0, time.perf_counter() - t0))
+            units.append(("maps", sc.config, params, args.glb))
+            targets.append((i, None))
+    seconds, n0 = [0.0] * len(plans), [0] * len(plans)
+    rows = []
+    with cluster.pool(args.cluster) as pool:
+        run.stage = f"rendering {plans[0][0].name}"
+        results = pool.map(cluster.render_unit, units, desc="render", unit="task")
+        for k, ((i, paths), (result, dt)) in enumerate(zip(targets, results, strict=True)):
+            sc, sweep, _ = plans[i]
+            t0 = time.perf_counter()
+            if k == 0 or targets[k - 1][0] != i:
+                n0[i] = len(outputs.written)
+            if paths is None:
+                _write_maps(sc, files[i], outputs, result)
+            else:
+                for image, path in zip(result if sweep else [result], paths, strict=False):
+                    maps.write_render(image, path, args.format)
+                    outputs.done(path)
+            seconds[i] += dt + time.perf_counter() - t0
+            if k + 1 == len(targets) or targets[k + 1][0] != i:  # the scene's last unit
+                config = sc.config
+                size = f"{config.image}x{config.image_height or config.image}"
+                rows.append((sc.name, size, len(outputs.written) - n0[i], seconds[i]))
+            if k + 1 < len(targets):
+                following = plans[targets[k + 1][0]][0].name
+                run.stage = (f"making the maps of {following}" if targets[k + 1][1] is None
+                             else f"rendering {following}")
     print(f"{'scene':<16} {'image':>9} {'files':>6} {'time s':>7}")
     for name, size, n, dt in rows:
         print(f"{name:<16} {size:>9} {n:>6} {dt:>7.2f}")
     _print_written(outputs)
     return 0
+
+
+def _write_maps(sc, planned: dict, outputs: Outputs, result: dict) -> None:
+    """Write a scene's texture-space maps (--maps) and GLB (--glb) from `result`
+    (`cluster.scene_maps`: height, normals and the GLB's albedo, made here or on a worker)."""
+    from . import maps, texture
+
+    s = texture.setup(sc.config.texture)  # the mesh and texture space, for the mask and GLB
+    if "glb" in planned:
+        from .export import write_glb
+
+        write_glb(s, result["albedo"], result["normals"], planned["glb"])
+        outputs.done(planned["glb"])
+    if "height" in planned:
+        maps.write_height(result["height"], planned["height"])
+        outputs.done(planned["height"])
+        maps.write_normals(result["normals"], s.mask, planned["normal"])
+        outputs.done(planned["normal"])
+        maps.write_field_plot(s, planned["field"])
+        outputs.done(planned["field"])
 
 
 def _fit_brdf(args, run: _Run) -> int:
@@ -626,7 +657,9 @@ def _fit_brdf(args, run: _Run) -> int:
     print(f"fitting {args.lobes} lobes x {args.starts} starts x 3 channels to "
           f"{len(samples.f)} samples ...", flush=True)
     t0 = time.perf_counter()
-    result = brdf.fit(samples, lobes=args.lobes, starts=args.starts, seed=args.seed)
+    with cluster.pool(args.cluster) as pool:
+        result = brdf.fit(samples, lobes=args.lobes, starts=args.starts, seed=args.seed,
+                          map_units=pool.mapper(desc="fit-brdf", unit="channel"))
     seconds = time.perf_counter() - t0
     stats = result.stats()
     formats.write_lafortune(result.params, out, fit={"source": Path(args.file).name, **stats})

@@ -20,8 +20,9 @@ Lafortune; growing with the size, so the model takes 280); the cosmetics model a
 fixed amount per texel, 1640 bytes with layers and 200 without (its spectral work runs in
 chunks: the peak did not grow from 3 to 4 layers nor from 41 to 81 bands),
 220 bytes per image sample, over 0.45 GB of JAX itself; the model gives 0.99-1.42x each
-row (tests/test_cli.py checks it against this table). A sweep batches the whole render
-(vmap), so its variable part counts once per value. The model errs high rather than low;
+row (tests/test_cli.py checks it against this table). A sweep renders in vmapped
+batches of `cluster.SWEEP_BATCH` (8) values, so its variable part counts once per value of
+one batch. The model errs high rather than low;
 it is a guard against runs that cannot fit, not a forecast.
 
 `fit_brdf_bytes` likewise, from `jaxskin fit-brdf` on the 4,000 shipped samples: 0.36 GB
