@@ -284,6 +284,27 @@ def _parser() -> argparse.ArgumentParser:
                    help="reflectance is in percent (0-100) instead of 0-1")
     k.add_argument("--no-report", action="store_true", help="write fit.csv only, no PNG")
     cluster.add_option(k, "chunk of 10 spectra")
+
+    e = sub.add_parser(
+        "edit",
+        help="edit a scene interactively in the browser (sliders, field edits, painting)",
+        description="Start a local web server with an editor for SCENE (default: hand): the "
+        "rendered view, every scene value as a slider, direction-field edits picked on the "
+        "mesh, cosmetic layers painted on the face; Save writes DIR/<name>.toml (and painted "
+        "maps as 16-bit PNGs) that jaxskin render reproduces. Needs pip install "
+        "'jaxskin[edit]'. Files the page opens must lie in the scene's folder or DIR.",
+    )
+    e.add_argument("scene", nargs="?", metavar="SCENE", help="built-in name or TOML file")
+    e.add_argument("-o", "--output", default=".", metavar="DIR",
+                   help="folder Save writes to (default: the current folder)")
+    e.add_argument("--port", type=_number(int, 0, 65535), default=0,
+                   help="port to serve on (default 0: a free one)")
+    e.add_argument("--host", default="127.0.0.1",
+                   help="address to serve on (default 127.0.0.1: this machine only; others "
+                   "are warned about)")
+    e.add_argument("--no-browser", action="store_true", help="do not open a browser")
+    e.add_argument("-D", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="start with a scene value changed, as jaxskin render -D (repeatable)")
     return p
 
 
@@ -681,6 +702,12 @@ def _fit_skin(args, run: _Run) -> int:
     return skin.command(args, run)
 
 
+def _edit(args, run: _Run) -> int:
+    from .editor import command
+
+    return command(args, run)
+
+
 def main(argv=None) -> int:
     """The `jaxskin` command: parse `argv` (default `sys.argv[1:]`), run the command, and
     return its exit code (0 done, 2 bad input, 1 failure, 130 SIGINT, 143 SIGTERM)."""
@@ -694,7 +721,7 @@ def main(argv=None) -> int:
     _enable_compilation_cache()
     run = _Run()
     commands = {"calibrate": _calibrate, "fit-brdf": _fit_brdf, "render": _render,
-                "fit-skin": _fit_skin}
+                "fit-skin": _fit_skin, "edit": _edit}
     with _signals():
         try:
             return commands[args.command](args, run)

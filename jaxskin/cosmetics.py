@@ -156,12 +156,17 @@ def image_map(path, height, width, scale_mm):
     import imageio.v3 as iio
 
     try:
-        img = np.asarray(iio.imread(path), np.float64)
+        raw = np.asarray(iio.imread(path))
+        img = raw.astype(np.float64)
     except Exception as e:  # noqa: BLE001  (imageio raises many kinds; all mean unreadable)
         raise InputError(f"cannot read as an image ({e.__class__.__name__})", path) from None
+    # The full scale from the file's sample type (a 16-bit map whose values all lie below
+    # 256, a faint one, is still 16-bit); other types by their values.
+    top = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(raw.dtype)
     if img.ndim == 3:
         img = img[..., :3].mean(axis=-1)
-    top = 65535.0 if img.max() > 255 else 255.0
+    if top is None:
+        top = 65535.0 if img.max() > 255 else 255.0
     rows = (np.arange(height) + 0.5) * img.shape[0] / height
     cols = (np.arange(width) + 0.5) * img.shape[1] / width
     return scale_mm * img[rows.astype(int)][:, cols.astype(int)] / top

@@ -12,8 +12,9 @@ import numpy as np
 
 from .io import InputError, atomic_write
 
-__all__ = ["FORMATS", "exr_available", "png16_bytes", "png_bytes", "read_exr", "write_exr",
-           "write_field_plot", "write_height", "write_image", "write_normals",
+__all__ = ["FORMATS", "exr_available", "image_bytes", "png16_bytes", "png_bytes", "quantize",
+           "read_exr",
+           "write_exr", "write_field_plot", "write_height", "write_image", "write_normals",
            "write_render"]
 
 FORMATS = ("png", "png16", "exr")
@@ -34,13 +35,23 @@ def _write(path, data: bytes) -> None:
 def write_image(image, path, bits: int = 8) -> None:
     """A PNG of display values in [0, 1] (clipped), `(H, W, 3)` RGB or `(H, W, 4)` RGBA
     (straight alpha, as PNG defines it), 8 or 16 bits per channel."""
-    image = np.clip(np.asarray(image, np.float64), 0.0, 1.0)
+    _write(path, image_bytes(image, bits))
+
+
+def image_bytes(image, bits: int = 8) -> bytes:
+    """The PNG file `write_image` writes, as bytes (the editor sends these to the page)."""
     if bits not in (8, 16):
         raise ValueError(f"bits must be 8 or 16, got {bits}")
     if bits == 8:
-        _write(path, png_bytes(np.round(image * 255).astype(np.uint8)))
-    else:
-        _write(path, png16_bytes(np.round(image * 65535).astype(np.uint16)))
+        return png_bytes(quantize(image, 8))
+    return png16_bytes(quantize(image, 16))
+
+
+def quantize(image, bits: int = 8) -> np.ndarray:
+    """Display values in [0, 1] (clipped) as the 8- or 16-bit samples a PNG holds."""
+    image = np.clip(np.asarray(image, np.float64), 0.0, 1.0)
+    top, kind = (255, np.uint8) if bits == 8 else (65535, np.uint16)
+    return np.round(image * top).astype(kind)
 
 
 def png16_bytes(image) -> bytes:

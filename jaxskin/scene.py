@@ -13,6 +13,8 @@ k_scale = 1.1                      # 0.5–2 (lengths, in texels; static)
 k_noise = 0.0                      # 0–1: noise added to the height field
 k_bump = 0.5                       # 0–1: depth of the bump mapping
 seed = 0                           # the furrows' random numbers
+method = "auto"                    # auto | parallel | sequential: the furrow program (static;
+                                   #   auto: sequential on a CPU, parallel on a GPU/TPU)
 [material]
 model = "blinn"                    # blinn | lafortune | spectral (the cosmetics model) |
                                    #   biophysical (the cosmetics model over a biophysical skin)
@@ -102,6 +104,7 @@ arrays: everything differentiable) are the split the renderer uses.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import difflib
 import functools
@@ -119,7 +122,7 @@ from .projection import KINDS
 from .spectral import ILLUMINANTS, STEPS, Grid
 
 __all__ = ["BUILTIN_SCENES", "Scene", "SceneConfig", "TextureConfig", "builtin_scenes",
-           "load_scene", "scene_at_width"]
+           "load_scene", "parse_scene", "scene_at_width"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -148,6 +151,7 @@ SCHEMA: dict[str, _Key] = {
     "wrinkles.k_noise": _Key(float, 0.0, 0.0, 1.0, param=True),
     "wrinkles.k_bump": _Key(float, 0.5, 0.0, 1.0, param=True),
     "wrinkles.seed": _Key(int, 0, 0, 2**31 - 1),
+    "wrinkles.method": _Key(str, "auto", choices=("auto", "parallel", "sequential")),
     "material.model": _Key(str, "blinn", choices=("blinn", "lafortune", "spectral",
                                                   "biophysical")),
     "material.melanin": _Key(float, 0.2, 0.0, 1.0, param=True),
@@ -225,6 +229,9 @@ class TextureConfig:
     k_scale: float
     seed: int
     edits: tuple[EditSpec, ...]
+    # The furrow program: "sequential" (wrinkles.height_field) or "parallel"
+    # (lockstep.height_field); the scene's "auto" is resolved by `furrow_method`.
+    method: str = "sequential"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -284,6 +291,18 @@ class SceneConfig:
         return self.texture.wrinkles and self.mode in ("wrinkles", "height")
 
 
+def furrow_method(method: str) -> str:
+    """`wrinkles.method` resolved: "auto" is the parallel program on a GPU or TPU (the
+    sequential one took 0.64 s at 512² on an H100, slower than on a CPU) and the sequential
+    one on a CPU — there the parallel one measured 2–5x faster too (benchmarks/RESULTS.md),
+    but the CPU default keeps the look the golden images pin; ask for "parallel"."""
+    if method != "auto":
+        return method
+    import jax
+
+    return "sequential" if jax.default_backend() == "cpu" else "parallel"
+
+
 @dataclasses.dataclass(frozen=True)
 class Scene:
     """A loaded, checked scene: `values` (every key's value), the field `edits` and
@@ -301,7 +320,7 @@ class Scene:
         v = self.values
         tex = TextureConfig(v["mesh.file"], v["mesh.projection"], v["texture.size"],
                             v["wrinkles.enabled"], v["wrinkles.k_scale"], v["wrinkles.seed"],
-                            self.edits)
+                            self.edits, furrow_method(v["wrinkles.method"]))
         spectral = None
         if v["material.model"] in SPECTRAL_MODELS:
             spectral = SpectralConfig(v["skin.subject"], v["spectral.step"],
@@ -380,6 +399,16 @@ def load_scene(name_or_path, overrides=()) -> Scene:
         raise InputError(f"cannot read ({e.__class__.__name__})", path) from None
     except tomllib.TOMLDecodeError as e:
         raise InputError(f"not valid TOML: {e}", path) from None
+    return parse_scene(doc, path, overrides)
+
+
+def parse_scene(doc: dict, path, overrides=()) -> Scene:
+    """A scene from its parsed TOML document `doc` (as `tomllib` gives it; not changed), read
+    as if from the file `path` (relative paths are taken from its folder), with `-D`
+    `overrides`: what `load_scene` does after reading the file (the editor builds scenes
+    from documents it holds)."""
+    path = Path(path)
+    doc = copy.deepcopy(doc)
     edits_raw = doc.get("fields", {}).pop("edit", []) if isinstance(doc.get("fields"), dict) \
         else []
     layers_raw = doc.pop("layer", [])

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import bump, wrinkles
+from . import bump, lockstep, wrinkles
 from .fields import Edit, interpolate_fields
 from .io import InputError
 from .mesh import Mesh, load_mesh
@@ -23,7 +23,7 @@ from .projection import TextureMap, project
 from .raster import interpolate
 from .scene import SceneConfig, TextureConfig
 
-__all__ = ["TextureSetup", "furrows", "setup", "texture_maps"]
+__all__ = ["TextureSetup", "furrows", "mapped", "setup", "texture_maps"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -56,11 +56,7 @@ class TextureSetup:
 def setup(config: TextureConfig) -> TextureSetup:
     """The `TextureSetup` of `config`, computed once per configuration (cached): the mesh
     loaded, projected to texture space and rasterized, its field edits interpolated."""
-    mesh = load_mesh(config.mesh)
-    try:
-        tmap = project(config.projection, mesh, config.size)
-    except ValueError as e:
-        raise InputError(str(e), key="mesh.projection") from None
+    mesh, tmap = mapped(config.mesh, config.projection, config.size)
     edits = []
     for i, e in enumerate(config.edits):
         if e.vertex is not None:
@@ -75,9 +71,26 @@ def setup(config: TextureConfig) -> TextureSetup:
     raster = tmap.raster
     field1 = interpolate(tmap.vectors(d1).astype(np.float32), mesh.faces, raster)
     field2 = interpolate(tmap.vectors(d2).astype(np.float32), mesh.faces, raster)
-    n, gradients = surface_frame(tmap)
+    n, gradients = _frame(config.mesh, config.projection, config.size)
     return TextureSetup(config, mesh, tmap, tuple(edits), d1, d2, field1, field2, n,
                         jnp.asarray(raster.mask), gradients)
+
+
+@functools.lru_cache(maxsize=4)
+def mapped(mesh_name: str, projection: str, size: int) -> tuple[Mesh, TextureMap]:
+    """The mesh and its texture map (rasterized on first use), shared by every
+    configuration that differs only in its field edits (the editor changes those)."""
+    mesh = load_mesh(mesh_name)
+    try:
+        return mesh, project(projection, mesh, size)
+    except ValueError as e:
+        raise InputError(str(e), key="mesh.projection") from None
+
+
+@functools.lru_cache(maxsize=4)
+def _frame(mesh_name: str, projection: str, size: int):
+    """`surface_frame` of `mapped(...)`: like the map, the same for every field edit."""
+    return surface_frame(mapped(mesh_name, projection, size)[1])
 
 
 def surface_frame(tmap: TextureMap):
@@ -98,11 +111,16 @@ RECORDS = 4096
 
 @functools.lru_cache(maxsize=8)
 def furrows(config: TextureConfig):
-    """The furrow height field before noise, `(H, W)`, and the furrow records."""
+    """The furrow height field before noise, `(H, W)`, and the furrow records, from the
+    configuration's furrow program (`config.method`: sequential or parallel)."""
     s = setup(config)
     # The furrow program is an int32/float32 program, not differentiable: the same under
     # a caller's float64 (jax.enable_x64), as in a gradient check of a wrinkled scene.
     with jax.enable_x64(False):
+        if config.method == "parallel":
+            return lockstep.height_field(
+                s.mask, s.field1, s.field2, config.k_scale, jax.random.key(config.seed),
+                records=RECORDS, wrap=s.tmap.wrap_x)
         return wrinkles.height_field(
             s.mask, s.field1, s.field2, jnp.asarray(s.tmap.centroids(), jnp.float32),
             config.k_scale, jax.random.key(config.seed),

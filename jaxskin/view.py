@@ -47,7 +47,8 @@ class View:
     """Per image pixel (at the supersampled size): the texture coordinate it sees
     `tex (H, W, 2)` in texels, `mask (H, W)`; the model rotation `R`, the `eye` (None for
     orthographic), whether texture x wraps (a cylinder), and the `raster` (triangle and
-    barycentrics, perspective-corrected) each sample sees."""
+    barycentrics, perspective-corrected) each sample sees, and where each vertex lands
+    (`xy`, pixels of the supersampled image)."""
 
     tex: np.ndarray
     mask: np.ndarray
@@ -55,6 +56,7 @@ class View:
     eye: np.ndarray | None
     wrap_x: bool
     raster: Raster | None = None
+    xy: np.ndarray | None = None  # (V, 2) the mesh's vertices in (supersampled) pixels
 
 
 def make_view(tmap: TextureMap, size: int, projection: str = "orthographic",
@@ -99,7 +101,7 @@ def make_view(tmap: TextureMap, size: int, projection: str = "orthographic",
     corners = tmap.face_corners()  # (F, 3, 2) texture coordinates, unwrapped at the seam
     tex = np.einsum("hwk,hwkc->hwc", bary, corners[safe])
     return View(tex.astype(np.float32), r.mask, R, eye, tmap.wrap_x,
-                Raster(r.tri, bary.astype(np.float32)))
+                Raster(r.tri, bary.astype(np.float32)), xy)
 
 
 def sample(image, tex, mask, wrap_x: bool, background=0.0):

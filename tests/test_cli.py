@@ -147,7 +147,9 @@ def test_wheel_installs_and_renders_from_an_empty_folder(tmp_path):
     assert tops == {"jaxskin"}  # one top-level package; fitting inside it
     for data in ("jaxskin/data/scenes/hand.toml", "jaxskin/data/meshes/hand_lowres.obj",
                  "jaxskin/data/materials/blush_rose.json", "jaxskin/fitting/km.py",
-                 "jaxskin/data/spectra/nist_skin_reflectance_M38597.csv"):
+                 "jaxskin/data/spectra/nist_skin_reflectance_M38597.csv",
+                 "jaxskin/editor/static/index.html", "jaxskin/editor/static/editor.js",
+                 "jaxskin/editor/static/editor.css"):
         assert data in names, data
     subprocess.run([*pip, "install", "--no-deps", "--target", str(target), str(wheel)],
                    check=True, timeout=600)

@@ -1,0 +1,78 @@
+"""`jaxskin edit`: an interactive editor in the browser (issue 15).
+
+A local web application over the same renderer as `jaxskin render`: sliders for every
+scene value, direction-field edits picked on the mesh (Bando 2001 §3.1), cosmetic layers
+painted on the face (Huang et al. 2013 §3), the state in the page's URL, Save as a scene
+file that `jaxskin render` reproduces byte for byte. `state` holds the session (and
+renders), `document` changes its scene document, `brush` paints thickness maps, `toml`
+writes scenes, `server` is the HTTP API (aiohttp), `static/` the page (plain HTML, CSS and
+JavaScript: no build step, nothing fetched from the network).
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import socket
+import sys
+
+__all__ = ["command"]
+
+LOCAL = ("127.0.0.1", "localhost", "::1")
+
+
+def command(args, run) -> int:
+    """The body of `jaxskin edit` (see `jaxskin edit --help`)."""
+    from ..io import InputError
+
+    try:
+        import aiohttp  # noqa: F401
+    except ImportError:
+        raise InputError("jaxskin edit needs aiohttp: pip install 'jaxskin[edit]'") from None
+    from aiohttp import web
+
+    from .server import make_app
+    from .state import EditorError, Session
+
+    host = args.host
+    if host not in LOCAL:
+        try:
+            local = ipaddress.ip_address(host).is_loopback
+        except ValueError:
+            local = False
+        if not local:
+            print(f"jaxskin: warning: serving on {host}: anyone who can reach this address "
+                  "can read and write scenes in the editor's folders; the default 127.0.0.1 "
+                  "is reachable from this machine only", file=sys.stderr, flush=True)
+    run.stage = "loading the scene"
+    try:
+        session = Session(args.scene or "hand", args.output)
+        pairs = []
+        for item in args.overrides:
+            key, sep, value = (t.strip() for t in item.partition("="))
+            if not sep:
+                raise InputError(f"expected -D key=value, got {item!r}")
+            pairs.append([key, value])
+        refused = session.open(session.source, pairs)
+    except EditorError as e:
+        raise InputError(e.message, key=e.key) from None
+    if refused:
+        raise InputError(refused[0]["error"], "-D", key=refused[0]["key"])
+    port = args.port
+    if port == 0:
+        with socket.socket() as s:  # a free port, known before the browser is opened
+            s.bind((host, 0))
+            port = s.getsockname()[1]
+    url = f"http://{'[' + host + ']' if ':' in host else host}:{port}/"
+    run.stage = "serving"
+    print(f"jaxskin edit: {session.source} at {url} (Ctrl-C to stop); Save writes to "
+          f"{session.output}", flush=True)
+    if not args.no_browser:
+        import webbrowser
+
+        webbrowser.open(url)
+    try:
+        web.run_app(make_app(session, log=lambda line: print(line, file=sys.stderr)),
+                    host=host, port=port, print=None, handle_signals=False)
+    except OSError as e:
+        raise InputError(f"cannot serve on {host}:{port} ({e.strerror or e})") from None
+    return 0

@@ -1,0 +1,241 @@
+"""The editor's HTTP server (aiohttp): one page, a JSON API, rendered views as PNG.
+
+Every request that touches the scene runs on one worker thread, in arrival order, so JAX
+sees one caller and the state one writer; the event loop stays free to answer. Renders
+are latest-wins per client: a render request that a newer one from the same client
+(`client=` in its query) overtook before it started is answered 409 `superseded`, never
+rendered. Every error is a JSON object `{"error": ..., "key": ...}` with a 4xx status
+(5xx only for a bug), and the server keeps serving.
+
+| method | path | body / query | answer |
+|---|---|---|---|
+| GET | `/` | | the page |
+| GET | `/static/<file>` | | its script and style |
+| GET | `/api/state` | | the session (`Session.state`) |
+| GET | `/api/files` | | scenes and materials the page may open |
+| POST | `/api/open` | `{scene, changes?}` | state, and `refused` changes |
+| POST | `/api/set` | `{changes: {key: value or null}}` | state |
+| POST | `/api/undo`, `/api/redo` | | state |
+| POST | `/api/pick` | `{x, y}` (image pixels) | the nearest vertex |
+| GET | `/api/fields` | `step=` | arrows and edit markers |
+| POST | `/api/paint` | `{stroke, layer, points, radius, strength, erase}` | `{dabs}` |
+| GET | `/api/render` | `client=`, `preview=1` | `image/png` (a preview: `image/bmp`) |
+| POST | `/api/save` | `{name, overwrite?}` | the files written, state |
+| POST | `/api/upload` | `name=` and the file's bytes | `{path}` (kept in the output folder) |
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import functools
+import importlib.resources
+import json
+import threading
+import time
+from pathlib import Path
+
+from aiohttp import web
+
+from .state import EditorError, Session
+
+__all__ = ["MAX_BODY", "make_app"]
+
+MAX_BODY = 1 << 20  # bytes: the largest request body (a long paint stroke is ~100 kB)
+STATIC = ("index.html", "editor.js", "editor.css")
+LOG = web.AppKey("log", object)
+
+
+def _static_dir() -> Path:
+    return Path(str(importlib.resources.files("jaxskin.editor") / "static"))
+
+
+async def _no_content(request):
+    return web.Response(status=204)
+
+
+def _error(status: int, message: str, key=None) -> web.Response:
+    return web.json_response({"error": message, "key": key}, status=status)
+
+
+@web.middleware
+async def _errors(request, handler):
+    """Every failure as a JSON error; a bug is a 500 with one line, and the server goes on."""
+    try:
+        return await handler(request)
+    except EditorError as e:
+        return web.json_response(e.json(), status=e.status)
+    except web.HTTPRequestEntityTooLarge as e:
+        return _error(413, f"request body too large (at most {MAX_BODY} bytes): {e.text}")
+    except web.HTTPException as e:
+        if e.status >= 400:
+            return _error(e.status, e.reason)
+        raise
+    except Exception as e:  # noqa: BLE001  (a bug: say what, keep serving)
+        request.app[LOG](f"jaxskin edit: internal error: {e.__class__.__name__}: {e}")
+        return _error(500, f"internal error ({e.__class__.__name__}: {e})")
+
+
+class _Worker:
+    """One thread for everything that touches the session (and JAX)."""
+
+    def __init__(self):
+        self.pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="jaxskin-edit")
+
+    async def __call__(self, fn, *args, **kwargs):
+        loop = asyncio.get_running_loop()
+        return await loop.run_in_executor(self.pool, functools.partial(fn, *args, **kwargs))
+
+
+async def _body(request) -> dict:
+    if request.content_length is not None and request.content_length > MAX_BODY:
+        raise EditorError(f"request body too large (at most {MAX_BODY} bytes)", 413)
+    raw = await request.read()
+    try:
+        body = json.loads(raw or b"{}")
+    except (ValueError, UnicodeDecodeError, RecursionError) as e:
+        raise EditorError(f"expected a JSON body ({e.__class__.__name__}: {e})"[:300],
+                          400) from None
+    if not isinstance(body, dict):
+        raise EditorError("expected a JSON object", 400)
+    return body
+
+
+def make_app(session: Session, log=print) -> web.Application:
+    """The aiohttp application serving `session`."""
+    app = web.Application(middlewares=[_errors], client_max_size=MAX_BODY)
+    app[LOG] = log
+    work = _Worker()
+    latest: dict[str, int] = {}
+    counter = iter(range(1, 1 << 62))
+    lock = threading.Lock()
+    cache: dict = {}
+
+    async def page(request):
+        return web.FileResponse(_static_dir() / "index.html",
+                                headers={"Cache-Control": "no-store"})
+
+    async def static(request):
+        name = request.match_info["name"]
+        if name not in STATIC:
+            raise EditorError(f"no such file {name!r}", 404)
+        return web.FileResponse(_static_dir() / name, headers={"Cache-Control": "no-store"})
+
+    async def state(request):
+        return web.json_response(await work(session.state))
+
+    async def files(request):
+        return web.json_response(await work(session.files))
+
+    async def open_(request):
+        body = await _body(request)
+        scene, changes = body.get("scene"), body.get("changes", {})
+        if not isinstance(scene, str) or not isinstance(changes, (dict, list)):
+            raise EditorError("expected {scene: name or file, changes: {key: value} or "
+                              "[[key, TOML value], ...]}", 400)
+
+        def run():
+            refused = session.open(scene, changes)
+            return {**session.state(), "refused": refused}
+        return web.json_response(await work(run))
+
+    async def set_(request):
+        body = await _body(request)
+        changes = body.get("changes")
+
+        def run():
+            session.set(changes)
+            return session.state()
+        return web.json_response(await work(run))
+
+    def stepper(method):
+        async def handler(request):
+            def run():
+                getattr(session, method)()
+                return session.state()
+            return web.json_response(await work(run))
+        return handler
+
+    async def pick(request):
+        body = await _body(request)
+        return web.json_response(await work(session.pick, body.get("x"), body.get("y")))
+
+    async def fields(request):
+        try:
+            step = int(request.query.get("step", "24"))
+        except ValueError:
+            raise EditorError("step: expected an integer", 400) from None
+        if not 4 <= step <= 256:
+            raise EditorError("step: expected an integer in [4, 256]", 400)
+        return web.json_response(await work(session.fields, step))
+
+    async def paint(request):
+        body = await _body(request)
+        args = {k: body.get(k) for k in ("stroke", "layer", "points", "radius", "strength")}
+        if not isinstance(args["stroke"], str) or not isinstance(args["layer"], str):
+            raise EditorError("expected {stroke: id, layer: name, points: [[x, y], ...], "
+                              "radius, strength, erase}", 400)
+        t0 = time.perf_counter()
+        out = await work(session.paint_stroke, erase=bool(body.get("erase", False)), **args)
+        return web.json_response({**out, "version": session.version,
+                                  "seconds": time.perf_counter() - t0})
+
+    async def render(request):
+        client = request.query.get("client", "")[:100]
+        preview = request.query.get("preview", "0") == "1"
+        with lock:
+            n = next(counter)
+            latest[client] = n
+
+        def run():
+            if latest.get(client) != n:
+                return None
+            key = (session.version, preview)
+            if cache.get("key") != key:
+                t0 = time.perf_counter()
+                data, kind = session.image_file(preview)
+                cache.update(key=key, data=data, kind=kind, seconds=time.perf_counter() - t0)
+            return cache["data"], cache["kind"], cache["seconds"], session.version
+        out = await work(run)
+        if out is None:
+            return web.json_response({"error": "superseded by a newer render request",
+                                      "superseded": True}, status=409)
+        data, kind, seconds, version = out
+        return web.Response(body=data, content_type=kind, headers={
+            "Cache-Control": "no-store", "X-Render-Seconds": f"{seconds:.4f}",
+            "X-Version": str(version)})
+
+    async def save(request):
+        body = await _body(request)
+        name = body.get("name")
+        overwrite = body.get("overwrite", False)
+        if not isinstance(name, str) or not isinstance(overwrite, bool):
+            raise EditorError("expected {name: a file name, overwrite: true or false}", 400,
+                              "name")
+
+        def run():
+            written = session.save(name, overwrite)
+            return {"written": written, **session.state()}
+        return web.json_response(await work(run))
+
+    async def upload(request):
+        name = request.query.get("name", "")
+        data = await request.read()
+        path = await work(session.upload, name, data)
+        return web.json_response({"path": path})
+
+    app.add_routes([
+        web.get("/", page), web.get("/static/{name}", static),
+        web.get("/favicon.ico", _no_content),
+        web.get("/api/state", state), web.get("/api/files", files),
+        web.post("/api/open", open_), web.post("/api/set", set_),
+        web.post("/api/undo", stepper("undo")), web.post("/api/redo", stepper("redo")),
+        web.post("/api/pick", pick), web.get("/api/fields", fields),
+        web.post("/api/paint", paint), web.get("/api/render", render),
+        web.post("/api/save", save), web.post("/api/upload", upload),
+    ])
+
+    async def close(app):
+        work.pool.shutdown(wait=False, cancel_futures=True)
+    app.on_cleanup.append(close)
+    return app

@@ -1,0 +1,665 @@
+"""The editor's session: a scene document, the changes made to it, painted maps, renders.
+
+One `Session` per server. It holds the scene file's TOML document (`base`), the changes the
+page made as flat `-D`-style keys (`changes`: `material.melanin`, `fields.edit`,
+`layer.blush.material`, …) and the painted thickness maps (`paint`: 16-bit, texture space).
+Every change is validated by the scene parser itself (`scene.parse_scene`), so a bad value
+gets the schema's own message and leaves the state as it was.
+
+Rendering calls the renderer the CLI calls (`render.render_prepared` with the arrays of
+`render.prepare`), with three things that only change arrays, never the traced program:
+
+- a field edit changes the furrows: `texture.furrows` of the new configuration replaces
+  `h0` (the view and every other array are the configuration's without the edit);
+- a painted layer's thickness map replaces its row of `cover`, exactly as `prepare` would
+  read it back from the 16-bit PNG that Save writes;
+- the jit cache key (the static configuration) is the first configuration seen that
+  differs only in those (edits, layer materials and maps, the shadow's direction), so none
+  of them retraces; `render` of the saved scene compiles the same program and gives the
+  same bytes (tests/test_editor.py).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from .. import cosmetics, maps, render, texture
+from ..io import InputError, atomic_write, data_dir
+from ..mesh import BUILTIN as BUILTIN_MESHES
+from ..outputs import check_name
+from ..scene import (
+    BUILTIN_SCENES,
+    LAYER_SCHEMA,
+    SCHEMA,
+    LayerSpec,
+    Scene,
+    SceneConfig,
+    builtin_scenes,
+    check_value,
+    parse_scene,
+)
+from . import brush
+from .document import EditorError, pair, put, relocate
+from .toml import dumps
+
+__all__ = ["EditorError", "Session"]
+
+HISTORY = 50  # undo steps kept
+PATH_KEYS = ("mesh.file", "material.brdf")
+LAYER_SET = ("material", *LAYER_SCHEMA)  # what the page may set on a layer
+
+
+@dataclasses.dataclass
+class _Stroke:
+    """A brush stroke in progress: its layer, the map before it and the union of its dabs."""
+
+    id: str
+    layer: str
+    before: np.ndarray  # float64 (H, W) in [0, 1]
+    mask: np.ndarray  # float64 (H, W) in [0, 1]
+    last: tuple | None = None  # the stroke's last point so far (image pixels)
+
+
+class Session:
+    """The state of one editor: see the module's docstring.
+
+    **Arguments:**
+
+    - `scene`: a built-in scene name or a TOML file.
+    - `output`: the folder Save writes to (created when first needed).
+    """
+
+    def __init__(self, scene: str = "hand", output=".", roots=()):
+        self.output = Path(output).resolve()
+        first = Path(str(scene))
+        self.roots = [self.output]
+        if str(scene) not in BUILTIN_SCENES:
+            self.roots.append(first.resolve().parent)
+        self.roots += [Path(r).resolve() for r in roots]
+        self._keys: dict = {}  # signature → the configuration compiled for it
+        self._cover_cache: tuple | None = None
+        self._prepared: list[SceneConfig] = []  # configurations prepared, newest first
+        self.version = 0  # bumped on every change of what the view shows
+        self.timings: dict[str, float] = {}
+        self.open(str(scene), {})
+
+    # --- opening and the document --------------------------------------------------------
+
+    def open(self, scene: str, changes: dict | None = None) -> list[dict]:
+        """Load a scene (a built-in name or a file inside the session's folders) and apply
+        `changes` (from a link); returns the changes refused, each `{key, error}`."""
+        path = self._scene_path(scene)
+        try:
+            base = tomllib.loads(path.read_text(encoding="utf-8"))
+            scene_obj = parse_scene(base, path)
+        except (OSError, UnicodeDecodeError) as e:
+            raise EditorError(f"{path}: cannot read ({e.__class__.__name__})", 400) from None
+        except tomllib.TOMLDecodeError as e:
+            raise EditorError(f"{path}: not valid TOML: {e}", 400) from None
+        except InputError as e:
+            raise EditorError(str(e), 400, e.key) from None
+        self._check(scene_obj)
+        self.source = scene if scene in BUILTIN_SCENES else str(path)
+        self.path, self.base = path, base
+        self.changes: dict = {}
+        self.paint: dict[str, np.ndarray] = {}
+        self.scene = scene_obj
+        self.undo_stack: list = []
+        self.redo_stack: list = []
+        self._stroke: _Stroke | None = None
+        self.saved_as: str | None = None
+        self.version += 1
+        refused = []
+        items = changes.items() if isinstance(changes, dict) else changes or []
+        for item in items:
+            try:
+                key, value = pair(item)
+                self.set({key: value}, record=False)
+            except EditorError as e:
+                refused.append({"key": e.key or str(item)[:100], "error": e.message})
+        return refused
+
+    def _scene_path(self, scene: str) -> Path:
+        if scene in BUILTIN_SCENES:
+            return builtin_scenes()[scene]
+        path = self.confine(scene, "scene")
+        if path.suffix != ".toml" or not path.is_file():
+            raise EditorError(f"no scene file {scene!r} (a .toml file in "
+                              f"{self._roots_text()}, or a built-in scene: "
+                              f"{', '.join(BUILTIN_SCENES)})", 404)
+        return path
+
+    def _roots_text(self) -> str:
+        return " or ".join(str(r) for r in self.roots)
+
+    def confine(self, text: str, what: str, base: Path | None = None) -> Path:
+        """`text` as a path inside one of the session's folders (the scene's, the output
+        folder): relative to `base` (default: each folder in turn), links resolved; an
+        `EditorError` (403) for anything outside them."""
+        if not isinstance(text, str) or not text or "\0" in text or len(text) > 1000:
+            raise EditorError(f"{what}: expected a file name, got {text!r}", 400)
+        p = Path(text)
+        candidates = [p] if p.is_absolute() else [
+            (b / p) for b in ([base] if base is not None else self.roots)]
+        for c in candidates:
+            r = c.resolve()
+            if any(r.is_relative_to(root) for root in self.roots) and (
+                    r.exists() or c is candidates[-1]):
+                return r
+        raise EditorError(f"{what}: {text!r} is outside the folders this editor may read "
+                          f"({self._roots_text()})", 403)
+
+    def document(self, changes: dict | None = None) -> dict:
+        """The scene's TOML document with `changes` (default: the session's) applied."""
+        doc = copy.deepcopy(self.base)
+        for key, value in (self.changes if changes is None else changes).items():
+            put(doc, key, value)
+        return doc
+
+    def _build(self, changes: dict, paint: dict) -> Scene:
+        """The scene of a document and paint, validated; `EditorError` with the schema's
+        message otherwise."""
+        try:
+            scene = parse_scene(self.document(changes), self.path)
+        except InputError as e:
+            raise EditorError(e.message, 400, e.key) from None
+        if paint:
+            scene = dataclasses.replace(scene, layers=tuple(
+                LayerSpec(spec.name, spec.material, None) if spec.name in paint else spec
+                for spec in scene.layers))
+        return scene
+
+    def _check(self, scene: Scene) -> None:
+        """What the CLI checks before a render (memory, mesh, vertices, materials, images)."""
+        from ..cli import _check_scene
+
+        try:
+            _check_scene(scene, 1)
+        except InputError as e:
+            raise EditorError(str(e), 400, e.key) from None
+        except RecursionError:
+            raise EditorError("nested too deeply to read", 400) from None
+
+    # --- changes -------------------------------------------------------------------------
+
+    def set(self, values: dict, record: bool = True) -> None:
+        """Apply `{key: value}` changes (value None: back to the file's value), all or none."""
+        if not isinstance(values, dict) or not values:
+            raise EditorError("expected an object of scene keys and values", 400)
+        changes = dict(self.changes)
+        names = [layer.name for layer in self.scene.layers]
+        adding = [k.split(".")[1] for k, v in values.items() if isinstance(k, str)
+                  and k.startswith("layer.") and k.endswith(".material") and v is not None]
+        for key, value in values.items():
+            if value is None:
+                changes.pop(key, None)
+                continue
+            changes[key] = self._checked(key, value, [*names, *adding])
+        paint = self.paint
+        scene = self._build(changes, paint)
+        added = [s.name for s in scene.layers if s.name not in names
+                 and s.name not in paint and not (s.image or s.ellipses or s.polygons)]
+        if added:  # a layer added here starts bare, to be painted (else it covers everything)
+            t = texture.mapped(*_texture_key(scene.config))[1]
+            paint = {**paint, **{n: np.zeros((t.height, t.width), np.uint16) for n in added}}
+            scene = self._build(changes, paint)
+        if scene.config != self.scene.config:
+            self._check(scene)
+        if record:
+            self._record()
+        self.changes, self.scene, self.paint = changes, scene, paint
+        self.version += 1
+
+    def _checked(self, key, value, layer_names):
+        """A change's key and value checked as far as they can be alone (the rest when the
+        document is parsed): known keys, paths confined, materials and meshes found."""
+        if not isinstance(key, str) or len(key) > 200:
+            raise EditorError(f"expected a scene key, got {key!r}", 400)
+        if key == "fields.edit":
+            if not isinstance(value, list) or len(value) > 1000:
+                raise EditorError("fields.edit: expected a list of edits (at most 1000)", 400,
+                                  key)
+            return value
+        parts = key.split(".")
+        if len(parts) == 3 and parts[0] == "layer":
+            name, attr = parts[1], parts[2]
+            if not name.isidentifier():
+                raise EditorError(f"a layer's name must be letters, digits and _, got "
+                                  f"{name!r}", 400, key)
+            if attr not in LAYER_SET:
+                raise EditorError(f"a layer's value to set must be one of "
+                                  f"{', '.join(LAYER_SET)}", 400, key)
+            if attr == "material":
+                return self._material(value, key)
+            if name not in layer_names:
+                raise EditorError(f"no layer named {name!r} (add it by choosing its "
+                                  "material first)", 400, key)
+            return _scalar(value, key, layer_names)
+        if key not in SCHEMA or key == "name":
+            try:
+                check_value(key, value, "editor", layer_names)
+            except InputError as e:
+                raise EditorError(e.message, 400, key) from None
+            raise EditorError(f"{key!r} cannot be set here", 400, key)
+        value = _scalar(value, key, layer_names)
+        if key in PATH_KEYS and not (key == "mesh.file" and value in BUILTIN_MESHES) and not (
+                key == "material.brdf" and value == "skin"):
+            value = str(self.confine(value, key, self.path.parent))
+        return value
+
+    def _material(self, value, key):
+        if not isinstance(value, str):
+            raise EditorError(f"expected a material name or file, got {value!r}", 400, key)
+        if value in cosmetics.shipped_materials():
+            return value
+        path = self.confine(value, key, self.path.parent)
+        if not path.is_file():
+            raise EditorError(f"no material file {value!r} (shipped materials: "
+                              f"{', '.join(cosmetics.shipped_materials())}; or a calibrated "
+                              f"JSON in {self._roots_text()})", 400, key)
+        try:
+            cosmetics.check_material(path)
+        except InputError as e:
+            raise EditorError(str(e), 400, key) from None
+        return str(path)
+
+    def _record(self) -> None:
+        self.undo_stack.append((self.changes, self.paint))
+        del self.undo_stack[:-HISTORY]
+        self.redo_stack.clear()
+
+    def undo(self) -> bool:
+        """Go back one change; False when there is none to undo."""
+        return self._step(self.undo_stack, self.redo_stack)
+
+    def redo(self) -> bool:
+        """Redo the last undone change; False when there is none."""
+        return self._step(self.redo_stack, self.undo_stack)
+
+    def _step(self, source: list, target: list) -> bool:
+        if not source:
+            return False
+        changes, paint = source.pop()
+        target.append((self.changes, self.paint))
+        self.changes, self.paint = changes, paint
+        self.scene = self._build(changes, paint)
+        self._stroke = None
+        self.version += 1
+        return True
+
+    # --- rendering -----------------------------------------------------------------------
+
+    def _key(self, config: SceneConfig) -> SceneConfig:
+        """The configuration to compile `config` as: the first seen that differs only in
+        what `arrays` passes in (edits, layer materials and maps, the shadow's direction)."""
+        sig = dataclasses.replace(
+            config, texture=dataclasses.replace(config.texture, edits=()),
+            shadow=None if config.shadow is None else (0.0, 0.0, 1.0))
+        if config.spectral is not None:
+            sig = dataclasses.replace(sig, spectral=dataclasses.replace(
+                config.spectral, layers=tuple(LayerSpec(s.name, "", None)
+                                              for s in config.spectral.layers)))
+        return self._keys.setdefault(sig, config)
+
+    def arrays(self, config: SceneConfig) -> dict:
+        """`render.prepare(config).arrays`, computed for the configuration without its
+        field edits where one with them is at hand, the edits' furrows and painted maps put
+        in."""
+        prepared = render.prepare(self._prepared_config(config))
+        arrays = dict(prepared.arrays)
+        if config.needs_furrows:
+            arrays["h0"] = texture.furrows(config.texture)[0]
+        if self.paint and config.spectral is not None:
+            arrays["cover"] = self._cover(config, arrays)
+        return arrays
+
+    def _prepared_config(self, config: SceneConfig) -> SceneConfig:
+        """A configuration equal to `config` but for what `arrays` puts in (field edits,
+        painted layers' maps) whose preparation is cached already (else `config`): an edit
+        then costs a furrow run and a stroke nothing, not a new view, shadow map or blur."""
+        def normal(c: SceneConfig) -> SceneConfig:
+            c = dataclasses.replace(c, texture=dataclasses.replace(c.texture, edits=()))
+            if c.spectral is None or not self.paint:
+                return c
+            return dataclasses.replace(c, spectral=dataclasses.replace(c.spectral, layers=tuple(
+                LayerSpec(s.name, s.material, None) if s.name in self.paint else s
+                for s in c.spectral.layers)))
+
+        for other in self._prepared:
+            if normal(other) == normal(config):
+                return other
+        self._prepared = [config, *self._prepared[:5]]
+        return config
+
+    def _cover(self, config: SceneConfig, arrays: dict):
+        import jax.numpy as jnp
+
+        names = [s.name for s in config.spectral.layers]
+        key = (id(arrays["cover"]), tuple((n, id(self.paint.get(n))) for n in names))
+        if self._cover_cache is not None and self._cover_cache[0] == key:
+            return self._cover_cache[1]
+        texels = np.asarray(arrays["texels"])
+        cover = np.array(arrays["cover"])
+        for i, name in enumerate(names):
+            if name in self.paint:  # as cosmetics.image_map reads the saved 16-bit PNG
+                q = self.paint[name]
+                cover[i] = np.clip(q.astype(np.float64) / 65535.0, 0.0, 1.0).reshape(-1)[
+                    texels].astype(np.float32)
+        out = jnp.asarray(cover, jnp.float32)
+        self._cover_cache = (key, out)
+        return out
+
+    def render(self, preview: bool = False) -> np.ndarray:
+        """The view `(H, W, 3)` display values, as `jaxskin render` makes it (`preview`:
+        one sample per pixel, for drags)."""
+        config = self.scene.config
+        if preview and config.supersample > 1:
+            config = dataclasses.replace(config, supersample=1)
+        t0 = time.perf_counter()
+        arrays = self.arrays(config)
+        image = render.render_prepared(self._key(config), self.scene.params, arrays)
+        image = np.asarray(image)
+        self.timings["render_s"] = time.perf_counter() - t0
+        return image
+
+    def png(self, preview: bool = False) -> bytes:
+        """The view as the PNG `jaxskin render` writes (8-bit)."""
+        return maps.image_bytes(self.render(preview))
+
+    def image_file(self, preview: bool = False) -> tuple[bytes, str]:
+        """The view as the page gets it, `(bytes, MIME type)`: the PNG `jaxskin render`
+        writes; a preview as an uncompressed BMP of the same 8-bit samples (2 ms to encode
+        at 512², where the PNG takes 30-60 ms on this CPU)."""
+        if not preview:
+            return self.png(), "image/png"
+        import imageio.v3 as iio
+
+        image = maps.quantize(self.render(preview))
+        return iio.imwrite("<bytes>", image, extension=".bmp"), "image/bmp"
+
+    # --- the view: picking, arrows, painting ---------------------------------------------
+
+    def _view(self):
+        config = self.scene.config
+        return config, render.prepare(self._prepared_config(config)).view
+
+    def _sample(self, view, k: int, x, y):
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                   and math.isfinite(v) for v in (x, y)):
+            raise EditorError("expected pixel coordinates x, y (numbers)", 400)
+        H, W = view.mask.shape
+        i, j = int(math.floor(y * k)), int(math.floor(x * k))
+        if not (0 <= i < H and 0 <= j < W):
+            raise EditorError(f"pixel ({x}, {y}) is outside the {W // k}x{H // k} image", 400)
+        return i, j
+
+    def pick(self, x, y) -> dict:
+        """The mesh vertex nearest to image pixel `(x, y)` (the triangle the view's raster
+        sees there, its corner of largest barycentric), with the screen's axes in the
+        mesh's frame (for turning a drag into a direction)."""
+        config, view = self._view()
+        k = config.supersample
+        i, j = self._sample(view, k, x, y)
+        tri = int(view.raster.tri[i, j])
+        R = view.R
+        axes = {"right": (R.T @ [1.0, 0.0, 0.0]).tolist(),
+                "down": (R.T @ [0.0, -1.0, 0.0]).tolist()}
+        if tri < 0:
+            return {"hit": False, **axes}
+        mesh = texture.setup(config.texture).mesh
+        vertex = int(mesh.faces[tri][int(np.argmax(view.raster.bary[i, j]))])
+        s = texture.setup(config.texture)
+        return {"hit": True, "vertex": vertex, "position": mesh.vertices[vertex].tolist(),
+                "d1": s.d1[vertex].tolist(), "d2": s.d2[vertex].tolist(),
+                "normal": mesh.normals[vertex].tolist(),
+                "screen": (view.xy[vertex] / k).tolist(), **axes}
+
+    def fields(self, step: int = 24) -> dict:
+        """The direction fields seen in the view, for the arrows: every `step` image pixels
+        on the mesh, `[x, y, d1x, d1y, d2x, d2y]` (screen directions, image pixels per unit
+        of |d|), and each edit's vertex on the screen."""
+        config, view = self._view()
+        k = config.supersample
+        s = texture.setup(config.texture)
+        H, W = view.mask.shape
+        ys = (np.arange(step // 2, H // k, step) * k + k // 2)
+        xs = (np.arange(step // 2, W // k, step) * k + k // 2)
+        ii, jj = np.meshgrid(ys, xs, indexing="ij")
+        tri = view.raster.tri[ii, jj]
+        on = tri >= 0
+        ii, jj, tri = ii[on], jj[on], tri[on]
+        bary = view.raster.bary[ii, jj].astype(np.float64)
+        corners = s.mesh.faces[tri]
+        out = [(ii + 0.5) / k, (jj + 0.5) / k]
+        for d in (s.d1, s.d2):
+            v = np.einsum("nk,nkc->nc", bary, d[corners]) @ view.R.T
+            out += [v[:, 0], -v[:, 1]]
+        rows = np.stack([out[1], out[0], *out[2:]], axis=1)
+        edits = [{"index": n, "vertex": e.vertex, "screen": (view.xy[e.vertex] / k).tolist()}
+                 for n, e in enumerate(s.edits)]
+        return {"arrows": np.round(rows, 2).tolist(), "edits": edits}
+
+    def paint_stroke(self, stroke: str, layer: str, points, radius: float, strength: float,
+                     erase: bool = False) -> dict:
+        """Paint (or erase) `layer`'s thickness map along `points` (image pixels), a soft
+        brush of `radius` image pixels: each point's texel from the view's texture lookup,
+        the radius in texels from the lookup's local scale. Repeated calls with the same
+        `stroke` id extend one stroke (one undo step; dabs do not pile up within it)."""
+        config, view = self._view()
+        if config.spectral is None or layer not in [s.name for s in config.spectral.layers]:
+            names = [s.name for s in config.spectral.layers] if config.spectral else []
+            none = "none; material.model must be spectral or biophysical"
+            raise EditorError(f"no cosmetic layer {layer!r} to paint (this scene's layers: "
+                              f"{', '.join(names) or none})", 400, "layer")
+        if not (isinstance(points, list) and 0 < len(points) <= 10000 and all(
+                isinstance(p, list) and len(p) == 2 and all(
+                    isinstance(c, (int, float)) and not isinstance(c, bool)
+                    and math.isfinite(c) for c in p) for p in points)):
+            raise EditorError("points: expected a list of [x, y] pixel positions (1-10000)", 400)
+        for name, v, lo, hi in (("radius", radius, 0.5, 500.0), ("strength", strength, 0, 1)):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo <= v <= hi:
+                raise EditorError(f"{name}: expected a number in [{lo:g}, {hi:g}], got {v!r}")
+        k = config.supersample
+        s = texture.setup(config.texture)
+        Ht, Wt = s.tmap.height, s.tmap.width
+        if self._stroke is None or self._stroke.id != stroke or self._stroke.layer != layer:
+            before = self._layer_map(config, layer)
+            self._record()
+            self._stroke = _Stroke(str(stroke), layer, before, np.zeros((Ht, Wt)))
+        mask = self._stroke.mask
+        points = [tuple(map(float, p)) for p in points]
+        last = self._stroke.last  # the stroke goes on from where its last request ended
+        dabs = brush.dabs(points, radius) if last is None else brush.dabs(
+            [last, *points], radius)[1:]
+        self._stroke.last = points[-1]
+        for x, y in dabs:
+            i, j = self._sample(view, k, x, y)
+            if not view.mask[i, j]:
+                continue
+            t = view.tex[i, j].astype(np.float64)
+            scale = brush.texels_per_pixel(view, i, j, k)
+            brush.dab(mask, t[0], t[1], radius * scale, s.tmap.wrap_x)
+        target = 0.0 if erase else 1.0
+        before = self._stroke.before
+        value = before + (target - before) * float(strength) * mask
+        first = layer not in self.paint
+        self.paint = {**self.paint, layer: np.round(np.clip(value, 0, 1) * 65535).astype(
+            np.uint16)}
+        if first:  # the layer's regions or image give way to its map
+            self.scene = self._build(self.changes, self.paint)
+        self.version += 1
+        return {"dabs": len(dabs)}
+
+    def _layer_map(self, config: SceneConfig, layer: str) -> np.ndarray:
+        """A layer's thickness map `(H, W)` in [0, 1] as the render has it now."""
+        if layer in self.paint:
+            return self.paint[layer].astype(np.float64) / 65535.0
+        arrays = self.arrays(config)
+        names = [s.name for s in config.spectral.layers]
+        s = texture.setup(config.texture)
+        out = np.zeros(s.tmap.height * s.tmap.width)
+        out[np.asarray(arrays["texels"])] = np.asarray(arrays["cover"][names.index(layer)])
+        return out.reshape(s.tmap.height, s.tmap.width)
+
+    # --- saving --------------------------------------------------------------------------
+
+    def save(self, name: str, overwrite: bool = False) -> list[str]:
+        """Write `<output>/<name>.toml` and each painted map as `<name>_<layer>.png` (16-bit
+        grey) beside it: a scene `jaxskin render` renders to the image shown. The session
+        then edits the saved file."""
+        try:
+            check_name(name, "save")
+        except InputError as e:
+            raise EditorError(e.message, 400, "name") from None
+        toml_path = self.output / f"{name}.toml"
+        layers = [spec.name for spec in self.scene.layers]
+        pngs = {layer: self.output / f"{name}_{layer}.png" for layer in self.paint
+                if layer in layers}
+        for p in [toml_path, *pngs.values()]:
+            if p.exists() and not overwrite:
+                raise EditorError(f"{p.name} exists in {self.output}; save with overwrite to "
+                                  "replace it", 409, "name")
+            if p.exists() and p.resolve() == self.path.resolve() and self.source in \
+                    BUILTIN_SCENES:
+                raise EditorError("cannot overwrite a built-in scene", 403, "name")
+        doc = self.document()
+        doc["name"] = name
+        relocate(doc, self.path.parent, self.output)
+        for table in doc.get("layer", []):
+            if table.get("name") in pngs:
+                for k in ("image", "ellipse", "polygon"):
+                    table.pop(k, None)
+                table["image"] = pngs[table["name"]].name
+        text = dumps(doc)
+        self.output.mkdir(parents=True, exist_ok=True)
+        for layer, p in pngs.items():
+            with atomic_write(p, "wb") as fh:
+                fh.write(maps.png16_bytes(self.paint[layer]))
+        with atomic_write(toml_path, "w") as fh:
+            fh.write(text)
+        paint, version = self.paint, self.version
+        self.open(str(toml_path), {})
+        self.paint, self.saved_as = paint, str(toml_path)
+        self.scene = self._build({}, paint)
+        self.version = version + 1
+        return [str(toml_path), *(str(p) for p in pngs.values())]
+
+    def upload(self, name: str, data: bytes) -> str:
+        """Keep a file the page uploads (a scene `.toml`, or a cosmetic material `.json` from
+        `jaxskin calibrate`) in the output folder, checked first: the way to bring in a
+        file from outside the session's folders. Returns its path."""
+        try:
+            check_name(name, "upload")
+        except InputError as e:
+            raise EditorError(e.message, 400, "name") from None
+        suffix = Path(name).suffix
+        if suffix not in (".toml", ".json"):
+            raise EditorError("expected a scene (.toml) or a material (.json)", 400, "name")
+        target = self.output / name
+        if target.exists():
+            if target.read_bytes() == data:
+                return str(target)
+            raise EditorError(f"{name} exists in {self.output} with other contents; rename "
+                              "the file to upload it", 409, "name")
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as tmp:
+            probe = Path(tmp) / name
+            probe.write_bytes(data)
+            try:
+                if suffix == ".json":
+                    cosmetics.check_material(probe)
+                else:
+                    doc = tomllib.loads(data.decode("utf-8"))
+                    parse_scene(doc, target)
+            except InputError as e:
+                raise EditorError(f"{name}: {e.message}", 400, e.key) from None
+            except (UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+                raise EditorError(f"{name}: not a TOML scene ({e})", 400) from None
+        self.output.mkdir(parents=True, exist_ok=True)
+        with atomic_write(target, "wb") as fh:
+            fh.write(data)
+        return str(target)
+
+    # --- what the page shows -------------------------------------------------------------
+
+    def files(self) -> dict:
+        """Scenes and materials the page can open: built-in ones and files in the folders."""
+        scenes, materials = list(BUILTIN_SCENES), cosmetics.shipped_materials()
+        for root in self.roots:
+            if root.is_dir():
+                scenes += sorted(str(p) for p in root.glob("*.toml"))[:200]
+                materials += sorted(str(p) for p in root.glob("*.json"))[:200]
+        return {"scenes": scenes, "materials": materials}
+
+    def state(self) -> dict:
+        """Everything the page draws its panels from (JSON)."""
+        sc = self.scene
+        values = {k: _jsonable(v) for k, v in sc.values.items()}
+        config = sc.config
+        layers = [{"name": s.name, "material": _material_name(s.material),
+                   "painted": s.name in self.paint} for s in sc.layers]
+        return {"source": self.source, "path": str(self.path), "name": sc.name,
+                "values": values, "changes": {k: _jsonable(v) for k, v in self.changes.items()},
+                "query": self.query(), "edits": [dataclasses.asdict(e) for e in sc.edits],
+                "layers": layers, "version": self.version,
+                "image": [config.image, config.image_height or config.image],
+                "painted": sorted(self.paint), "undo": len(self.undo_stack),
+                "redo": len(self.redo_stack), "output": str(self.output),
+                "saved_as": self.saved_as, "schema": schema()}
+
+    def query(self) -> list[list[str]]:
+        """The changes as `[key, value]` pairs with TOML values, the `-D` syntax (the page's
+        URL holds them)."""
+        from .toml import value_text
+
+        return [[k, value_text(v)] for k, v in self.changes.items()]
+
+
+def _texture_key(config: SceneConfig) -> tuple:
+    t = config.texture
+    return t.mesh, t.projection, t.size
+
+
+def schema() -> dict:
+    """The scene schema for the page: kind, default, range, choices, differentiable."""
+    def one(spec):
+        kind = spec.kind if isinstance(spec.kind, str) else spec.kind.__name__
+        return {"kind": kind, "default": _jsonable(spec.default), "lo": spec.lo, "hi": spec.hi,
+                "choices": list(spec.choices) if spec.choices else None, "param": spec.param}
+
+    return {"keys": {k: one(v) for k, v in SCHEMA.items()},
+            "layer": {k: one(v) for k, v in LAYER_SCHEMA.items()}}
+
+
+def _scalar(value, key, layer_names):
+    """A JSON value for `key` as TOML would give it (lists for vectors), checked by the
+    schema: `EditorError` with its message."""
+    if isinstance(value, (dict,)):
+        raise EditorError(f"expected a value, got an object for {key}", 400, key)
+    try:
+        check_value(key, value, "editor", layer_names)
+    except InputError as e:
+        raise EditorError(e.message, 400, key) from None
+    return value
+
+
+def _material_name(path: str) -> str:
+    p = Path(path)
+    shipped = data_dir() / "materials" / f"{p.stem}.json"
+    return p.stem if p == shipped else path
+
+
+def _jsonable(v):
+    if isinstance(v, tuple):
+        return [_jsonable(x) for x in v]
+    return v
+
+
