@@ -6,6 +6,7 @@
     jaxskin fit-brdf FILE.csv -o OUT.json [--lobes N]     # Lafortune lobes
     jaxskin render SCENE [SCENE ...] -o DIR --maps        # wrinkle height and normal maps
     jaxskin fit-skin SPECTRA.csv -o DIR                   # the biophysical skin, fitted
+    jaxskin fit-image SCENE TARGET.png --fit KEY[,KEY] -o DIR   # inverse rendering
 
 (`python -m jaxskin …` is the same.) Exit codes: 0 done; 2 bad input (a file, a column, a
 value, an option, an output path, a run that cannot fit in memory), reported as one line
@@ -235,6 +236,33 @@ def _parser() -> argparse.ArgumentParser:
                    help="override a scene value, e.g. -D wrinkles.k_scale=1.3 (repeatable; "
                    "applies to every scene)")
     cluster.add_option(r, f"batch of {cluster.SWEEP_BATCH} sweep values, or scene")
+
+    f = sub.add_parser(
+        "fit-image",
+        help="fit scene values and texture-space maps to a target image (inverse rendering)",
+        description="Fit the named values of a scene to TARGET, an image seen from the "
+        "scene's camera (same size): scalars (any differentiable key: material.melanin, "
+        "light.intensity, layer.NAME.thickness_mm, ...) by Levenberg-Marquardt, and "
+        "texture-space maps (layer.NAME.map, skin.melanin_map) with a smoothness prior by "
+        "Adam. The loss is the mean squared difference of display values over the pixels the "
+        "mesh covers fully (and the mask's, if any). Writes DIR/<name>.toml (the scene with "
+        "the fitted values; jaxskin render turns it into the fitted image), DIR/<name>_<map "
+        "key>.png (each fitted map, 16-bit grey, loaded by that scene) and DIR/<name>_fit.png "
+        "(target, fit, residual, loss, maps). Warns when two fitted keys trade off against "
+        "each other (exposure and intensity, albedo and intensity).",
+    )
+    f.add_argument("scene", metavar="SCENE", help="built-in name or TOML file: the start")
+    f.add_argument("target", metavar="TARGET.png", help="the image to fit")
+    f.add_argument("--fit", required=True, metavar="KEY[,KEY...]", help="the keys to fit")
+    f.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
+    f.add_argument("--mask", metavar="M.png", help="weights in [0, 1] per pixel (grey; 0: "
+                   "ignore), the target's size")
+    f.add_argument("--steps", type=_number(int, 1, 100000), default=100, metavar="N",
+                   help="at most N optimiser steps (100)")
+    f.add_argument("--smooth", type=_number(lo=0.0, hi=1e6), default=1e-5, metavar="W",
+                   help="weight of the maps' total-variation prior (1e-5)")
+    f.add_argument("-D", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene value (the fit's start), as for render")
 
     b = sub.add_parser(
         "fit-brdf",
@@ -506,6 +534,9 @@ def _check_scene(sc, count: int) -> list:
                              "reflects no light; expected a fit from jaxskin fit-brdf",
                              config.brdf)
     sp = config.spectral
+    if sp is not None and sp.melanin_image is not None:
+        inputs.append(sp.melanin_image)
+        _check_image(sp.melanin_image, sc.source, "skin.melanin_image")
     for layer in sp.layers if sp is not None else ():
         inputs.append(layer.material)
         with _reading(layer.material):
@@ -696,6 +727,12 @@ def _fit_brdf(args, run: _Run) -> int:
     return 0
 
 
+def _fit_image(args, run: _Run) -> int:
+    from jaxskin.fitting import image
+
+    return image.run_command(args, run)
+
+
 def _fit_skin(args, run: _Run) -> int:
     from jaxskin.fitting import skin
 
@@ -721,7 +758,7 @@ def main(argv=None) -> int:
     _enable_compilation_cache()
     run = _Run()
     commands = {"calibrate": _calibrate, "fit-brdf": _fit_brdf, "render": _render,
-                "fit-skin": _fit_skin, "edit": _edit}
+                "fit-skin": _fit_skin, "edit": _edit, "fit-image": _fit_image}
     with _signals():
         try:
             return commands[args.command](args, run)

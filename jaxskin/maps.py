@@ -13,9 +13,8 @@ import numpy as np
 from .io import InputError, atomic_write
 
 __all__ = ["FORMATS", "exr_available", "image_bytes", "png16_bytes", "png_bytes", "quantize",
-           "read_exr",
-           "write_exr", "write_field_plot", "write_height", "write_image", "write_normals",
-           "write_render"]
+           "read_exr", "read_image", "write_exr", "write_field_plot", "write_grey16",
+           "write_height", "write_image", "write_normals", "write_render"]
 
 FORMATS = ("png", "png16", "exr")
 
@@ -110,6 +109,38 @@ def read_exr(path) -> np.ndarray:
     with OpenEXR.File(str(path), separate_channels=True) as f:
         channels = f.channels()
         return np.stack([channels[c].pixels for c in "RGBA"], axis=-1).astype(np.float32)
+
+
+def read_image(path, what: str = "image"):
+    """A PNG (or any image imageio reads) as display values in [0, 1]: `(rgb (H, W, 3),
+    alpha (H, W) or None)`; grey is repeated to RGB; 8- and 16-bit at their full scale.
+    `InputError` naming the file if it is not a readable 2-D image of finite values."""
+    import imageio.v3 as iio
+
+    try:
+        img = np.asarray(iio.imread(path))
+    except Exception as e:  # noqa: BLE001  (imageio raises many kinds; all mean unreadable)
+        raise InputError(f"cannot read as an {what} ({e.__class__.__name__})", path) from None
+    if img.dtype.kind not in "uifb" or img.size == 0 or not (
+            img.ndim == 2 or (img.ndim == 3 and img.shape[-1] in (1, 2, 3, 4))):
+        raise InputError(f"expected an {what} (H, W) or (H, W, 1-4 channels), got an array of "
+                         f"shape {img.shape} and type {img.dtype}", path)
+    if img.dtype.kind in "ui":
+        img = img.astype(np.float64) / float(np.iinfo(img.dtype).max)
+    img = np.asarray(img, np.float64)
+    if not np.all(np.isfinite(img)):
+        raise InputError(f"the {what} has non-finite values", path)
+    if img.ndim == 2:
+        img = img[..., None]
+    alpha = img[..., -1] if img.shape[-1] in (2, 4) else None
+    grey_or_rgb = img[..., :3] if img.shape[-1] >= 3 else img[..., :1]
+    return np.broadcast_to(grey_or_rgb, (*img.shape[:2], 3)).copy(), alpha
+
+
+def write_grey16(values, path) -> None:
+    """A 16-bit grey PNG of `values (H, W)` in [0, 1] (clipped): a map a scene loads."""
+    v = np.clip(np.asarray(values, np.float64), 0.0, 1.0)
+    _write(path, png16_bytes(np.round(v * 65535).astype(np.uint16)))
 
 
 def write_render(image, path, fmt: str) -> None:

@@ -42,7 +42,7 @@ from .shading import blinn, lafortune, layered
 from .view import View, coverage, downsample, make_view, pad_index, sample
 
 __all__ = ["OUTPUTS", "Prepared", "albedo", "decode_srgb", "encode_srgb", "expose", "prepare",
-           "render", "render_prepared", "skin_reflectance"]
+           "render", "render_prepared", "skin_reflectance", "texel_map"]
 
 OUTPUTS = ("display", "rgba", "linear_rgba")
 SHADOW_MAX = 2048  # texels across the shadow map, at most
@@ -109,6 +109,9 @@ def _prepare(config: SceneConfig) -> Prepared:
                      for layer in sp.layers]
             arrays["cover"] = jnp.asarray(np.stack(cover).reshape(len(cover), -1)[:, texels],
                                           jnp.float32)
+        if sp.melanin_image is not None:  # skin.melanin × this map, per texel
+            factor = cosmetics.image_map(sp.melanin_image, s.tmap.height, s.tmap.width, 1.0)
+            arrays["melanin_cover"] = jnp.asarray(factor.reshape(-1)[texels], jnp.float32)
     if config.shadow is not None and config.mode != "height":
         arrays["lit"] = _visibility(config, s, view)
     return Prepared(s, view, arrays, texel_mm)
@@ -277,15 +280,17 @@ def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: d
         def blur(colour):
             return to_list(sss.blur(to_image(colour), p.texel_mm, mask, sp.sss,
                                     norm=arrays.get("sss_norm")))
-    skin_R = skin_reflectance(sp, params, arrays)
+    skin_R = skin_reflectance(sp, params, arrays, texels)
     layers = {}
     if sp.layers:
         def per_layer(key):
             return jnp.stack([params[f"layer.{layer.name}.{key}"] for layer in sp.layers])
 
+        cover = jnp.stack([texel_map(params, f"layer.{layer.name}.map", texels,
+                                     arrays["cover"][i]) for i, layer in enumerate(sp.layers)])
         layers = {"S": arrays["S"] * per_layer("s_scale")[:, None],
                   "K": arrays["K"] * per_layer("k_scale")[:, None],
-                  "X": arrays["cover"] * per_layer("thickness_mm")[:, None],
+                  "X": cover * per_layer("thickness_mm")[:, None],
                   "roughness": per_layer("roughness"), "rho": per_layer("specular")}
     colour = layered.radiance(sp.grid, normals, L, V, params["light.ambient"], light, skin_R,
                               params["skin.roughness"], params["skin.specular"], blur=blur,
@@ -293,15 +298,32 @@ def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: d
     return to_image(colour)
 
 
-def skin_reflectance(sp, params: dict, arrays: dict):
+def skin_reflectance(sp, params: dict, arrays: dict, texels=None):
     """The spectral model's skin reflectance on its grid, `(n,)`: the NIST subject darkened
     by `skin.melanin` (`jaxskin.skin`), or the biophysical model (`jaxskin.biophysical`) of
-    the `skin.*` parameters (`scene.BIOPHYSICAL_KEYS`)."""
+    the `skin.*` parameters (`scene.BIOPHYSICAL_KEYS`). With `texels` (flat indices of the
+    texels on the mesh) and a melanin map (`skin.melanin_map` in the params, or the scene's
+    `skin.melanin_image`), the NIST skin's melanin varies per texel: `(P, n)`."""
     if sp.skin == "biophysical":
         c = biophysical.Chromophores(*arrays["chromophores"])
         return biophysical.reflectance(c, biophysical.Skin(
             *(params[BIOPHYSICAL_KEYS[name]] for name in biophysical.PARAMS)))
-    return skin.reflectance(arrays["skin"], params["skin.melanin"], sp.grid)
+    melanin = params["skin.melanin"]
+    factor = None if texels is None else texel_map(params, "skin.melanin_map", texels,
+                                                   arrays.get("melanin_cover"))
+    if factor is not None:  # a melanin map: the skin's spectrum per texel, (P, n)
+        melanin = melanin * factor[:, None]
+    return skin.reflectance(arrays["skin"], melanin, sp.grid)
+
+
+def texel_map(params: dict, key: str, texels, default=None):
+    """A per-texel factor for the texels on the mesh, `(P,)`: the texture-space map
+    `params[key]` `(H, W)` when the params carry one (a fit's map, `jaxskin.fitting.image`),
+    else `default` (the scene's map, from its image or regions; or `None`: no map). A map
+    multiplies its scalar, as a scene's image does: `layer.NAME.map` × thickness_mm,
+    `skin.melanin_map` × skin.melanin."""
+    value = params.get(key)
+    return default if value is None else value.reshape(-1)[texels]
 
 
 def encode_srgb(linear):

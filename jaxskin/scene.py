@@ -64,6 +64,7 @@ haemoglobin = 0.02                 # biophysical: dermal blood volume fraction 0
 oxygenation = 0.6                  # biophysical: the blood's oxygen saturation 0–1
 epidermis_mm = 0.035               # biophysical: epidermis thickness 0.01–0.15 mm
 scattering = 2.5                   # biophysical: scattering factor 0.5–6
+melanin_image = "melanin.png"      # optional: a greyscale map, melanin × its value (0–1)
 roughness = 0.3                    # Kelemen m of the skin's own highlight
 specular = 0.18                    # Kelemen rho_s of the skin's own highlight
 [spectral]
@@ -176,6 +177,7 @@ SCHEMA: dict[str, _Key] = {
     "skin.melanin": _Key(float, 0.0, 0.0, 3.0, param=True),
     "skin.roughness": _Key(float, 0.3, 0.01, 1.0, param=True),
     "skin.specular": _Key(float, 0.18, 0.0, 1.0, param=True),
+    "skin.melanin_image": _Key(str, None),  # a greyscale map (0–1 × skin.melanin) per texel
     # The biophysical skin (`jaxskin.biophysical`): its parameters, ranges and defaults.
     **{key: _Key(float, float(getattr(biophysical.DEFAULT, name)),
                  *biophysical.RANGES[name], param=True)
@@ -259,6 +261,7 @@ class SpectralConfig:
     texel_mm: float  # 0: from the mesh
     layers: tuple[LayerSpec, ...]
     skin: str = "nist"  # the skin under the layers: a NIST subject, or "biophysical"
+    melanin_image: str | None = None  # skin.melanin × this greyscale map, per texel
 
     @property
     def grid(self) -> Grid:
@@ -326,7 +329,8 @@ class Scene:
             spectral = SpectralConfig(v["skin.subject"], v["spectral.step"],
                                       v["spectral.illuminant"], v["mesh.unit_mm"],
                                       v["sss.method"] if v["sss.enabled"] else None,
-                                      v["sss.texel_mm"], self.layers, self.skin_model)
+                                      v["sss.texel_mm"], self.layers, self.skin_model,
+                                      v["skin.melanin_image"])
         return SceneConfig(tex, v["material.model"], v["material.brdf"], v["camera.projection"],
                            v["camera.size"], v["camera.supersample"], v["camera.fov"],
                            tuple(v["camera.rotate"]), v["view.mode"], spectral,
@@ -451,6 +455,14 @@ def parse_scene(doc: dict, path, overrides=()) -> Scene:
                              f"written by jaxskin fit-brdf); no file {brdf_path}", path,
                              key="material.brdf")
         values["material.brdf"] = str(brdf_path)
+    image = values["skin.melanin_image"]
+    if image is not None:
+        image_path = Path(image) if Path(image).is_absolute() else (
+            base("skin.melanin_image") / image).resolve()
+        if not image_path.is_file():
+            raise InputError(f"expected a greyscale image file, got {image!r}", path,
+                             key="skin.melanin_image")
+        values["skin.melanin_image"] = str(image_path)
     edits = tuple(_edit(i, e, path) for i, e in enumerate(edits_raw))
     return Scene(values["name"], str(path), values, edits, layers)
 

@@ -62,7 +62,8 @@ def radiance(grid: Grid, N, L, V, ambient, light, skin_R, skin_roughness, skin_r
       `L (3,)` unit direction to the light; `V (3,)` or `(..., 3)` unit directions to the
       viewer; `ambient`, `light`: I_ambient, I_light (`light` may vary per texel, `(...)`:
       the light that reaches each one, as with shadows).
-    - `skin_R (n,)`: the skin's reflectance on `grid`; `skin_roughness`, `skin_rho`: its
+    - `skin_R (n,)`: the skin's reflectance on `grid` (or `(..., n)` per texel, a
+      melanin map); `skin_roughness`, `skin_rho`: its
       Kelemen m and ρ_s.
     - `S, K (L, n)` per mm, `X (L, ...)` mm, `roughness, rho (L,)`: the cosmetic layers,
       bottom (applied first) to top; `None` for bare skin (no KM work at all).
@@ -181,16 +182,23 @@ def _colours_jvp(grid, blurred, primals, tangents):
         a = a.reshape(*a.shape[:axis], chunks, CHUNK, *a.shape[axis + 1:])
         return jnp.moveaxis(a, axis, 0)
 
-    texel_axes = (1, 0, 0, 1)  # X, E, h, h_l; S, K, skin_R are per band
+    # X, E, h, h_l per texel; S, K per band; skin_R per band (n,) or per texel (P, n).
+    texel_axes = (1, 0, 0, 1, None, None, 0 if primals[6].ndim == 2 else None)
+    chunked = [i for i, ax in enumerate(texel_axes) if ax is not None]
+
+    def merge(local, whole):  # the chunked arguments in their places among the whole ones
+        out = list(whole)
+        for i, a in zip(chunked, local, strict=True):
+            out[i] = a
+        return out
 
     @jax.checkpoint
     def one_chunk(local, local_dot):
-        return jax.jvp(lambda *a: _joint(grid, blurred, *a), (*local, *primals[4:]),
-                       (*local_dot, *tangents[4:]))[1]
+        return jax.jvp(lambda *a: _joint(grid, blurred, *a), merge(local, primals),
+                       merge(local_dot, tangents))[1]
 
-    local = tuple(per_texel(a, ax) for a, ax in zip(primals[:4], texel_axes, strict=True))
-    local_dot = tuple(per_texel(a, ax) for a, ax in zip(tangents[:4], texel_axes,
-                                                        strict=True))
+    local = tuple(per_texel(primals[i], texel_axes[i]) for i in chunked)
+    local_dot = tuple(per_texel(tangents[i], texel_axes[i]) for i in chunked)
     out_dot = jax.lax.map(lambda c: one_chunk(*c), (local, local_dot))
     out_dot = out_dot.reshape(-1, out_dot.shape[-1])[:P]
     return _colours(grid, blurred, *primals), out_dot

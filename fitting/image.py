@@ -1,0 +1,583 @@
+"""Inverse rendering: scene values and texture-space maps fitted to an image.
+
+`jaxskin fit-image SCENE TARGET.png --fit KEY[,KEY...]` asks which values of the scene, seen
+from its camera, make the target. The renderer is `render.render_prepared`, unchanged; the fit
+moves some of its parameters:
+
+- **Scalars** (`FitKey.kind == "scalar"` or `"vector"`): any differentiable scene value the
+  scene's model uses (`Scene.params`: melanin, blood, light, exposure, k_bump, layer
+  thickness, roughness, specular …). Each is bounded by its schema range through
+  x = lo + (hi − lo) σ(z); `light.direction` is free (the renderer normalises it);
+  `material.lafortune`, a Lafortune scene's lobes, with ρd and n through exp.
+- **Maps** (`"map"`): per-texel factors in texture space, `(H, W)` like the texture, that
+  multiply their scalar as a scene's greyscale image does (`render.texel_map`):
+  `layer.NAME.map` (× the layer's thickness_mm) and `skin.melanin_map` (× skin.melanin),
+  kept in [0, the schema's top] by a sigmoid, log-like near 0 (a step changes a texel by
+  a fraction of its value: thicknesses span decades). A smoothness prior,
+  a smoothed total variation between neighbouring texels on the mesh, fills the texels the
+  camera does not see and damps the noise.
+
+The loss is the weighted mean squared difference of display values (sRGB, clipped to [0, 1]
+as a PNG holds them) over the pixels the mesh covers fully (and the mask, if any), plus the
+prior. Optimisers (optimistix, stepped one iteration at a time for the progress bar):
+
+- scalars only: Levenberg–Marquardt (`optimistix.LevenbergMarquardt`) on the residual image,
+  its Jacobian by forward mode (one JVP per scalar);
+- with maps: `optimistix.OptaxMinimiser(optax.adam)`. Measured on the makeup face
+  (benchmarks/bench_fit_image.py): see `MAP_SOLVER_NOTE`.
+
+The optics stays in `jaxskin.render`; reading and writing files is the CLI's
+(`jaxskin.cli`, `write_report` here for the PNG report).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import time
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import optimistix as optx
+
+from jaxskin import render
+from jaxskin.io import InputError, atomic_write
+from jaxskin.scene import LAYER_SCHEMA, SCHEMA, Scene
+
+__all__ = ["DEGENERATE", "FitKey", "ImageFit", "MAP_SCALARS", "fit", "fit_keys", "weights",
+           "write_report"]
+
+# A map key → the scalar it multiplies (the biophysical model's maps go here too). Layer
+# maps, `layer.NAME.map`, multiply `layer.NAME.thickness_mm`.
+MAP_SCALARS = {"skin.melanin_map": "skin.melanin"}
+# Pairs of keys that trade off against each other in an image (warned about when fitted
+# together): exact scale ambiguities and near ones.
+DEGENERATE = {
+    frozenset({"camera.exposure", "light.intensity"}):
+        "exposure and light intensity both scale the image (exactly, with light.ambient)",
+    frozenset({"camera.exposure", "light.ambient"}):
+        "exposure and ambient light both scale the image (exactly, with light.intensity)",
+    frozenset({"light.intensity", "material.melanin"}):
+        "albedo against light intensity: melanin darkens much as less light does",
+    frozenset({"light.intensity", "material.blood"}):
+        "albedo against light intensity: blood darkens much as less light does",
+    frozenset({"light.intensity", "skin.melanin"}):
+        "albedo against light intensity: melanin darkens much as less light does",
+    frozenset({"camera.exposure", "skin.melanin"}):
+        "albedo against exposure: melanin darkens much as a lower exposure does",
+}
+MAP_SOLVER_NOTE = (
+    "Adam (optax, through optimistix.OptaxMinimiser) for maps: on the makeup face (three "
+    "thickness maps, 48² texture, 96² image, σ 0.01, 150 steps) Adam reached the noise floor "
+    "(RMS 0.0102) in 31 s; optimistix.LBFGS and NonlinearCG never left the start's loss "
+    "(0.295) in as many steps, their line searches rejecting every step in float32 "
+    "(benchmarks/RESULTS.md, 'fit-image')")
+ADAM_RATE = 0.3  # per step, in the transformed (log-like) coordinates: ~35 % at most
+PRIOR_EPS = 0.01  # the total variation's smoothing, in map units: sqrt(d² + ε²) − ε
+
+
+@dataclasses.dataclass(frozen=True)
+class FitKey:
+    """One fitted value: `key` (a `Scene.params` key or a map key), `kind` (`"scalar"`,
+    `"vector"`, `"map"` or `"lafortune"`: the lobes, ρd and n kept positive), its bounds
+    `lo`, `hi` (None: free) and, for a map, the scalar it multiplies and its transform
+    (`"sigmoid"`: in [0, hi/scalar], log-like near 0)."""
+
+    key: str
+    kind: str
+    lo: float | None = None
+    hi: float | None = None
+    scalar: str | None = None
+    transform: str | None = None
+
+    @property
+    def span(self) -> float:
+        """hi − lo of the key's range (1 for a key without one)."""
+        return float(self.hi - self.lo) if self.lo is not None else 1.0
+
+
+def map_keys(scene: Scene) -> dict[str, str]:
+    """The map keys a scene has, each → the scalar it multiplies."""
+    if scene.config.spectral is None:
+        return {}
+    out = {f"layer.{layer.name}.map": f"layer.{layer.name}.thickness_mm"
+           for layer in scene.layers}
+    if scene.config.spectral.skin == "nist":  # the biophysical skin has no maps yet
+        out.update({k: s for k, s in MAP_SCALARS.items() if s in scene.params})
+    return out
+
+
+def _schema(key: str):
+    parts = key.split(".")
+    if len(parts) == 3 and parts[0] == "layer":
+        return LAYER_SCHEMA.get(parts[2])
+    return SCHEMA.get(key)
+
+
+def fit_keys(scene: Scene, text: str, where: str = "--fit") -> tuple[FitKey, ...]:
+    """`--fit KEY[,KEY...]` for `scene`, checked: every key known, differentiable and used by
+    the scene's model; no key twice; no scalar with its own map (the pair has one scale).
+    Warns (`warnings.warn`) about the pairs in `DEGENERATE`. `InputError` otherwise."""
+    names = [k.strip() for k in text.split(",")]
+    if not names or any(not k for k in names):
+        raise InputError(f"expected KEY[,KEY...], got {text!r}", where)
+    params, maps = scene.params, map_keys(scene)
+    out = []
+    for key in names:
+        if names.count(key) > 1:
+            raise InputError("this key is given twice", where, key=key)
+        if key in maps:
+            scalar = maps[key]
+            if scalar in names:
+                raise InputError(f"fit the map or its scalar '{scalar}', not both: the map "
+                                 "multiplies it, so only their product is seen", where, key=key)
+            spec = _schema(scalar)
+            out.append(FitKey(key, "map", spec.lo, spec.hi, scalar, "sigmoid"))
+            continue
+        spec = _schema(key)
+        if key == "material.lafortune" and key in params:
+            out.append(FitKey(key, "lafortune"))
+            continue
+        if key not in params:
+            fittable = list(params) + list(maps)
+            if spec is not None and not spec.param:
+                why = ("is not differentiable: it is static (it decides which stages run or "
+                       "their sizes)")
+            elif spec is not None:
+                why = (f"is not used by this scene's material model "
+                       f"({scene.values['material.model']!r})")
+            elif key.endswith("_map") or key.endswith(".map"):
+                why = "is not a map of this scene"
+            else:
+                near = difflib.get_close_matches(key, fittable, n=1, cutoff=0.5)
+                why = "is unknown" + (f"; did you mean '{near[0]}'?" if near else "")
+            raise InputError(f"{why}; this scene's fittable keys: {', '.join(fittable)}",
+                             where, key=key)
+        if spec.kind == "vec3":
+            out.append(FitKey(key, "vector"))
+        else:
+            out.append(FitKey(key, "scalar", spec.lo, spec.hi))
+    keys = {k.key for k in out}
+    pairs = dict(DEGENERATE)
+    melanin = keys & {"skin.melanin", "skin.melanin_map"}
+    thickness = {k for k in keys if k.startswith("layer.") and k.endswith(("thickness_mm",
+                                                                          ".map"))}
+    for a in melanin:
+        for b in thickness:
+            pairs[frozenset({a, b})] = ("melanin against thickness: more melanin and a "
+                                        "thicker tinted layer both darken the skin")
+    for pair, why in pairs.items():
+        if pair <= keys:
+            a, b = sorted(pair)
+            warnings.warn(f"fitting {a} and {b} together: {why}; fix one of them (the fit "
+                          "finds one of many equally good answers)", stacklevel=2)
+    return tuple(out)
+
+
+# --- the parameter transforms -------------------------------------------------------------
+
+def _unit(fk: FitKey, params: dict) -> float:
+    """A map's fitting scale: its scalar's value (the schema's top when that is 0)."""
+    value = float(params[fk.scalar])
+    return value if value > 0 else float(fk.hi)
+
+
+def _to_z(fk: FitKey, value, unit: float = 1.0):
+    if fk.kind == "lafortune":  # ρd and the exponents n positive (log), Cxy and Cz free
+        return value._replace(diffuse=jnp.log(jnp.maximum(value.diffuse, 1e-6)),
+                              n=jnp.log(jnp.maximum(value.n, 1e-6)))
+    return _to_z_array(fk, value, unit)
+
+
+def _to_z_array(fk: FitKey, value, unit: float = 1.0):
+    """The unconstrained coordinate of a value (inverse of `_from_z`), kept off the bounds
+    so that it is finite: by 1e-3 of the range for a scalar, 1e-7 for a map (whose range,
+    up to the schema's top in units of its scalar, is wide: 0.01 mm of 10 mm)."""
+    x = np.asarray(value, np.float64)
+    if fk.kind == "vector":
+        return x
+    lo, hi = (0.0, fk.hi / unit) if fk.kind == "map" else (fk.lo, fk.hi)
+    eps = 1e-7 if fk.kind == "map" else 1e-3
+    f = np.clip((x - lo) / (hi - lo), eps, 1 - eps)
+    return np.log(f) - np.log1p(-f)
+
+
+def _from_z(fk: FitKey, z, unit: float = 1.0):
+    if fk.kind == "lafortune":
+        return z._replace(diffuse=jnp.exp(z.diffuse), n=jnp.exp(z.n))
+    if fk.kind == "vector":
+        return z
+    lo, hi = (0.0, fk.hi / unit) if fk.kind == "map" else (fk.lo, fk.hi)
+    return lo + (hi - lo) * jax.nn.sigmoid(z)
+
+
+# --- the loss -------------------------------------------------------------------------------
+
+def weights(config, params, target_alpha=None, mask=None):
+    """Per-pixel weights `(H, W)`: 1 where the mesh covers the pixel fully (its coverage,
+    `render`'s alpha, is 1), times the target's alpha and the mask (each in [0, 1])."""
+    alpha = np.asarray(render.render(config, params, "rgba"))[..., 3]
+    w = (alpha >= 1.0 - 1e-6).astype(np.float64)
+    for extra in (target_alpha, mask):
+        if extra is not None:
+            w = w * np.clip(np.asarray(extra, np.float64), 0.0, 1.0)
+    return w
+
+
+def _pairs(mask: np.ndarray):
+    """Neighbouring texel pairs (right and down) with both texels on the mesh: two index
+    arrays into the flattened texture."""
+    H, W = mask.shape
+    idx = np.arange(H * W).reshape(H, W)
+    a = [idx[:, :-1][mask[:, :-1] & mask[:, 1:]], idx[:-1][mask[:-1] & mask[1:]]]
+    b = [idx[:, 1:][mask[:, :-1] & mask[:, 1:]], idx[1:][mask[:-1] & mask[1:]]]
+    return np.concatenate(a), np.concatenate(b)
+
+
+def total_variation(m, pairs, eps: float = PRIOR_EPS):
+    """The smoothed total variation of a map `m (H, W)` over `pairs`: the mean over pairs
+    of sqrt(d² + ε²) − ε (d: the pair's difference); 0 for a constant map, ≈ mean |d| for
+    steps much larger than ε, smooth everywhere."""
+    flat = m.reshape(-1)
+    d = flat[pairs[0]] - flat[pairs[1]]
+    return jnp.mean(jnp.sqrt(d * d + eps * eps) - eps)
+
+
+@dataclasses.dataclass
+class ImageFit:
+    """A fit's result: `params` (the scene's, with the fitted values in their units and the
+    maps as factors `(H, W)`), `values` (the fitted scalars and vectors, as Python floats),
+    `history` (the loss at each step), `rms` (the RMS display-value difference over the
+    weighted pixels at the end), `steps`, `seconds`, `solver` (its name) and `image` (the
+    fitted render, display values)."""
+
+    params: dict
+    values: dict
+    history: list
+    rms: float
+    steps: int
+    seconds: float
+    solver: str
+    image: np.ndarray
+
+
+def _loss_of(state) -> jax.Array:
+    """The loss an optimistix solver's state holds (the last accepted point's)."""
+    info = getattr(state, "f_info", None)
+    if info is not None and hasattr(info, "residual"):
+        return jnp.sum(info.residual ** 2)
+    if info is not None and hasattr(info, "f"):
+        return info.f
+    return state.f
+
+
+def _solve(solver, fn, z0, args, steps: int, progress: Callable | None,
+           stall: int | None = None):
+    """Run an optimistix `solver` on `fn(z, args) -> (out, aux)` from `z0` for at most
+    `steps` steps, one jitted step at a time (`args`, the render's prepared arrays, passed
+    as arguments: closed over, XLA would fold them in as constants); `progress(loss)` after
+    each. `stall`: also stop when the loss has not fallen by 1e-4 of itself in this many
+    steps (Levenberg–Marquardt at the noise floor rejects step after step in float32, and
+    its own test only runs on accepted steps). Returns the last accepted `z`, the loss
+    history and the number of steps."""
+    options, tags = {}, frozenset()
+    f_struct, aux_struct = jax.eval_shape(fn, z0, args)
+    state = solver.init(fn, z0, args, options, f_struct, aux_struct, tags)
+    dynamic, static = eqx.partition(state, eqx.is_array)
+
+    @jax.jit
+    def step(z, dynamic, args):
+        state = eqx.combine(dynamic, static)
+        z, state, _ = solver.step(fn, z, args, options, state, tags)
+        done, _ = solver.terminate(fn, z, args, options, state, tags)
+        return z, eqx.filter(state, eqx.is_array), done, _loss_of(state)
+
+    history, z = [], z0
+    while len(history) < steps:
+        z, dynamic, done, loss = step(z, dynamic, args)
+        history.append(float(loss))
+        if progress is not None:
+            progress(history[-1])
+        if not np.isfinite(history[-1]) or bool(done):
+            break
+        if stall and len(history) > stall and history[-1] > (1 - 1e-4) * history[-1 - stall]:
+            break
+    return z, history, len(history)
+
+
+def fit(config, params: dict, target, w, keys: tuple[FitKey, ...], steps: int = 100,
+        smooth: float = 1e-5, progress: Callable | None = None, solver: str = "auto",
+        rate: float = ADAM_RATE) -> ImageFit:
+    """Fit `keys` of a scene (`config`, `params`: the start) to `target`.
+
+    **Arguments:**
+
+    - `target (H, W, 3)`: display values in [0, 1] from the scene's camera.
+    - `w (H, W)`: per-pixel weights (`weights`).
+    - `keys`: from `fit_keys`.
+    - `steps`: at most this many optimiser steps.
+    - `smooth`: the weight of the maps' total-variation prior (per map).
+    - `progress`: called with the loss after each step.
+    - `solver`: `"auto"` (Levenberg–Marquardt for scalars only, Adam with maps), or one of
+      `"lm"`, `"adam"`, `"lbfgs"`, `"ncg"` (for comparisons).
+    - `rate`: Adam's step size.
+
+    **Returns:** an `ImageFit`.
+    """
+    t0 = time.perf_counter()
+    arrays = render.prepare(config).arrays
+    target = jnp.asarray(target, jnp.float32)
+    w = np.asarray(w, np.float64)
+    if w.sum() <= 0:
+        raise InputError("no pixel to fit: the mesh covers no pixel fully inside the mask")
+    sqrt_w = jnp.asarray(np.sqrt(w / (3.0 * w.sum()))[..., None], jnp.float32)
+    mask = np.asarray(arrays["mask"])
+    start = dict(params)
+    units = {}
+    z0 = {}
+    for fk in keys:
+        if fk.kind == "map":
+            units[fk.key] = _unit(fk, params)
+            if units[fk.key] <= 0:
+                raise InputError(f"'{fk.scalar}' is 0, and its map multiplies it; set it to "
+                                 "the map's typical value (-D) to fit the map", key=fk.key)
+            start[fk.scalar] = jnp.float32(units[fk.key])
+            m0 = _start_map(config, params, fk, units[fk.key], arrays, mask)
+            z0[fk.key] = jnp.asarray(_to_z(fk, m0, units[fk.key]), jnp.float32)
+        elif fk.kind == "lafortune":
+            z0[fk.key] = jax.tree.map(lambda a: jnp.asarray(a, jnp.float32),
+                                      _to_z(fk, params[fk.key]))
+        else:
+            z0[fk.key] = jnp.asarray(_to_z(fk, params[fk.key]), jnp.float32)
+    pairs = jnp.asarray(np.stack(_pairs(mask)), jnp.int32)
+    maps = [fk for fk in keys if fk.kind == "map"]
+
+    def unpack(z):
+        p = dict(start)
+        for fk in keys:
+            p[fk.key] = _from_z(fk, z[fk.key], units.get(fk.key, 1.0))
+        return p
+
+    def residual(z, args):
+        image = render.render_prepared(config, unpack(z), args["arrays"])
+        return (jnp.clip(image, 0.0, 1.0) - args["target"]) * args["sqrt_w"], None
+
+    def loss(z, args):
+        r, _ = residual(z, args)
+        prior = sum(total_variation(unpack(z)[fk.key], args["pairs"]) for fk in maps)
+        return jnp.sum(r * r) + smooth * prior, None
+
+    name = solver if solver != "auto" else ("adam" if maps else "lm")
+    if name == "lm":
+        s = optx.LevenbergMarquardt(rtol=1e-4, atol=1e-4)  # |Δz| < 1e-4: x to 2.5e-5 of its range
+        fn = residual
+    else:
+        fn = loss
+        s = {"adam": lambda: optx.OptaxMinimiser(optax.adam(rate), rtol=0.0, atol=0.0),
+             "lbfgs": lambda: optx.LBFGS(rtol=0.0, atol=0.0),
+             "ncg": lambda: optx.NonlinearCG(rtol=0.0, atol=0.0)}[name]()
+    args = {"arrays": arrays, "target": target, "sqrt_w": sqrt_w, "pairs": pairs}
+    z, history, n = _solve(s, fn, z0, args, steps, progress, stall=5 if name == "lm" else None)
+    fitted = unpack(z)
+    image = np.asarray(render.render_prepared(config, fitted, arrays))
+    r = (np.clip(image, 0, 1) - np.asarray(target)) * np.asarray(sqrt_w)
+    values = {}
+    for fk in keys:
+        if fk.kind in ("scalar", "vector"):
+            v = np.asarray(fitted[fk.key], np.float64)
+            values[fk.key] = v.tolist() if v.ndim else float(v)
+        elif fk.kind == "lafortune":
+            values[fk.key] = jax.tree.map(np.asarray, fitted[fk.key])
+    return ImageFit(fitted, values, history, float(np.sqrt(np.sum(r * r))), n,
+                    time.perf_counter() - t0, name, image)
+
+
+def _start_map(config, params, fk: FitKey, unit: float, arrays, mask):
+    """A map's start `(H, W)`, in units of `unit`: the scene's own map (its image or
+    regions) × its scalar, with off-mesh texels at the mesh's mean."""
+    texels = np.asarray(arrays["texels"])
+    H, W = mask.shape
+    if fk.key == "skin.melanin_map":
+        own = arrays.get("melanin_cover")
+    else:
+        names = [layer.name for layer in config.spectral.layers]
+        own = arrays["cover"][names.index(fk.key.split(".")[1])]
+    on_mesh = np.ones(len(texels)) if own is None else np.asarray(own, np.float64)
+    on_mesh = on_mesh * float(params[fk.scalar]) / unit
+    out = np.full(H * W, on_mesh.mean() if on_mesh.size else 0.0)
+    out[texels] = on_mesh
+    return out.reshape(H, W)
+
+
+def map_image(fitted: ImageFit, fk: FitKey, mask) -> tuple[np.ndarray, float]:
+    """A fitted map as the scene holds it: the greyscale image `(H, W)` in [0, 1] (its
+    largest texel on the mesh is 1; 0 off the mesh) and the scalar it multiplies."""
+    m = np.asarray(fitted.params[fk.key], np.float64)
+    scalar = float(fitted.params[fk.scalar])
+    top = float(m[mask].max()) if mask.any() else 0.0
+    if top <= 0:
+        return np.zeros_like(m), scalar
+    return np.where(mask, np.clip(m / top, 0.0, 1.0), 0.0), scalar * top
+
+
+def write_report(result: ImageFit, target, w, maps: dict, path, title: str = "") -> None:
+    """The report PNG: target, fit, |residual| heat map, loss against step, and each fitted
+    map (`maps`: key → (values `(H, W)` in the scalar's units, texture mask, unit name))."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+
+    ncol = 4
+    rows = 1 + -(-len(maps) // ncol)
+    fig, axes = plt.subplots(rows, ncol, figsize=(4 * ncol, 3.9 * rows), squeeze=False,
+                             constrained_layout=True)
+    fit_image = np.clip(result.image, 0, 1)
+    axes[0, 0].imshow(np.clip(target, 0, 1))
+    axes[0, 0].set_title("target")
+    axes[0, 1].imshow(fit_image)
+    axes[0, 1].set_title(f"fit ({result.solver}, {result.steps} steps, {result.seconds:.0f} s)")
+    err = np.abs(fit_image - np.asarray(target)).mean(axis=-1)
+    err = np.where(np.asarray(w) > 0, err, np.nan)
+    im = axes[0, 2].imshow(err, cmap="inferno", vmin=0)
+    axes[0, 2].set_title(f"|fit − target| (RMS {result.rms:.4f})")
+    fig.colorbar(im, ax=axes[0, 2], shrink=0.8)
+    ax = axes[0, 3]
+    ax.semilogy(np.arange(1, len(result.history) + 1), result.history)
+    ax.set_xlabel("step")
+    ax.set_ylabel("loss")
+    ax.set_title("loss")
+    ax.grid(alpha=0.3)
+    for a in axes[0, :3]:
+        a.set_axis_off()
+    for i, (key, (values, tmask, unit)) in enumerate(maps.items()):
+        a = axes[1 + i // ncol, i % ncol]
+        im = a.imshow(np.where(tmask, values, np.nan), cmap="viridis")
+        a.set_title(f"{key} ({unit})")
+        a.set_axis_off()
+        fig.colorbar(im, ax=a, shrink=0.8)
+    for j in range(len(maps), (rows - 1) * ncol):
+        axes[1 + j // ncol, j % ncol].set_axis_off()
+    if title:
+        fig.suptitle(title)
+    with atomic_write(path, "wb") as fh:
+        fig.savefig(fh, format="png", dpi=90)
+    plt.close(fig)
+
+
+# --- the command ----------------------------------------------------------------------------
+
+def run_command(args, run) -> int:
+    """`jaxskin fit-image` (the CLI's body): check everything, fit, write DIR/<name>.toml,
+    the maps as 16-bit PNGs and DIR/<name>_fit.png. `run`: the CLI's record of what is
+    written."""
+    from tqdm import tqdm
+
+    from jaxskin import cli, maps
+    from jaxskin.outputs import Outputs, check_name
+    from jaxskin.scene import load_scene
+    from jaxskin.scene_writer import scene_toml
+
+    outputs = Outputs(args.output)
+    with cli._reading(args.scene):
+        scene = load_scene(args.scene, args.overrides)
+    keys = fit_keys(scene, args.fit)
+    config = scene.config
+    height, width = config.image_height or config.image, config.image
+    target, target_alpha = maps.read_image(args.target, "image")
+    if target.shape[:2] != (height, width):
+        raise InputError(f"the target is {target.shape[1]}x{target.shape[0]} pixels, the "
+                         f"scene's camera {width}x{height} (camera.size, camera.height; set "
+                         "them with -D)", args.target)
+    mask = None
+    if args.mask is not None:
+        rgb, _ = maps.read_image(args.mask, "image")
+        if rgb.shape[:2] != (height, width):
+            raise InputError(f"the mask is {rgb.shape[1]}x{rgb.shape[0]} pixels, the target "
+                             f"{width}x{height}", args.mask)
+        mask = rgb.mean(axis=-1)
+    outputs.inputs += [Path(p) for p in cli._check_scene(scene, 1)]
+    outputs.inputs += [Path(p) for p in (args.target, args.mask) if p is not None]
+    name = check_name(scene.name, scene.source)
+    toml_path = outputs.plan(f"{name}.toml", "the fitted scene")
+    report_path = outputs.plan(f"{name}_fit.png", "the report")
+    map_paths = {fk.key: outputs.plan(f"{name}_{fk.key}.png", fk.key)
+                 for fk in keys if fk.kind == "map"}
+    brdf_path = (outputs.plan(f"{name}_brdf.json", "the fitted lobes")
+                 if any(fk.kind == "lafortune" for fk in keys) else None)
+    params = scene.params
+    w = weights(config, params, target_alpha, mask)
+    if w.sum() <= 0:
+        raise InputError("no pixel to fit: the mesh covers no pixel fully"
+                         + (" inside the mask" if mask is not None else ""),
+                         args.mask or args.target)
+    run.outputs.append(outputs)
+    run.stage = "fitting"
+    print(f"fitting {', '.join(k.key for k in keys)} to {args.target} "
+          f"({width}x{height}, {int((w > 0).sum())} pixels)", flush=True)
+    with tqdm(total=args.steps, desc="fit-image", unit="step", disable=None) as bar:
+        def progress(loss):
+            bar.set_postfix(loss=f"{loss:.3e}", refresh=False)
+            bar.update(1)
+
+        result = fit(config, params, target, w, keys, steps=args.steps, smooth=args.smooth,
+                     progress=progress)
+    run.stage = "writing"
+    tmask = np.asarray(render.prepare(config).arrays["mask"])
+    values = dict(result.values)
+    if brdf_path is not None:
+        from jaxskin.formats import write_lafortune
+
+        write_lafortune(values.pop("material.lafortune"), brdf_path,
+                        fit={"source": Path(args.target).name, "rms": result.rms})
+        outputs.done(brdf_path)
+        values["material.brdf"] = brdf_path.name
+    images, shown = {}, {}
+    for fk in keys:
+        if fk.kind != "map":
+            continue
+        grey, scalar = map_image(result, fk, tmask)
+        hi = _schema(fk.scalar).hi
+        if scalar > hi:
+            warnings.warn(f"{fk.key}: the fitted map's largest value {scalar:g} is beyond "
+                          f"{fk.scalar}'s range (≤ {hi:g}); written as {hi:g}", stacklevel=1)
+            grey, scalar = grey * scalar / hi, hi
+        values[fk.scalar] = scalar
+        maps.write_grey16(grey, map_paths[fk.key])
+        outputs.done(map_paths[fk.key])
+        images[fk.key] = map_paths[fk.key].name
+        shown[fk.key] = (grey * scalar, tmask, "mm" if fk.scalar.endswith("_mm") else
+                         fk.scalar)
+    comment = (f"Fitted by jaxskin fit-image to {args.target} ({result.solver}, "
+               f"{result.steps} steps, RMS {result.rms:.4g})\nfrom {scene.source}; fitted: "
+               + ", ".join(k.key for k in keys))
+    with atomic_write(toml_path, "w") as fh:
+        fh.write(scene_toml(scene, values, images, comment))
+    outputs.done(toml_path)
+    write_report(result, target, w, shown, report_path,
+                 f"{scene.name}: fit-image {', '.join(k.key for k in keys)}")
+    outputs.done(report_path)
+    print(f"{'key':<28} {'start':>12} {'fitted':>12}")
+    for fk in keys:
+        if fk.kind == "lafortune":
+            print(f"{fk.key:<28} {'(lobes)':>12} {brdf_path.name:>12}")
+        elif fk.kind != "map":
+            print(f"{fk.key:<28} {_fmt(params[fk.key]):>12} {_fmt(values[fk.key]):>12}")
+        else:
+            print(f"{fk.key:<28} {'(map)':>12} {'× ' + _fmt(values[fk.scalar]):>12}")
+    print(f"RMS difference {result.rms:.4g} (display values) after {result.steps} steps "
+          f"({result.seconds:.1f} s)")
+    cli._print_written(outputs)
+    return 0
+
+
+def _fmt(v) -> str:
+    a = np.asarray(v, np.float64)
+    return f"{float(a):.4g}" if a.ndim == 0 else "[" + ", ".join(f"{x:.3g}" for x in a) + "]"

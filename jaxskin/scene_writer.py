@@ -1,0 +1,110 @@
+"""A scene as TOML text: the inverse of `scene.load_scene` (what `jaxskin fit-image` writes).
+
+`scene_toml(scene)` gives a file that `load_scene` reads back to the same configuration and
+parameters: every value that differs from the schema's default, the layers (their regions or
+images) and the field edits. Paths are written absolute (meshes, materials other than the
+shipped ones, BRDF files, images), except the images given in `images`, which are written as
+given (file names beside the new scene file).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from .io import data_dir
+from .scene import LAYER_SCHEMA, SCHEMA, Scene
+
+__all__ = ["scene_toml"]
+
+
+def _value(v) -> str:
+    """One TOML value: a string, bool, int, finite float or a list of them."""
+    if isinstance(v, str):
+        return json.dumps(v, ensure_ascii=False)  # JSON's escapes are TOML's basic string's
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if not math.isfinite(v):
+            raise ValueError(f"a scene value must be finite, got {v!r}")
+        return repr(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    raise TypeError(f"cannot write {v!r} ({type(v).__name__}) as a TOML value")
+
+
+def _material(path: str) -> str:
+    """A shipped material by its name, any other by its absolute path."""
+    p = Path(path)
+    return p.stem if p.parent == data_dir() / "materials" else str(p)
+
+
+def scene_toml(scene: Scene, values: dict | None = None, images: dict | None = None,
+               comment: str = "") -> str:
+    """The TOML text of `scene`, with `values` (dotted keys: scalars, `light.direction`,
+    `layer.NAME.KEY`) replacing the scene's own.
+
+    **Arguments:**
+
+    - `scene`: a loaded scene.
+    - `values`: new values by key (floats, or three floats for a vector); their ranges are
+      the caller's to respect (`load_scene` checks them when the file is read).
+    - `images`: image files by map key: `layer.NAME.map` (the layer's `image`, replacing
+      its regions) and `skin.melanin_map` (`skin.melanin_image`), written as given.
+    - `comment`: lines put at the top as TOML comments.
+
+    **Returns:** the text, ending with a newline.
+    """
+    v = {**scene.values, **(values or {})}
+    images = images or {}
+    if "skin.melanin_map" in images:
+        v["skin.melanin_image"] = images["skin.melanin_map"]
+    lines = [f"# {line}".rstrip() for line in comment.splitlines()]
+    lines.append(f"name = {_value(v['name'])}")
+    section = None
+    heads = list(dict.fromkeys(k.split(".")[0] for k in SCHEMA))  # one table per section
+    for key, spec in sorted(SCHEMA.items(), key=lambda kv: heads.index(kv[0].split(".")[0])):
+        if key == "name" or v[key] is None:
+            continue
+        value = v[key]
+        default = spec.default
+        if spec.kind == "vec3":
+            value = [float(c) for c in value]
+            default = list(default)
+        elif spec.kind is float:
+            value = float(value)
+        if value == default and key != "material.model":
+            continue
+        head, name = key.split(".", 1)
+        if head != section:
+            lines += ["", f"[{head}]"]
+            section = head
+        lines.append(f"{name} = {_value(value)}")
+    for layer in scene.layers:
+        lines += ["", "[[layer]]", f"name = {_value(layer.name)}",
+                  f"material = {_value(_material(layer.material))}"]
+        for k in LAYER_SCHEMA:
+            lines.append(f"{k} = {_value(float(v[f'layer.{layer.name}.{k}']))}")
+        image = images.get(f"layer.{layer.name}.map")
+        if image is not None or layer.image is not None:
+            lines.append(f"image = {_value(image if image is not None else layer.image)}")
+            continue
+        for center, radii, angle, feather in layer.ellipses:
+            lines += ["[[layer.ellipse]]", f"center = {_value(list(center))}",
+                      f"radii = {_value(list(radii))}", f"angle = {_value(float(angle))}",
+                      f"feather = {_value(float(feather))}"]
+        for points, vertices, feather in layer.polygons:
+            lines.append("[[layer.polygon]]")
+            lines.append(f"vertices = {_value(list(vertices))}" if vertices is not None else
+                         f"points = {_value([list(p) for p in points])}")
+            lines.append(f"feather = {_value(float(feather))}")
+    for e in scene.edits:
+        lines += ["", "[[fields.edit]]"]
+        lines.append(f"vertex = {e.vertex}" if e.vertex is not None else
+                     f"at = {_value(list(e.at))}")
+        lines += [f"d1 = {_value(list(e.d1))}", f"d2 = {_value(list(e.d2))}",
+                  f"weight = {_value(float(e.weight))}"]
+    return "\n".join(lines) + "\n"
