@@ -98,6 +98,7 @@ class FitKey:
 
     @property
     def span(self) -> float:
+        """hi − lo of the key's range (1 for a key without one)."""
         return float(self.hi - self.lo) if self.lo is not None else 1.0
 
 

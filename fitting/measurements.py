@@ -1,6 +1,6 @@
 """Spectroradiometer measurement CSVs for Kubelka–Munk calibration (Huang et al. 2013 §4).
 
-The format, also in the README:
+The format (also in the documentation, docs/reference/formats.md):
 
     # name: foundation_1          (optional; default: the file's stem)
     # thickness_mm: 0.15          (optional; the thickness of a bare `R` column)

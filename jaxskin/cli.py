@@ -168,7 +168,7 @@ def _parser() -> argparse.ArgumentParser:
         "CSV of thin-layer (R_<X>mm), opaque (R_inf) and background (R_g) reflectances, or raw "
         "radiances (E_… and E_white). Writes OUTDIR/<name>.json (the material file the "
         "renderer reads) and OUTDIR/<name>.png (a report). Every file is checked before any "
-        "fit runs: one bad file writes nothing. The CSV format is in the README.",
+        "fit runs: one bad file writes nothing. The CSV format: docs/reference/formats.md.",
     )
     c.add_argument("files", nargs="+", metavar="FILE.csv", help="measurement CSVs")
     c.add_argument("-o", "--output", required=True, metavar="OUTDIR",
@@ -197,7 +197,8 @@ def _parser() -> argparse.ArgumentParser:
         "render",
         help="render scenes to PNG (and their texture-space maps)",
         description="Render one or more scenes: a built-in name (hand, foot, arm: Bando 2001 "
-        "figs. 6.1-6.3) or a TOML scene file (format in the README). Writes DIR/<scene>.png "
+        "figs. 6.1-6.3) or a TOML scene file (format: docs/reference/scene.md). Writes "
+        "DIR/<scene>.png "
         "(or .exr, --format); "
         "with --maps also DIR/<scene>_height.png (16-bit grey), DIR/<scene>_normal.png (the "
         "bump-mapped normal map) and DIR/<scene>_field.png (the mesh with d1 in red and d2 in "
@@ -745,6 +746,8 @@ def _edit(args, run: _Run) -> int:
 
 
 def main(argv=None) -> int:
+    """The `jaxskin` command: parse `argv` (default `sys.argv[1:]`), run the command, and
+    return its exit code (0 done, 2 bad input, 1 failure, 130 SIGINT, 143 SIGTERM)."""
     parser = _parser()
     args = parser.parse_args(argv)
     if args.command is None:

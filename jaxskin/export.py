@@ -188,5 +188,6 @@ def read_glb(data: bytes) -> tuple[dict, bytes]:
 
 
 def write_glb(setup, albedo, normals, path) -> None:
+    """Write `glb_bytes(setup, albedo, normals)` to `path` atomically."""
     with atomic_write(path, "wb") as fh:
         fh.write(glb_bytes(setup, albedo, normals))

@@ -61,6 +61,7 @@ class Table:
     delimiter: str = ","
 
     def column(self, name: str) -> np.ndarray:
+        """The values of the column named `name`, `(rows,)`."""
         return self.data[:, self.header.index(name)]
 
     def error(self, message: str, row: int | None = None, column: str | None = None):

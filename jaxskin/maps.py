@@ -20,6 +20,7 @@ FORMATS = ("png", "png16", "exr")
 
 
 def png_bytes(image: np.ndarray) -> bytes:
+    """An 8-bit PNG file's bytes of `image` (`(H, W)`, `(H, W, 3)` or `(H, W, 4)` uint8)."""
     import imageio.v3 as iio
 
     return iio.imwrite("<bytes>", image, extension=".png")

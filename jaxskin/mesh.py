@@ -38,6 +38,7 @@ class Mesh:
     uv: np.ndarray | None
 
     def face_normals(self) -> np.ndarray:
+        """Unit normals of the faces `(F, 3)`, by the right-hand rule of their vertex order."""
         a, b, c = (self.vertices[self.faces[:, i]] for i in range(3))
         n = np.cross(b - a, c - a)
         return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)

@@ -122,8 +122,10 @@ class Outputs:
         return path
 
     def done(self, path) -> None:
+        """Record `path` as written (complete)."""
         self.written.append(Path(path))
 
     def summary(self) -> str:
+        """One line: how many files are complete, and where."""
         n = len(self.written)
         return f"{n} file(s) complete in {self.folder}/"

@@ -62,6 +62,7 @@ class TextureMap:
 
     @functools.cached_property
     def raster(self) -> Raster:
+        """The texture's `Raster` (triangle and barycentrics per texel), made once."""
         return rasterize(self.xy, self.mesh.faces, self.height, self.width, self.depth,
                          self.wrap_x)
 

@@ -30,6 +30,7 @@ class Raster(NamedTuple):
 
     @property
     def mask(self) -> np.ndarray:
+        """`(H, W)` bool: the pixels or texels a triangle covers."""
         return self.tri >= 0
 
 

@@ -51,6 +51,9 @@ SHADOW_MAX = 2048  # texels across the shadow map, at most
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Prepared:
+    """What `prepare` computes once per configuration: the texture-space setup, the camera
+    view, the arrays `render_prepared` takes and the texel size on the skin (mm)."""
+
     setup: texture.TextureSetup
     view: View
     arrays: dict  # what `render` takes as arguments (not as compile-time constants)

@@ -8,19 +8,20 @@ projection = "planar"              # planar | cylindrical | uv
 [texture]
 size = 512                         # texels across
 [wrinkles]
-enabled = true
+enabled = true                     # false: no furrow program at all (a smooth surface)
 k_scale = 1.1                      # 0.5–2 (lengths, in texels; static)
-k_noise = 0.0                      # 0–1
-k_bump = 0.5                       # 0–1
-seed = 0
+k_noise = 0.0                      # 0–1: noise added to the height field
+k_bump = 0.5                       # 0–1: depth of the bump mapping
+seed = 0                           # the furrows' random numbers
 method = "auto"                    # auto | parallel | sequential: the furrow program (static;
                                    #   auto: sequential on a CPU, parallel on a GPU/TPU)
 [material]
-model = "blinn"                    # blinn | lafortune | spectral | biophysical
-melanin = 0.2                      # Blinn: melanin, blood 0–1 (shading.blinn); specular 0–1;
-blood = 0.5                        #   shininess 0–10000
-specular = 0.2
-shininess = 100.0
+model = "blinn"                    # blinn | lafortune | spectral (the cosmetics model) |
+                                   #   biophysical (the cosmetics model over a biophysical skin)
+melanin = 0.2                      # Blinn's skin colour: melanin 0–1 (shading.blinn)
+blood = 0.5                        # Blinn's skin colour: blood 0–1
+specular = 0.2                     # Blinn's specular reflectance 0–1
+shininess = 100.0                  # Blinn's exponent 0–10000
 brdf = "skin"                      # Lafortune: the preset, or a JSON from jaxskin fit-brdf
 [light]
 direction = [0.0, 0.0, 1.0]        # toward the light, camera space (parallel light)
@@ -40,9 +41,10 @@ rotate = [0.0, 0.0, 0.0]           # degrees about x, y, z: turns the mesh
 [view]
 mode = "wrinkles"                  # wrinkles | overview (no wrinkles) | height
 [[fields.edit]]                    # any number; none: the initial fields
-at = [0.0, 0.4, 0.1]               # the vertex nearest to this point (or: vertex = 123)
-d1 = [0.6, 1.0, 0.0]               # direction and magnitude (|d| <= 2)
-d2 = [-0.8, 0.5, 0.0]
+at = [0.0, 0.4, 0.1]               # the vertex nearest to this point ...
+vertex = 123                       # ... or a vertex index (give one of the two)
+d1 = [0.6, 1.0, 0.0]               # direction and magnitude (|d| <= 2) of the first field
+d2 = [-0.8, 0.5, 0.0]              # ... and of the second
 weight = 1.0                       # λ, 0–10
 ```
 
@@ -55,39 +57,43 @@ unit_mm = 10.0                     # millimetres per mesh unit (the face is in c
 model = "nist"                     # nist (a measured subject) | biophysical
 subject = 1                        # NIST skin spectrum, subjects 1–100
 melanin = 0.0                      # added melanin, optical depth at 500 nm (0–3)
-melanin_fraction = 0.06            # biophysical (jaxskin.biophysical; material.model =
-eumelanin = 0.1                    #   "biophysical" is this with the spectral model):
-haemoglobin = 0.02                 #   melanosome fraction 0.005–0.5, eumelanin share 0–1,
-oxygenation = 0.6                  #   blood fraction 0.001–0.1, saturation 0–1,
-epidermis_mm = 0.035               #   epidermis 0.01–0.15 mm, scattering factor 0.5–6
-scattering = 2.5
+melanin_fraction = 0.06            # biophysical skin (jaxskin.biophysical): melanosome
+                                   #   volume fraction 0.005–0.5
+eumelanin = 0.1                    # biophysical: the eumelanin share 0–1 (the rest pheomelanin)
+haemoglobin = 0.02                 # biophysical: dermal blood volume fraction 0.001–0.1
+oxygenation = 0.6                  # biophysical: the blood's oxygen saturation 0–1
+epidermis_mm = 0.035               # biophysical: epidermis thickness 0.01–0.15 mm
+scattering = 2.5                   # biophysical: scattering factor 0.5–6
 melanin_image = "melanin.png"      # optional: a greyscale map, melanin × its value (0–1)
-roughness = 0.3                    # Kelemen m and rho_s of the skin's own highlight
-specular = 0.18
+roughness = 0.3                    # Kelemen m of the skin's own highlight
+specular = 0.18                    # Kelemen rho_s of the skin's own highlight
 [spectral]
 step = 10                          # nm: 1 | 5 | 10 | 20
 illuminant = "D65"                 # D65 | D55 | D50 | A
 [sss]
-enabled = true
+enabled = true                     # false: no subsurface scattering blur at all
 method = "fft"                     # fft (exact) | separable (3-sigma passes)
 texel_mm = 0.0                     # 0: from the mesh's scale and UV area
 [[layer]]                          # any number, bottom (applied first) to top
 name = "blush"                     # names the layer's keys: -D layer.blush.thickness_mm=0.02
 material = "blush_rose"            # a shipped material, or a jaxskin calibrate JSON
 thickness_mm = 0.01                # thickness where the map is 1
-roughness = 0.3                    # its highlight (Kelemen m, rho_s)
-specular = 0.1
-s_scale = 1.0                      # multiply the material's S(λ), K(λ)
-k_scale = 1.0
-image = "blush.png"                # a greyscale map (0–1 × thickness_mm), or regions:
-[[layer.ellipse]]                  #   ellipses and polygons on the mesh's UVs (u right,
-center = [0.28, 0.47]              #   v up), feathered; the map is their union; none of
-radii = [0.08, 0.05]               #   image, ellipse, polygon: everywhere
+roughness = 0.3                    # its highlight: Kelemen m
+specular = 0.1                     # its highlight: Kelemen rho_s
+s_scale = 1.0                      # multiplies the material's S(λ)
+k_scale = 1.0                      # multiplies the material's K(λ)
+image = "blush.png"                # a greyscale map (0–1 × thickness_mm), or regions below;
+                                   #   none of image, ellipse, polygon: everywhere
+[[layer.ellipse]]                  # ellipses on the mesh's UVs (u right, v up), feathered;
+                                   #   the map is the union of the regions
+center = [0.28, 0.47]              # uv
+radii = [0.08, 0.05]               # uv units
 angle = 0.0                        # degrees
 feather = 0.03                     # soft edge width, uv units
-[[layer.polygon]]
-vertices = [61, 146, 91]           # mesh vertices (their UVs), or points = [[u, v], ...]
-feather = 0.01
+[[layer.polygon]]                  # polygons on the mesh's UVs, feathered
+vertices = [61, 146, 91]           # mesh vertices (their UVs) ...
+points = [[0.4, 0.2], [0.6, 0.2], [0.5, 0.3]]  # ... or uv points (give one of the two)
+feather = 0.01                     # soft edge width, uv units
 ```
 
 Every key has a type and a range; an unknown key is an error that suggests the nearest
@@ -259,6 +265,7 @@ class SpectralConfig:
 
     @property
     def grid(self) -> Grid:
+        """The spectral `Grid` of `step` and `illuminant`."""
         return Grid(self.step, illuminant=self.illuminant)
 
 
@@ -282,6 +289,8 @@ class SceneConfig:
 
     @property
     def needs_furrows(self) -> bool:
+        """Whether the render runs the furrow program (wrinkles on and a mode that shows
+        them)."""
         return self.texture.wrinkles and self.mode in ("wrinkles", "height")
 
 
@@ -299,6 +308,9 @@ def furrow_method(method: str) -> str:
 
 @dataclasses.dataclass(frozen=True)
 class Scene:
+    """A loaded, checked scene: `values` (every key's value), the field `edits` and
+    cosmetic `layers`; `config` and `params` split it for the renderer."""
+
     name: str
     source: str
     values: dict
@@ -307,6 +319,7 @@ class Scene:
 
     @functools.cached_property
     def config(self) -> SceneConfig:
+        """The static part of the scene, hashable: the jit cache key."""
         v = self.values
         tex = TextureConfig(v["mesh.file"], v["mesh.projection"], v["texture.size"],
                             v["wrinkles.enabled"], v["wrinkles.k_scale"], v["wrinkles.seed"],
@@ -361,6 +374,7 @@ BUILTIN_SCENES = ("hand", "foot", "arm", "face", "makeup")
 
 
 def builtin_scenes() -> dict[str, Path]:
+    """`{name: path}` of the built-in scene files in `data/scenes/`."""
     return {name: data_dir() / "scenes" / f"{name}.toml" for name in BUILTIN_SCENES}
 
 

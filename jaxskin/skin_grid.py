@@ -1,5 +1,5 @@
 """The melanin × blood grid: small Blinn renders of one scene over k_melanin and k_blood
-(the README's picture of `shading.blinn`'s skin colours; the gallery's grid)."""
+(the documentation's picture of `shading.blinn`'s skin colours; the gallery's grid)."""
 
 from __future__ import annotations
 

@@ -28,6 +28,10 @@ __all__ = ["TextureSetup", "furrows", "mapped", "setup", "texture_maps"]
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class TextureSetup:
+    """Everything texture space holds for a `TextureConfig`: the mesh, its map to texels,
+    the field edits, the vertex and texel direction fields, interpolated normals, the mask
+    and (cylindrical, uv) the surface gradients of the texture coordinates."""
+
     config: TextureConfig
     mesh: Mesh
     tmap: TextureMap
@@ -50,6 +54,8 @@ class TextureSetup:
 
 @functools.lru_cache(maxsize=8)
 def setup(config: TextureConfig) -> TextureSetup:
+    """The `TextureSetup` of `config`, computed once per configuration (cached): the mesh
+    loaded, projected to texture space and rasterized, its field edits interpolated."""
     mesh, tmap = mapped(config.mesh, config.projection, config.size)
     edits = []
     for i, e in enumerate(config.edits):

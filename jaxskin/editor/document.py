@@ -23,6 +23,7 @@ class EditorError(Exception):
         self.message, self.status, self.key = message, status, key
 
     def json(self) -> dict:
+        """The error as the JSON body of a 4xx answer: `{"error": message, "key": key}`."""
         return {"error": self.message, "key": self.key}
 
 

@@ -276,9 +276,11 @@ class Session:
         self.redo_stack.clear()
 
     def undo(self) -> bool:
+        """Go back one change; False when there is none to undo."""
         return self._step(self.undo_stack, self.redo_stack)
 
     def redo(self) -> bool:
+        """Redo the last undone change; False when there is none."""
         return self._step(self.redo_stack, self.undo_stack)
 
     def _step(self, source: list, target: list) -> bool:
