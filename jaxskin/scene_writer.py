@@ -9,31 +9,13 @@ given (file names beside the new scene file).
 
 from __future__ import annotations
 
-import json
-import math
 from pathlib import Path
 
 from .io import data_dir
 from .scene import LAYER_SCHEMA, SCHEMA, Scene
+from .toml_writer import value_text
 
 __all__ = ["scene_toml"]
-
-
-def _value(v) -> str:
-    """One TOML value: a string, bool, int, finite float or a list of them."""
-    if isinstance(v, str):
-        return json.dumps(v, ensure_ascii=False)  # JSON's escapes are TOML's basic string's
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, float):
-        if not math.isfinite(v):
-            raise ValueError(f"a scene value must be finite, got {v!r}")
-        return repr(v)
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_value(x) for x in v) + "]"
-    raise TypeError(f"cannot write {v!r} ({type(v).__name__}) as a TOML value")
 
 
 def _material(path: str) -> str:
@@ -63,7 +45,7 @@ def scene_toml(scene: Scene, values: dict | None = None, images: dict | None = N
     if "skin.melanin_map" in images:
         v["skin.melanin_image"] = images["skin.melanin_map"]
     lines = [f"# {line}".rstrip() for line in comment.splitlines()]
-    lines.append(f"name = {_value(v['name'])}")
+    lines.append(f"name = {value_text(v['name'])}")
     section = None
     heads = list(dict.fromkeys(k.split(".")[0] for k in SCHEMA))  # one table per section
     for key, spec in sorted(SCHEMA.items(), key=lambda kv: heads.index(kv[0].split(".")[0])):
@@ -82,29 +64,29 @@ def scene_toml(scene: Scene, values: dict | None = None, images: dict | None = N
         if head != section:
             lines += ["", f"[{head}]"]
             section = head
-        lines.append(f"{name} = {_value(value)}")
+        lines.append(f"{name} = {value_text(value)}")
     for layer in scene.layers:
-        lines += ["", "[[layer]]", f"name = {_value(layer.name)}",
-                  f"material = {_value(_material(layer.material))}"]
+        lines += ["", "[[layer]]", f"name = {value_text(layer.name)}",
+                  f"material = {value_text(_material(layer.material))}"]
         for k in LAYER_SCHEMA:
-            lines.append(f"{k} = {_value(float(v[f'layer.{layer.name}.{k}']))}")
+            lines.append(f"{k} = {value_text(float(v[f'layer.{layer.name}.{k}']))}")
         image = images.get(f"layer.{layer.name}.map")
         if image is not None or layer.image is not None:
-            lines.append(f"image = {_value(image if image is not None else layer.image)}")
+            lines.append(f"image = {value_text(image if image is not None else layer.image)}")
             continue
         for center, radii, angle, feather in layer.ellipses:
-            lines += ["[[layer.ellipse]]", f"center = {_value(list(center))}",
-                      f"radii = {_value(list(radii))}", f"angle = {_value(float(angle))}",
-                      f"feather = {_value(float(feather))}"]
+            lines += ["[[layer.ellipse]]", f"center = {value_text(list(center))}",
+                      f"radii = {value_text(list(radii))}", f"angle = {value_text(float(angle))}",
+                      f"feather = {value_text(float(feather))}"]
         for points, vertices, feather in layer.polygons:
             lines.append("[[layer.polygon]]")
-            lines.append(f"vertices = {_value(list(vertices))}" if vertices is not None else
-                         f"points = {_value([list(p) for p in points])}")
-            lines.append(f"feather = {_value(float(feather))}")
+            lines.append(f"vertices = {value_text(list(vertices))}" if vertices is not None else
+                         f"points = {value_text([list(p) for p in points])}")
+            lines.append(f"feather = {value_text(float(feather))}")
     for e in scene.edits:
         lines += ["", "[[fields.edit]]"]
         lines.append(f"vertex = {e.vertex}" if e.vertex is not None else
-                     f"at = {_value(list(e.at))}")
-        lines += [f"d1 = {_value(list(e.d1))}", f"d2 = {_value(list(e.d2))}",
-                  f"weight = {_value(float(e.weight))}"]
+                     f"at = {value_text(list(e.at))}")
+        lines += [f"d1 = {value_text(list(e.d1))}", f"d2 = {value_text(list(e.d2))}",
+                  f"weight = {value_text(float(e.weight))}"]
     return "\n".join(lines) + "\n"

@@ -28,7 +28,7 @@ from aiohttp.test_utils import TestClient, TestServer  # noqa: E402
 from jaxskin import cli, render  # noqa: E402
 from jaxskin.editor.server import MAX_BODY, make_app  # noqa: E402
 from jaxskin.editor.state import Session  # noqa: E402
-from jaxskin.editor.toml import dumps  # noqa: E402
+from jaxskin.toml_writer import dumps  # noqa: E402
 
 SCENE = """\
 # A small face for the editor's tests: one cosmetic layer, furrows, no SSS or shadows.

@@ -45,9 +45,9 @@ from ..scene import (
     check_value,
     parse_scene,
 )
+from ..toml_writer import dumps
 from . import brush
 from .document import EditorError, pair, put, relocate
-from .toml import dumps
 
 __all__ = ["EditorError", "Session"]
 
@@ -618,7 +618,7 @@ class Session:
     def query(self) -> list[list[str]]:
         """The changes as `[key, value]` pairs with TOML values, the `-D` syntax (the page's
         URL holds them)."""
-        from .toml import value_text
+        from ..toml_writer import value_text
 
         return [[k, value_text(v)] for k, v in self.changes.items()]
 

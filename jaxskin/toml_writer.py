@@ -1,4 +1,5 @@
-"""Writing scene documents as TOML (the standard library reads TOML but does not write it).
+"""Writing TOML, which the standard library reads but does not write (the editor's Save,
+`scene_writer` for fit-image).
 
 A scene document holds tables, strings, booleans, integers, floats (finite), arrays of
 those and arrays of tables (`[[layer]]`, `[[fields.edit]]`): what this writes. Floats are
