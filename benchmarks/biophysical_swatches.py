@@ -22,10 +22,10 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from common import save_figure  # noqa: E402
 
 from jaxskin import biophysical as bp  # noqa: E402
 from jaxskin import formats, render, spectral  # noqa: E402
-from jaxskin.io import atomic_write  # noqa: E402
 from jaxskin.scene import scene_at_width  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
@@ -86,10 +86,7 @@ def main() -> None:
     ax.set_xticks((np.arange(len(FACES)) + 0.5) * SIZE, [f"{v:.3g}" for v in FACES])
     ax.set_yticks([])
     ax.set(xlabel="skin.melanin_fraction (face, material.model = \"biophysical\")")
-    with atomic_write(OUT, "wb") as fh:
-        fig.savefig(fh, format="png")
-    plt.close(fig)
-    print(f"wrote {OUT} ({OUT.stat().st_size // 1024} KB)")
+    save_figure(fig, OUT)
 
 
 if __name__ == "__main__":

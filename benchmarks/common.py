@@ -122,3 +122,15 @@ def synthetic_measurement(rows: int, noise: float = 0.002, seed: int = 0):
     R_inf = np.clip(R_inf + rng.normal(0, noise, rows), 0, 1)
     return Measurement(Path(f"synthetic_{rows}.csv"), f"synthetic_{rows}", wl,
                        np.array([0.05, 0.15]), R, R_inf, Rg, ("R_0.05mm", "R_0.15mm"), 1)
+
+
+def save_figure(fig, path: Path) -> None:
+    """Write a matplotlib figure as a PNG (atomically), close it and say where it went."""
+    import matplotlib.pyplot as plt
+
+    from jaxskin.io import atomic_write
+
+    with atomic_write(path, "wb") as fh:
+        fig.savefig(fh, format="png")
+    plt.close(fig)
+    print(f"wrote {path} ({path.stat().st_size // 1024} KB)")

@@ -13,8 +13,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from common import save_figure  # noqa: E402
 
-from jaxskin.io import atomic_write  # noqa: E402
 from jaxskin.skin_grid import skin_grid  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "skin_grid.png"
@@ -37,10 +37,7 @@ def main() -> None:
     for side in ax.spines.values():
         side.set_visible(False)
     fig.tight_layout(pad=0.3)
-    with atomic_write(OUT, "wb") as fh:
-        fig.savefig(fh, format="png")
-    plt.close(fig)
-    print(f"wrote {OUT} ({OUT.stat().st_size // 1024} KB)")
+    save_figure(fig, OUT)
 
 
 if __name__ == "__main__":
