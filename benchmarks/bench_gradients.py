@@ -20,7 +20,6 @@ Writes the `gradients` section of RESULTS.md (or of the file `--results` names).
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -103,13 +102,7 @@ def measure(quick: bool = False, repeat: int = 5):
 
 
 def main(argv: list[str] | None = None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="tiny sizes (a check that it runs)")
-    ap.add_argument("--repeat", type=int, default=5)
-    ap.add_argument("--results", type=Path, help="write the section to this file instead")
-    args = ap.parse_args(argv or [])
-    if args.results:
-        common.RESULTS = args.results
+    args = common.options(__doc__, argv)
     print(machine())
     rows = measure(args.quick, args.repeat)
     t = table(["model", "gradient with respect to", "forward ms", "gradient ms",

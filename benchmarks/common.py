@@ -134,3 +134,19 @@ def save_figure(fig, path: Path) -> None:
         fig.savefig(fh, format="png")
     plt.close(fig)
     print(f"wrote {path} ({path.stat().st_size // 1024} KB)")
+
+
+def options(doc: str, argv: list[str] | None = None):
+    """The options `run.py` passes on (`--quick`, `--repeat`, `--results`), parsed for a
+    benchmark whose help is the first line of `doc`; `--results` redirects `write_section`."""
+    import argparse
+
+    global RESULTS
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="tiny sizes (a check that it runs)")
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--results", type=Path, help="write the section to this file instead")
+    args = ap.parse_args(argv or [])
+    if args.results:
+        RESULTS = args.results
+    return args

@@ -24,7 +24,6 @@ Writes the `limits` section of RESULTS.md (or of the file `--results` names).
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -136,13 +135,7 @@ def _nbytes(tree) -> int:
 
 
 def main(argv: list[str] | None = None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="tiny sizes (a check that it runs)")
-    ap.add_argument("--repeat", type=int, default=5)
-    ap.add_argument("--results", type=Path, help="write the section to this file instead")
-    opts = ap.parse_args(argv or [])
-    if opts.results:
-        common.RESULTS = opts.results
+    opts = common.options(__doc__, argv)
     print(machine())
     peak = peak_flops()
     rows = []
