@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import functools
+import gc
 import hashlib
 import math
 import os
@@ -79,8 +80,37 @@ class _Terminated(BaseException):
     """SIGTERM, raised in the main thread like KeyboardInterrupt is for SIGINT."""
 
 
-def _on_sigterm(signum, frame):
-    raise _Terminated()
+_SIGNAL_ERRORS = {signal.SIGINT: KeyboardInterrupt, signal.SIGTERM: _Terminated}
+_pending: list[int] = []  # a signal whose exception could not be raised where it arrived
+_collecting = [False]  # the garbage collector is running (and calling JAX's callback)
+
+
+def _gc_start(phase, info):
+    if phase == "start":
+        _collecting[0] = True
+
+
+def _gc_stop(phase, info):
+    if phase == "stop":
+        _collecting[0] = False
+
+
+def _on_signal(signum, frame):
+    """Raise KeyboardInterrupt / _Terminated where the signal arrived, unless that is inside
+    the garbage collector's callbacks or a finaliser, where Python would print the exception
+    and drop it: then it is kept and raised at the next `_raise_pending` (a stage change, or
+    the command's end)."""
+    if _collecting[0] or (frame is not None and frame.f_code.co_name in ("__del__",
+                                                                         "_xla_gc_callback")):
+        _pending.append(signum)
+        return
+    raise _SIGNAL_ERRORS[signum]()
+
+
+def _raise_pending() -> None:
+    """Raise a signal that arrived where it could not be raised (see `_on_signal`)."""
+    if _pending:
+        raise _SIGNAL_ERRORS[_pending.pop(0)]()
 
 
 @contextlib.contextmanager
@@ -93,14 +123,23 @@ def _signals():
         return
     old_format = warnings.formatwarning
     warnings.formatwarning = _warning_line
-    old = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    signal.signal(signal.SIGTERM, _on_sigterm)
+    old = {sig: signal.getsignal(sig) for sig in _SIGNAL_ERRORS}
+    _pending.clear()
+    # First and last of the collector's callbacks, so that JAX's (which runs Python code in
+    # both phases) sits between them.
+    gc.callbacks.insert(0, _gc_start)
+    gc.callbacks.append(_gc_stop)
+    for sig in _SIGNAL_ERRORS:
+        signal.signal(sig, _on_signal)
     try:
         yield
     finally:
         for sig, handler in old.items():
             signal.signal(sig, handler)
+        for callback in (_gc_start, _gc_stop):
+            if callback in gc.callbacks:
+                gc.callbacks.remove(callback)
+        _collecting[0] = False
         warnings.formatwarning = old_format
 
 
@@ -114,7 +153,18 @@ class _Run:
 
     def __init__(self):
         self.outputs: list[Outputs] = []
-        self.stage = "checking the inputs"
+        self._stage = "checking the inputs"
+
+    @property
+    def stage(self) -> str:
+        """What the command is doing, for the last line; setting it is also where a signal
+        held back by `_on_signal` is raised."""
+        return self._stage
+
+    @stage.setter
+    def stage(self, text: str) -> None:
+        _raise_pending()
+        self._stage = text
 
     def finished(self) -> str:
         written = [p for o in self.outputs for p in o.written]
@@ -761,7 +811,9 @@ def main(argv=None) -> int:
                 "fit-skin": _fit_skin, "edit": _edit, "fit-image": _fit_image}
     with _signals():
         try:
-            return commands[args.command](args, run)
+            code = commands[args.command](args, run)
+            _raise_pending()
+            return code
         except InputError as e:
             _say(f"jaxskin: error: {e}")
             return EXIT_INPUT

@@ -121,6 +121,43 @@ def test_a_signal_mid_run_stops_cleanly(tmp_path, sig, code):
         assert iio.imread(p).shape == (32, 32, 3)  # complete: decodes
 
 
+@pytest.mark.parametrize("sig, code", [("SIGINT", 130), ("SIGTERM", 143)])
+def test_a_signal_inside_the_garbage_collector_is_not_lost(tmp_path, monkeypatch, capsys, sig,
+                                                          code):
+    """A signal that lands while the collector runs JAX's callback (where Python would print
+    the exception as 'Exception ignored' and carry on, exit 0: a CI failure of 2026-11-30)
+    is held and raised at the command's next stage: exit 130 / 143 and one line."""
+    import gc
+    import signal
+
+    from jaxskin import cli
+
+    armed = []
+
+    def command(args, run):
+        armed.append(True)
+        gc.collect()  # the callbacks run; the signal arrives in one of them
+        armed.clear()
+        run.stage = "rendering the next scene"  # held signal raised here
+        raise AssertionError("the held signal was not raised")
+
+    def callback(phase, info):
+        if phase == "start" and armed:
+            os.kill(os.getpid(), getattr(signal, sig))
+            for _ in range(1000):  # Python runs the handler here, inside the collector
+                pass
+
+    monkeypatch.setattr(cli, "_render", command)
+    gc.callbacks.append(callback)
+    try:
+        assert main(["render", "hand", "-o", str(tmp_path)]) == code
+    finally:
+        gc.callbacks.remove(callback)
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and sig in err and "Exception ignored" not in err, err
+    assert "while checking the inputs" in err
+
+
 @pytest.mark.slow
 def test_wheel_installs_and_renders_from_an_empty_folder(tmp_path):
     """A regular (non-editable) install: build the wheel, install it into a folder of its
