@@ -40,13 +40,14 @@ from .precision import matmul
 from .raster import interpolate
 from .scene import BIOPHYSICAL_KEYS, SceneConfig
 from .shading import blinn, lafortune, layered
-from .view import View, coverage, downsample, make_view, pad_index, sample
+from .view import View, coverage, downsample, make_view, pad_index, sample_padded, transpose_table
 
 __all__ = ["OUTPUTS", "Prepared", "albedo", "decode_srgb", "encode_srgb", "expose", "prepare",
            "render", "render_prepared", "skin_reflectance", "texel_map"]
 
 OUTPUTS = ("display", "rgba", "linear_rgba")
 SHADOW_MAX = 2048  # texels across the shadow map, at most
+VIEW_TABLE = ("view_rows", "view_weights", "view_dest")  # `view.transpose_table`
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -77,6 +78,9 @@ def _prepare(config: SceneConfig) -> Prepared:
     arrays = {"normals": s.normals, "mask": s.mask, "tex": jnp.asarray(view.tex),
               "view_mask": jnp.asarray(view.mask),
               "pad": jnp.asarray(pad_index(s.tmap.raster.mask, s.tmap.wrap_x), jnp.int32)}
+    # The view sampling's transpose as a table: reverse mode reads it instead of scattering.
+    arrays.update({k: jnp.asarray(v) for k, v in transpose_table(
+        view.tex, view.mask, arrays["pad"], s.mask.shape, view.wrap_x).items()})
     if config.needs_furrows:
         arrays["h0"] = texture.furrows(config.texture)[0]
         arrays["noise"] = texture.noise(config.texture)
@@ -174,10 +178,12 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
     p = prepare(config)  # host-side, cached: only static facts (rotation, eye) are used
     mask, view_mask, k = arrays["mask"], arrays["view_mask"], config.supersample
 
+    table = ([arrays[k] for k in VIEW_TABLE] if all(k in arrays for k in VIEW_TABLE)
+             else None)
+
     def to_view(texture_image):  # bilinear samples at every (super)sample, padded texture
-        C = texture_image.shape[-1]
-        padded = texture_image.reshape(-1, C)[arrays["pad"]]
-        return sample(padded, arrays["tex"], view_mask, p.view.wrap_x)
+        return sample_padded(texture_image, arrays["pad"], arrays["tex"], view_mask,
+                             p.view.wrap_x, table)
 
     if config.needs_furrows:
         frame = {k: arrays[k] for k in ("grad_s", "grad_t") if k in arrays}

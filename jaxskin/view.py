@@ -19,15 +19,19 @@ the paper's mouse does, and the normals with it (§5.3).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .linear import linear_call
 from .projection import TextureMap
 from .raster import Raster, rasterize
 
-__all__ = ["View", "coverage", "downsample", "make_view", "pad_index", "rotation", "sample"]
+__all__ = ["View", "coverage", "downsample", "make_view", "pad_index", "rotation", "sample",
+           "sample_padded", "transpose_table"]
 
 MARGIN = 0.05
 PAD = 3  # texels of padding around the mesh's texels (bilinear reads reach one)
@@ -170,3 +174,106 @@ def downsample(image, k: int):
         return image
     H, W, C = image.shape
     return image.reshape(H // k, k, W // k, k, C).mean(axis=(1, 3))
+
+
+def transpose_table(tex, mask, pad, shape, wrap_x: bool, width: int = 16) -> dict:
+    """The transpose of `sample_padded` (a gather of the bilinear samples) as a table, so
+    that reverse mode reads instead of scattering: XLA's scatter-add of every sample's four
+    corners into the texture took 0.5 s at 1280×720, supersample 2. Each row lists up to
+    `width` (4 × sample + corner, weight) pairs that land on one texel (`"view_rows"`,
+    `"view_weights"`, `(R, width)`; empty slots weigh 0) and the texel (`"view_dest"`,
+    `(R,)`, sorted); a texel read by more samples gets more rows. The weights are stored in
+    float32; a float64 gradient recomputes them from the coordinates (exact). Made once per view (numpy), from the view's
+    texture coordinates `tex (H, W, 2)`, its `mask (H, W)`, the padding `pad (Ht, Wt)`
+    (`pad_index`) and the texture's `shape (Ht, Wt)`."""
+    Ht, Wt = shape
+    tex = np.asarray(tex, np.float64)
+    mask = np.asarray(mask, bool)
+    where = np.flatnonzero(mask)
+    x = tex[..., 0].reshape(-1)[where] - 0.5
+    y = tex[..., 1].reshape(-1)[where] - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = x - x0, y - y0
+    samples, texels, weights = [], [], []
+    for corner, (dx, dy, w) in enumerate([(0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)),
+                                          (0, 1, (1 - fx) * fy), (1, 1, fx * fy)]):
+        xi = np.mod(x0 + dx, Wt) if wrap_x else np.clip(x0 + dx, 0, Wt - 1)
+        yi = np.clip(y0 + dy, 0, Ht - 1)
+        texels.append(np.asarray(pad).reshape(-1)[yi.astype(np.int64) * Wt + xi.astype(np.int64)])
+        samples.append(4 * where + corner)
+        weights.append(w)
+    texels, samples, weights = (np.concatenate(a) for a in (texels, samples, weights))
+    order = np.argsort(texels, kind="stable")
+    texels, samples, weights = texels[order], samples[order], weights[order]
+    width = max(1, min(width, int(np.bincount(texels).max()) if texels.size else 1))
+    starts = np.flatnonzero(np.r_[True, texels[1:] != texels[:-1]]) if texels.size else \
+        np.zeros(0, np.int64)
+    counts = np.diff(np.r_[starts, texels.size])
+    rows_per = -(-counts // width)
+    first_row = np.r_[0, np.cumsum(rows_per)[:-1]]
+    group = np.repeat(np.arange(starts.size), counts)
+    pos = np.arange(texels.size) - starts[group]
+    row = first_row[group] + pos // width
+    R = int(rows_per.sum())
+    rows = np.zeros((R, width), np.int32)
+    w = np.zeros((R, width), np.float32)
+    rows[row, pos % width] = samples
+    w[row, pos % width] = weights
+    dest = np.repeat(texels[starts], rows_per).astype(np.int32)
+    return {"view_rows": rows, "view_weights": w, "view_dest": dest}
+
+
+def sample_padded(image, pad, tex, mask, wrap_x: bool, table=None):
+    """`sample` of `image (Ht, Wt, C)` padded by `pad` (`pad_index`): the view's colour.
+    With `table` (`transpose_table`'s three arrays, in its order) reverse mode reads the
+    table instead of scattering (forward mode and values are the same either way). Only
+    `image` is differentiated (the view's coordinates are fixed)."""
+    if table is None:
+        return _padded_sample(wrap_x, image, pad, tex, mask)
+    return _sample_with_table(wrap_x, image, (pad, tex, mask, *table))
+
+
+def _padded_sample(wrap_x, image, pad, tex, mask, *table):
+    C = image.shape[-1]
+    padded = image.reshape(-1, C)[pad]
+    return sample(padded, tex, mask, wrap_x)
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
+def _sample_with_table(wrap_x, image, residuals):
+    return _padded_sample(wrap_x, image, *residuals)
+
+
+@_sample_with_table.defjvp
+def _sample_with_table_jvp(wrap_x, primals, tangents):
+    image, residuals = primals
+    out = _sample_with_table(wrap_x, image, residuals)
+    return out, linear_call(*_sample_rules(wrap_x, image.shape), tuple(residuals),
+                            (tangents[0],))
+
+
+@functools.cache
+def _sample_rules(wrap_x, shape):
+    def fun(pad, tex, mask, rows, weights, dest, image):
+        return _padded_sample(wrap_x, image, pad, tex, mask)
+
+    def transpose(pad, tex, mask, rows, weights, dest, ct):
+        C = ct.shape[-1]
+        sample = rows // 4
+        if ct.dtype == jnp.float32:
+            w = weights
+        else:  # float64: the weights from the coordinates, as `sample` computes them
+            corner = rows % 4
+            xy = tex.reshape(-1, 2).astype(ct.dtype)[sample] - 0.5
+            f = xy - jnp.floor(xy)
+            wx = jnp.where(corner % 2 == 1, f[..., 0], 1 - f[..., 0])
+            wy = jnp.where(corner // 2 == 1, f[..., 1], 1 - f[..., 1])
+            w = jnp.where(weights != 0, wx * wy, 0.0)
+        # One gather per channel: measured 2.5× faster than gathering (R, width, C) rows.
+        read = jnp.stack([jnp.sum(ct[..., c].reshape(-1)[sample] * w, axis=1) for c in range(C)],
+                         axis=-1)
+        out = jnp.zeros((shape[0] * shape[1], C), ct.dtype).at[dest].add(
+            read, indices_are_sorted=True)
+        return (out.reshape(shape),)
+
+    return fun, transpose

@@ -38,6 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import km
+from ..linear import linear_call
 from ..precision import matmul
 from ..spectral import Grid
 from . import kelemen
@@ -171,17 +172,30 @@ def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
     return jnp.concatenate([rgb_surface, xyz_da, xyz_dta], axis=-1)
 
 
+_RULE = "transpose"  # "jvp": the old rule, JAX's transpose of the chunked JVP (benchmarks)
+
+
 @_colours.defjvp
 def _colours_jvp(grid, blurred, primals, tangents):
+    out = _colours(grid, blurred, *primals)
+    if _RULE == "jvp":
+        return out, _chunked_tangent(grid, blurred, primals, tangents, tie=True)
+    return out, linear_call(*_rules(grid, blurred), tuple(primals), tuple(tangents))
+
+
+def _chunked_tangent(grid, blurred, primals, tangents, tie=False):
+    """Forward mode: the tangent of the colours, a loop over chunks of `CHUNK` texels,
+    each chunk's tangent recomputed from its inputs (checkpointed)."""
     X = primals[0]
     P = X.shape[1]
     chunks = -(-P // CHUNK)
     pad = chunks * CHUNK - P
-    # Tie every tangent to X's (adding 0 × one of its entries): inputs whose tangent is a
-    # known zero otherwise make JAX's linearisation hoist their share of the work out of
-    # the loop as full-size residuals (measured: 4× slower).
-    tie = 0.0 * tangents[0][0, 0]
-    tangents = [t + tie for t in tangents]
+    if tie:
+        # Tie every tangent to X's (adding 0 × one of its entries): inputs whose tangent is
+        # a known zero otherwise make JAX's linearisation hoist their share of the work out
+        # of the loop as full-size residuals (measured: 4× slower).
+        t0 = 0.0 * tangents[0][0, 0]
+        tangents = [t + t0 for t in tangents]
 
     def per_texel(a, axis):  # (..., P, ...) → (chunks, ..., CHUNK, ...)
         widths = [(0, 0)] * a.ndim
@@ -208,8 +222,21 @@ def _colours_jvp(grid, blurred, primals, tangents):
     local = tuple(per_texel(primals[i], texel_axes[i]) for i in chunked)
     local_dot = tuple(per_texel(tangents[i], texel_axes[i]) for i in chunked)
     out_dot = jax.lax.map(lambda c: one_chunk(*c), (local, local_dot))
-    out_dot = out_dot.reshape(-1, out_dot.shape[-1])[:P]
-    return _colours(grid, blurred, *primals), out_dot
+    return out_dot.reshape(-1, out_dot.shape[-1])[:P]
+
+
+@functools.cache
+def _rules(grid, blurred):
+    """The colours' tangent (forward mode, `_chunked_tangent`) and its transpose (reverse
+    mode, `_cotangents`, derived by hand) for `linear.linear_call`: linear in the tangents
+    of `_colours`' seven inputs."""
+    def tangent(*args):
+        return _chunked_tangent(grid, blurred, args[:7], args[7:])
+
+    def transpose(*args):
+        return _cotangents_chunked(grid, blurred, *args)
+
+    return tangent, transpose
 
 
 def _separately(fns):
@@ -219,3 +246,159 @@ def _separately(fns):
     took 7.5× one); apart, each fuses into one loop and the shared work is just redone
     (3 products: 2.7× one)."""
     return jax.lax.map(lambda k: jax.lax.switch(k, fns), jnp.arange(len(fns)))
+
+
+def _band(g, M):
+    """`g @ M.T` for `g (P, 3)`, `M (n, 3)`, written as three broadcast products so that it
+    fuses into the elementwise pass that reads it: `(P, n)`."""
+    M = jnp.asarray(M, g.dtype)
+    return g[:, 0:1] * M[:, 0] + g[:, 1:2] * M[:, 1] + g[:, 2:3] * M[:, 2]
+
+
+def _layer_dS_dK(S, K, X, R, T):
+    """The partial derivatives of one KM layer's R0 and T (`km.layer`) with respect to S
+    and K, elementwise: `(dR/dS, dR/dK, dT/dS, dT/dK)`. With q = β² = K(K + 2S), z = βX,
+    τ = tanh(z)/β and D = (S + K)τ + 1 (R0 = Sτ/D, T = sech z/D):
+    ∂τ/∂β = β w, w = (X sech² z − τ)/β², ∂sech z/∂β = −X β τ sech z, ∂β/∂S = K/β,
+    ∂β/∂K = (S + K)/β. w = −X³ F(z²) sech² z with F(y) = Σ_k≥1 4^k y^(k−1)/(2k+1)! (a series
+    for small z: no branch point at K = 0), directly for z² ≥ `km._Q_SMALL`."""
+    q = K * (K + 2.0 * S)
+    z2 = q * (X * X)
+    small = z2 < km._Q_SMALL
+    qs = jnp.where(small, z2, 0.0)
+    inv_cosh = 1.0 / km._horner(km._COSH, qs)
+    tau_s = X * km._horner(km._SINHC, qs) * inv_cosh
+    w_s = -(X * X * X) * km._horner(_F_SERIES, qs) * (inv_cosh * inv_cosh)
+    inv_beta = jax.lax.rsqrt(jnp.where(q > 0, q, 1.0))
+    e = jnp.exp(-X / inv_beta)
+    e2 = e * e
+    inv = 1.0 / (1.0 + e2)
+    tau_l = (1.0 - e2) * inv * inv_beta
+    sech_l = 2.0 * e * inv
+    w_l = (X * sech_l * sech_l - tau_l) * (inv_beta * inv_beta)
+    tau = jnp.where(small, tau_s, tau_l)
+    sech = jnp.where(small, inv_cosh, sech_l)
+    w = jnp.where(small, w_s, w_l)
+    SK = S + K
+    inv_den = 1.0 / (SK * tau + 1.0)
+    tau_S, tau_K = K * w, SK * w  # ∂τ/∂S, ∂τ/∂K
+    sech_S, sech_K = -X * K * sech * tau, -X * SK * sech * tau
+    den_S, den_K = tau + SK * tau_S, tau + SK * tau_K
+    dR_dS = (tau + S * tau_S - R * den_S) * inv_den
+    dR_dK = (S * tau_K - R * den_K) * inv_den
+    dT_dS = (sech_S - T * den_S) * inv_den
+    dT_dK = (sech_K - T * den_K) * inv_den
+    return dR_dS, dR_dK, dT_dS, dT_dK
+
+
+# F(y) = Σ_k≥1 4^k y^(k−1)/(2k+1)!, highest power first (Horner), for `_layer_dS_dK`: at
+# y = 0.25 the first dropped term is below 1e-16 relative.
+_F_SERIES = [4.0 ** k / float(np.prod(np.arange(1, 2 * k + 2, dtype=np.float64)))
+             for k in range(8, 0, -1)]
+
+
+def _cotangents(grid, blurred, X, E, h, h_l, S, K, skin_R, g):
+    """The reverse-mode derivative of `_colours` (its transpose), derived by hand: the
+    cotangent `g (P, C)` of the colours, taken to band space by the transposed colour
+    matrices, then one elementwise pass over (texel, band) that recomputes each KM layer,
+    the stack and the highlights and accumulates the chain rule backwards through them.
+    Returns the cotangents of `(X, E, h, h_l, S, K, skin_R)`, in their shapes."""
+    n_layers = X.shape[0]
+    dtype = X.dtype
+    if blurred:
+        gs = _band(g[:, :3], grid.rgb_matrix)
+        ga = _band(g[:, 3:6], grid.xyz_matrix)
+        gt = _band(g[:, 6:], grid.xyz_matrix)
+    else:
+        gs = _band(g, grid.rgb_matrix)
+        ga = gt = E * gs
+    s = skin_R
+    x = [X[i][:, None] for i in range(n_layers)]  # (P, 1) each
+    R, T = zip(*(km.layer(S[i], K[i], x[i]) for i in range(n_layers)), strict=True)
+    # The stack from the bottom up (km.stack's order), every partial stack kept.
+    accs = [(R[0], T[0], R[0])]
+    for i in range(1, n_layers):
+        aR, aT, aRb = accs[-1]
+        inv = 1.0 / (1.0 - R[i] * aR)
+        accs.append((R[i] + T[i] * T[i] * aR * inv, T[i] * aT * inv,
+                     aRb + aT * aT * R[i] * inv))
+    Rt, Tt, Rbt = accs[-1]
+    u = 1.0 / (1.0 - Rbt * s)
+    da = s * ((Tt - 1.0) + Rbt * s) * u
+    # a = s + da = s T u: da's partials ∂/∂T = s u, ∂/∂R' = s² T u², ∂/∂s = T u² − 1.
+    A = ga + gt * (Tt - 1.0)  # the whole cotangent of da
+    a_T = gt * (s + da) + A * s * u
+    a_Rb = A * s * s * Tt * u * u
+    a_s = gt * (Tt - 1.0) + A * (Tt * u * u - 1.0)
+    a_R = gs * E
+    dE = jnp.sum(gs * Rt, axis=-1, keepdims=True)
+    if not blurred:
+        dE = dE + jnp.sum(gs * (da + (Tt - 1.0) * (s + da)), axis=-1, keepdims=True)
+    # Back through the stack (compose, R1' = R1 for a homogeneous top layer).
+    aR_l, aT_l = [None] * n_layers, [None] * n_layers
+    for i in range(n_layers - 1, 0, -1):
+        cR, cT, _ = accs[i - 1]
+        inv = 1.0 / (1.0 - R[i] * cR)
+        inv2 = inv * inv
+        aR_l[i] = (a_R * (1.0 + T[i] * T[i] * cR * cR * inv2) + a_T * T[i] * cT * cR * inv2
+                   + a_Rb * cT * cT * inv2)
+        aT_l[i] = 2.0 * a_R * T[i] * cR * inv + a_T * cT * inv
+        a_R, a_T = (a_R * T[i] * T[i] * inv2 + a_T * T[i] * cT * R[i] * inv2
+                    + a_Rb * cT * cT * R[i] * R[i] * inv2,
+                    a_T * T[i] * inv + 2.0 * a_Rb * cT * R[i] * inv)
+    aR_l[0], aT_l[0] = a_R + a_Rb, a_T
+    # The highlights: dD_i = dD_(i−1) T_i² + h (T_i² − 1) + cover_i h_l,i, from the bottom.
+    D = [jnp.zeros_like(Rt)]
+    for i in range(n_layers - 1):
+        cover = -jnp.expm1(-x[i] / COVER_MM)
+        T2 = T[i] * T[i]
+        D.append(D[-1] * T2 + h * (T2 - 1.0) + cover * h_l[i])
+    a_D = gs
+    dh = 0.0
+    dh_l, dX = [None] * n_layers, [None] * n_layers
+    dS, dK = [None] * n_layers, [None] * n_layers
+    for i in range(n_layers - 1, -1, -1):
+        T2 = T[i] * T[i]
+        aT_l[i] = aT_l[i] + 2.0 * a_D * (D[i] + h) * T[i]
+        dh = dh + a_D * (T2 - 1.0)
+        sum_D = jnp.sum(a_D, axis=-1, keepdims=True)  # (P, 1)
+        cover = -jnp.expm1(-x[i] / COVER_MM)
+        dh_l[i] = cover * sum_D
+        # ∂R0/∂X = S T², ∂T/∂X = −T (S + K − S R0) (Kubelka–Munk's equations).
+        dX[i] = (jnp.sum(aR_l[i] * S[i] * T2 - aT_l[i] * T[i] * (S[i] + K[i] - S[i] * R[i]),
+                         axis=-1) + (h_l[i] * sum_D * (1.0 - cover) / COVER_MM)[:, 0])
+        dR_dS, dR_dK, dT_dS, dT_dK = _layer_dS_dK(S[i], K[i], x[i], R[i], T[i])
+        dS[i] = jnp.sum(aR_l[i] * dR_dS + aT_l[i] * dT_dS, axis=0)
+        dK[i] = jnp.sum(aR_l[i] * dR_dK + aT_l[i] * dT_dK, axis=0)
+        a_D = a_D * T2
+    dh = jnp.sum(dh, axis=-1, keepdims=True)
+    d_skin = a_s if skin_R.ndim == 2 else jnp.sum(a_s, axis=0)
+    return (jnp.stack(dX), dE, dh, jnp.stack(dh_l), jnp.stack(dS), jnp.stack(dK),
+            d_skin.astype(dtype))
+
+
+def _cotangents_chunked(grid, blurred, X, E, h, h_l, S, K, skin_R, g, chunk=CHUNK):
+    P = X.shape[1]
+    chunks = -(-P // chunk)
+    pad = chunks * chunk - P
+
+    def per_texel(a, axis):
+        widths = [(0, 0)] * a.ndim
+        widths[axis] = (0, pad)
+        a = jnp.pad(a, widths)
+        a = a.reshape(*a.shape[:axis], chunks, chunk, *a.shape[axis + 1:])
+        return jnp.moveaxis(a, axis, 0)
+
+    per = skin_R.ndim == 2
+    local = (per_texel(X, 1), per_texel(E, 0), per_texel(h, 0), per_texel(h_l, 1),
+             per_texel(skin_R, 0) if per else None, per_texel(g, 0))
+
+    def one(c):
+        x, e, hh, hl, sk, gg = c
+        return _cotangents(grid, blurred, x, e, hh, hl, S, K, sk if per else skin_R, gg)
+
+    dX, dE, dh, dh_l, dS, dK, dskin = jax.lax.map(one, local)
+    unchunk = lambda a, axis: jnp.moveaxis(a, 0, axis).reshape(  # noqa: E731
+        *a.shape[1:axis + 1], -1, *a.shape[axis + 2:]).take(jnp.arange(P), axis=axis)
+    return (unchunk(dX, 1), unchunk(dE, 0), unchunk(dh, 0), unchunk(dh_l, 1),
+            dS.sum(0), dK.sum(0), unchunk(dskin, 0) if per else dskin.sum(0))

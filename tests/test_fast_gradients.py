@@ -1,0 +1,155 @@
+"""The hand-written reverse-mode rules (issue 19, item 2): the makeup model's spectral
+cotangents (`layered._cotangents`) and the view sampling's transpose table
+(`view.transpose_table`), against JAX's autodiff of the plain forward in float64, at ordinary
+and stiff points; forward mode (jvp, jacfwd, vmap) through `linear.linear_call` kept."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from conftest import check_grads_scaled
+
+from jaxskin import formats, render, spectral, view
+from jaxskin.linear import linear_call
+from jaxskin.scene import load_scene
+from jaxskin.shading import layered
+
+GRID = spectral.Grid(step=20)
+
+
+def _spectral_inputs(point, per_texel_skin, P=40, L=4, seed=0):
+    """`(X, E, h, h_l, S, K, skin_R)` on GRID; `point`: ordinary values, or the stiff ones
+    (thickness 0 and 10 mm, K = 0, S = 0, K = 1e-9, X = 1e-7)."""
+    rng = np.random.default_rng(seed)
+    n = len(GRID)
+    S = rng.uniform(5, 60, (L, n))
+    K = rng.uniform(0.5, 30, (L, n))
+    X = rng.uniform(0, 0.03, (L, P))
+    if point == "stiff":  # (K → 0 under a thick layer is left out: ∂R/∂K → −∞ there)
+        X[0, :5] = 0.0
+        X[1, 5:9] = 10.0  # opaque
+        X[2, 9:12] = 1e-7
+        X[:, 12:14] = 0.0  # no layer at all
+        K[2, :4] = 0.0
+        S[0, :3] = 0.0
+        K[0, 4:6] = 1e-9
+        S[2, 6] = 0.0
+        K[2, 6] = 1e-9
+    E = rng.uniform(0.2, 1.0, (P, 1))
+    h = rng.uniform(0.0, 0.3, (P, 1))
+    h_l = rng.uniform(0.0, 0.3, (L, P, 1))
+    skin = formats.nist_reflectance(3, GRID)
+    if per_texel_skin:
+        skin = skin * rng.uniform(0.3, 1.0, (P, 1))
+    return tuple(jnp.asarray(a, jnp.float64) for a in (X, E, h, h_l, S, K, skin))
+
+
+@pytest.mark.parametrize("point", ["ordinary", "stiff"])
+@pytest.mark.parametrize("per_texel_skin", [False, True], ids=["skin per band", "skin map"])
+@pytest.mark.parametrize("blurred", [False, True], ids=["unblurred", "blurred"])
+def test_cotangents_equal_autodiff_of_the_plain_forward(x64, blurred, per_texel_skin, point):
+    """Every cotangent of `_colours` (X, E, h, h_l, S, K, skin), by hand, against jax.vjp of
+    `_joint` (the same colours in one plain program), to 1e-10 of the largest entry."""
+    args = _spectral_inputs(point, per_texel_skin)
+    out, vjp = jax.vjp(lambda *a: layered._joint(GRID, blurred, *a), *args)
+    assert bool(jnp.all(jnp.isfinite(out)))
+    g = jnp.asarray(np.random.default_rng(1).normal(size=out.shape))
+    expected = vjp(g)
+    got = layered._cotangents(GRID, blurred, *args, g)
+    chunked = layered._cotangents_chunked(GRID, blurred, *args, g, chunk=16)  # ragged chunks
+    for name, e, a, c in zip("X E h h_l S K skin".split(), expected, got, chunked, strict=True):
+        assert a.shape == e.shape and c.shape == e.shape, name
+        scale = float(jnp.max(jnp.abs(e)))
+        assert scale > 0, name
+        assert float(jnp.max(jnp.abs(a - e))) <= 1e-10 * scale, name
+        assert float(jnp.max(jnp.abs(c - e))) <= 1e-10 * scale, name
+
+
+@pytest.mark.parametrize("point", ["ordinary", "stiff"])
+@pytest.mark.parametrize("blurred", [False, True], ids=["unblurred", "blurred"])
+def test_colours_check_grads(x64, blurred, point):
+    """`_colours` itself (the custom JVP whose transpose is `_cotangents`): check_grads fwd and
+    rev, float64, with respect to every input, at ordinary and stiff points."""
+    args = _spectral_inputs(point, per_texel_skin=False, P=24, L=3, seed=2)
+    scales = [1e-3, 0.01, 0.01, 0.01, 0.5, 0.5, 0.01]
+
+    def f(*a):
+        return layered._colours(GRID, blurred, *a)
+
+    check_grads_scaled(f, list(args), scales, order=1, eps=1e-4, atol=1e-7, rtol=1e-5)
+    grads = jax.grad(lambda *a: jnp.sum(f(*a)), argnums=tuple(range(7)))(*args)
+    assert all(bool(jnp.all(jnp.isfinite(x))) for x in grads)
+
+
+def test_forward_mode_and_vmap_through_linear_call(x64):
+    """jacfwd (vmap of forward mode) and jacrev of a small makeup render agree: forward mode
+    evaluates the tangent, reverse mode the hand-written transposes."""
+    sc = load_scene("makeup", ["texture.size=32", "camera.size=16"])
+    arrays = jax.tree.map(lambda a: jnp.asarray(a, jnp.float64)
+                          if jnp.issubdtype(a.dtype, jnp.floating) else a,
+                          render.prepare(sc.config).arrays)
+    params = jax.tree.map(lambda a: jnp.asarray(a, jnp.float64), sc.params)
+    keys = ["layer.foundation.thickness_mm", "layer.blush.k_scale", "skin.melanin"]
+
+    def f(v):
+        p = {**params, **{k: v[i] for i, k in enumerate(keys)}}
+        return render.render_prepared(sc.config, p, arrays)[4:12, 4:12].reshape(-1)
+
+    v = jnp.asarray([float(params[k]) for k in keys])
+    fwd, rev = jax.jacfwd(f)(v), jax.jacrev(f)(v)
+    assert float(jnp.abs(fwd).max()) > 0
+    np.testing.assert_allclose(fwd, rev, rtol=0, atol=1e-12 * float(jnp.abs(fwd).max()))
+
+
+def test_linear_call_transposes_by_hand_and_batches():
+    """A toy: fun scales by 2, its 'transpose' by 3 (deliberately not fun's), so the test
+    sees which rule ran; forward mode and vmap."""
+    def fun(r, x):
+        return 2.0 * r * x
+
+    def transpose(r, ct):
+        return (3.0 * r * ct,)
+
+    @jax.custom_jvp
+    def f(r, x):
+        return 2.0 * r * x
+
+    @f.defjvp
+    def f_jvp(primals, tangents):
+        r, x = primals
+        return f(r, x), linear_call(fun, transpose, (r,), (tangents[1],))
+
+    x = jnp.arange(3.0)
+    assert float(jax.grad(lambda x: jnp.sum(f(1.5, x)))(x)[0]) == 4.5  # the hand rule: 3 r
+    assert float(jax.jvp(lambda x: f(1.5, x), (x,), (jnp.ones(3),))[1][0]) == 3.0  # 2 r
+    assert jnp.array_equal(jax.jacfwd(lambda x: f(1.5, x))(x), 3.0 * jnp.eye(3))
+    batched = jax.vmap(jax.grad(lambda x: jnp.sum(f(1.5, x))))(jnp.ones((2, 3)))
+    assert batched.shape == (2, 3)  # batched: vmap of fun, JAX's own transpose (2 r)
+
+
+@pytest.mark.parametrize("scene", ["makeup", "hand"])
+def test_view_transpose_table_equals_autodiff(x64, scene):
+    """The gradient of a sampled view with respect to the texture image, by the transpose
+    table, equals JAX's transpose of the plain gathers (float64, exact up to rounding); every
+    sample's four weights are in the table once."""
+    sc = load_scene(scene, ["texture.size=48", "camera.size=24"])
+    p = render.prepare(sc.config)
+    a = p.arrays
+    table = [jnp.asarray(a[k]) for k in render.VIEW_TABLE]
+    assert float(np.sum(a["view_weights"])) == pytest.approx(float(np.sum(a["view_mask"])),
+                                                             rel=1e-6)
+    rng = np.random.default_rng(4)
+    image = jnp.asarray(rng.uniform(size=(*a["mask"].shape, 3)))
+    W = jnp.asarray(rng.normal(size=(*a["view_mask"].shape, 3)))
+
+    def loss(image, table):
+        return jnp.sum(W * view.sample_padded(image, a["pad"], jnp.asarray(a["tex"], jnp.float64),
+                                              a["view_mask"], p.view.wrap_x, table))
+
+    assert float(loss(image, table)) == float(loss(image, None))
+    fast, plain = jax.grad(loss)(image, table), jax.grad(loss)(image, None)
+    assert float(jnp.abs(plain).max()) > 0
+    np.testing.assert_allclose(fast, plain, rtol=0, atol=1e-13)
+    check_grads_scaled(lambda im: view.sample_padded(im, a["pad"], a["tex"], a["view_mask"],
+                                                     p.view.wrap_x, table),
+                       [image], [0.1], order=1)
