@@ -183,9 +183,9 @@ def transpose_table(tex, mask, pad, shape, wrap_x: bool, width: int = 16) -> dic
     `width` (4 × sample + corner, weight) pairs that land on one texel (`"view_rows"`,
     `"view_weights"`, `(R, width)`; empty slots weigh 0) and the texel (`"view_dest"`,
     `(R,)`, sorted); a texel read by more samples gets more rows. The weights are stored in
-    float32; a float64 gradient recomputes them from the coordinates (exact). Made once per view (numpy), from the view's
-    texture coordinates `tex (H, W, 2)`, its `mask (H, W)`, the padding `pad (Ht, Wt)`
-    (`pad_index`) and the texture's `shape (Ht, Wt)`."""
+    float32; a float64 gradient recomputes them from the coordinates (exact). Made once per
+    view (numpy), from the view's texture coordinates `tex (H, W, 2)`, its `mask (H, W)`,
+    the padding `pad (Ht, Wt)` (`pad_index`) and the texture's `shape (Ht, Wt)`."""
     Ht, Wt = shape
     tex = np.asarray(tex, np.float64)
     mask = np.asarray(mask, bool)
