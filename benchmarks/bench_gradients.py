@@ -32,7 +32,6 @@ from common import device, machine, table, timeit, write_section  # noqa: E402
 
 from jaxskin import render  # noqa: E402
 from jaxskin.scene import load_scene  # noqa: E402
-from jaxskin.shading import layered  # noqa: E402
 
 HAND = ["texture.size=1024", "camera.size=512"]
 FACE = ["camera.size=1280", "camera.height=720"]
@@ -80,11 +79,9 @@ def cases(quick: bool = False):
     ]
 
 
-def measure(quick: bool = False, repeat: int = 5, old: bool = False):
-    """Rows `(model, with respect to, forward ms, gradient ms, ratio, gradient entries)`;
-    `old`: the makeup rows also with the rules before issue 19's hand-written transposes
-    (JAX's transpose of the chunked JVP; the view sampling's scatter)."""
-    rows, forward, forward_fn = [], {}, {}
+def measure(quick: bool = False, repeat: int = 5):
+    """Rows `(model, with respect to, forward ms, gradient ms, ratio, gradient entries)`."""
+    rows, forward = [], {}
     for label, what, name, overrides, make in cases(quick):
         sc = load_scene(name, overrides)
         config, params = sc.config, sc.params
@@ -93,32 +90,21 @@ def measure(quick: bool = False, repeat: int = 5, old: bool = False):
         if key not in forward:
             f = jax.jit(lambda p, a, c=config: render.render_prepared(c, p, a))
             forward[key] = timeit(f, params, arrays, repeat=repeat)
-            forward_fn[key] = f
         loss, arg = make(config, params, arrays)
+        g = jax.jit(jax.grad(loss))
+        tg = timeit(g, arg, arrays, repeat=max(repeat // 2, 1))
         size = sum(x.size for x in jax.tree.leaves(arg))
-        variants = [("", arrays)]
-        if old and name == "makeup":  # the rules before issue 19's hand-written transposes
-            variants.append((" (old rule)", {k: v for k, v in arrays.items()
-                                             if k not in render.VIEW_TABLE}))
-        for note, a in variants:
-            layered._RULE = "jvp" if note else "transpose"
-            jax.clear_caches()
-            g = jax.jit(jax.grad(loss))
-            tg = timeit(g, arg, a, repeat=max(repeat // 2, 1))
-            tf = min(forward[key], timeit(forward_fn[key], params, a, repeat=repeat))
-            forward[key] = tf
-            rows.append((label, what + note, f"{tf * 1e3:.1f}", f"{tg * 1e3:.1f}",
-                         f"{tg / tf:.2f}×", f"{size:,}"))
-            print(rows[-1], flush=True)
-        layered._RULE = "transpose"
+        tf = forward[key]
+        rows.append((label, what, f"{tf * 1e3:.1f}", f"{tg * 1e3:.1f}", f"{tg / tf:.2f}×",
+                     f"{size:,}"))
+        print(rows[-1], flush=True)
     return rows
 
 
 def main(argv: list[str] | None = None):
-    old = "--old" in (argv or [])
-    args = common.options(__doc__, [a for a in (argv or []) if a != "--old"])
+    args = common.options(__doc__, argv)
     print(machine())
-    rows = measure(args.quick, args.repeat, old)
+    rows = measure(args.quick, args.repeat)
     t = table(["model", "gradient with respect to", "forward ms", "gradient ms",
                "gradient / forward", "entries"], rows)
     print(t)

@@ -26,7 +26,8 @@ this weight open; ours is 0 at X = 0 and saturates within a few microns.
 
 Everything is written as a change from the bare skin (a − R_s, t − 1, T² − 1, coverage),
 so zero thickness everywhere adds exact zeros: the image is bit for bit the one without
-layers. Differentiable in every input (check_grads in tests/test_makeup.py).
+layers. Differentiable in every input (check_grads in tests/test_makeup.py and
+tests/test_fast_gradients.py; reverse mode by hand-written transposes, see `_colours`).
 """
 
 from __future__ import annotations
@@ -148,18 +149,18 @@ def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
     rgb(surface), xyz(da), xyz(dta).
 
     Performance (XLA on CPU). Forward: without blur one spectral product; with it three,
-    each computed apart (`_separately`). Derivatives: by the rule below, a loop over
-    chunks of `CHUNK` texels, each chunk's tangent recomputed from its inputs
-    (checkpointed), so that the many intermediates that XLA materialises for a derivative
-    stay in the cache; reverse mode transposes that loop. Measured on the makeup face at
-    1280×720 (benchmarks/bench_makeup.py): the gradient with respect to every thickness
-    map takes 4.3–4.7× the forward pass, against 20–23× with plain autodiff.
-    Re-measured for issue 19 on the 4-layer scene (benchmarks/bench_gradients.py, a loaded
-    2-core machine): plain reverse mode through this forward (the `switch` inside a `map`
-    keeps every branch's residuals) took 162× (maps) and 332× (scalars) the forward pass and
-    21 GB, against 10–11× for this rule in the same conditions; reverse mode over chunks
-    of `_joint`, each under `jax.checkpoint` (no custom rule), was no better (5.8–14×).
-    So the rule stays; measure again on a GPU (benchmarks/gpu_check.sh).
+    each computed apart (`_separately`). Forward mode: `_chunked_tangent`, a loop over
+    chunks of `CHUNK` texels, each chunk's tangent by `jax.jvp` of `_joint`, checkpointed.
+    Reverse mode: that tangent's transpose written by hand (`_cotangents`, through
+    `linear.linear_call`): the colours' cotangent goes to band space through the transposed
+    colour matrices, then one elementwise pass per chunk recomputes the layers and the stack
+    and runs the chain rule back through them. Measured on the 4-layer makeup face at
+    1280×720 (benchmarks/bench_gradients.py, the loaded 2-core machine, one process): the
+    gradient of the whole render with respect to the thickness maps 1.97× the forward pass,
+    with respect to the 21 scalars 3.06×, where JAX's transpose of the chunked JVP (the
+    rule before) took 6.32× and 6.51×. Earlier: plain reverse mode through this forward (the
+    `switch` inside a `map` keeps every branch's residuals) 162× and 21 GB; reverse mode
+    over checkpointed chunks of `_joint` 5.8–14×.
     """
     if not blurred:
         return _joint(grid, False, X, E, h, h_l, S, K, skin_R)
@@ -172,30 +173,19 @@ def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
     return jnp.concatenate([rgb_surface, xyz_da, xyz_dta], axis=-1)
 
 
-_RULE = "transpose"  # "jvp": the old rule, JAX's transpose of the chunked JVP (benchmarks)
-
-
 @_colours.defjvp
 def _colours_jvp(grid, blurred, primals, tangents):
     out = _colours(grid, blurred, *primals)
-    if _RULE == "jvp":
-        return out, _chunked_tangent(grid, blurred, primals, tangents, tie=True)
     return out, linear_call(*_rules(grid, blurred), tuple(primals), tuple(tangents))
 
 
-def _chunked_tangent(grid, blurred, primals, tangents, tie=False):
+def _chunked_tangent(grid, blurred, primals, tangents):
     """Forward mode: the tangent of the colours, a loop over chunks of `CHUNK` texels,
     each chunk's tangent recomputed from its inputs (checkpointed)."""
     X = primals[0]
     P = X.shape[1]
     chunks = -(-P // CHUNK)
     pad = chunks * CHUNK - P
-    if tie:
-        # Tie every tangent to X's (adding 0 × one of its entries): inputs whose tangent is
-        # a known zero otherwise make JAX's linearisation hoist their share of the work out
-        # of the loop as full-size residuals (measured: 4× slower).
-        t0 = 0.0 * tangents[0][0, 0]
-        tangents = [t + t0 for t in tangents]
 
     def per_texel(a, axis):  # (..., P, ...) → (chunks, ..., CHUNK, ...)
         widths = [(0, 0)] * a.ndim
@@ -385,16 +375,24 @@ def _cotangents(grid, blurred, X, E, h, h_l, S, K, skin_R, g):
 
 
 def _cotangents_chunked(grid, blurred, X, E, h, h_l, S, K, skin_R, g, chunk=CHUNK):
+    """`_cotangents` in a loop over chunks of `chunk` texels (the last one padded), so that
+    each chunk's pass stays in the cache; the per-band cotangents (S, K and a skin spectrum
+    shared by all texels) summed over the chunks."""
     P = X.shape[1]
     chunks = -(-P // chunk)
     pad = chunks * chunk - P
 
-    def per_texel(a, axis):
+    def per_texel(a, axis):  # (..., P, ...) → (chunks, ..., chunk, ...)
         widths = [(0, 0)] * a.ndim
         widths[axis] = (0, pad)
         a = jnp.pad(a, widths)
         a = a.reshape(*a.shape[:axis], chunks, chunk, *a.shape[axis + 1:])
         return jnp.moveaxis(a, axis, 0)
+
+    def unchunk(a, axis):  # the inverse of per_texel, the padding dropped
+        a = jnp.moveaxis(a, 0, axis)
+        a = a.reshape(*a.shape[:axis], chunks * chunk, *a.shape[axis + 2:])
+        return jax.lax.slice_in_dim(a, 0, P, axis=axis)
 
     per = skin_R.ndim == 2
     local = (per_texel(X, 1), per_texel(E, 0), per_texel(h, 0), per_texel(h_l, 1),
@@ -405,7 +403,5 @@ def _cotangents_chunked(grid, blurred, X, E, h, h_l, S, K, skin_R, g, chunk=CHUN
         return _cotangents(grid, blurred, x, e, hh, hl, S, K, sk if per else skin_R, gg)
 
     dX, dE, dh, dh_l, dS, dK, dskin = jax.lax.map(one, local)
-    unchunk = lambda a, axis: jnp.moveaxis(a, 0, axis).reshape(  # noqa: E731
-        *a.shape[1:axis + 1], -1, *a.shape[axis + 2:]).take(jnp.arange(P), axis=axis)
     return (unchunk(dX, 1), unchunk(dE, 0), unchunk(dh, 0), unchunk(dh_l, 1),
             dS.sum(0), dK.sum(0), unchunk(dskin, 0) if per else dskin.sum(0))
