@@ -35,6 +35,8 @@ import warnings
 from pathlib import Path
 
 from . import __version__, cluster
+from .checks import check_scene as _check_scene
+from .checks import reading as _reading
 from .io import FitError, InputError
 from .outputs import Outputs, check_name, slug
 
@@ -531,93 +533,6 @@ def _base_name(sc, overrides) -> str:
     if len(suffix) > 120:  # many overrides: a digest keeps runs apart and names short
         suffix = "D-" + hashlib.sha1("\0".join(overrides).encode()).hexdigest()[:12]
     return f"{base}_{suffix}" if suffix else base
-
-
-@contextlib.contextmanager
-def _reading(path, key=None):
-    """A file nested too deeply for Python's parsers is bad input, not a crash."""
-    try:
-        yield
-    except RecursionError:
-        raise InputError("nested too deeply to read", path, key=key) from None
-
-
-def _check_scene(sc, count: int) -> list:
-    """Everything a scene reads, checked before any render: memory first (no allocation),
-    then the mesh, edits, polygons, BRDF file, materials and layer images. Returns the
-    scene's input files."""
-    import numpy as np
-
-    from . import cosmetics, resources
-    from .mesh import BUILTIN as MESHES
-    from .mesh import load_mesh
-
-    config = sc.config
-    resources.check_memory(resources.render_bytes(config, count),
-                           f"scene {sc.name!r} (texture {config.texture.size}², image "
-                           f"{config.image}x{config.image_height or config.image}, "
-                           f"supersample {config.supersample}"
-                           + (f", {count} sweep values" if count > 1 else "") + ")",
-                           sc.source)
-    inputs = [sc.source]
-    mesh_name = config.texture.mesh
-    with _reading(mesh_name):
-        mesh = load_mesh(mesh_name)
-    if mesh_name not in MESHES:
-        inputs.append(mesh_name)
-    if config.texture.projection == "uv" and mesh.uv is None:
-        raise InputError(f"mesh '{mesh.name}' has no texture coordinates; use planar or "
-                         "cylindrical projection", sc.source, key="mesh.projection")
-    for i, e in enumerate(config.texture.edits):
-        if e.vertex is not None and e.vertex >= len(mesh.vertices):
-            raise InputError(f"vertex {e.vertex} does not exist; the mesh has "
-                             f"{len(mesh.vertices)} vertices", sc.source,
-                             key=f"fields.edit[{i}].vertex")
-    if config.material == "lafortune":
-        if config.brdf != "skin":
-            inputs.append(config.brdf)
-        with _reading(config.brdf, "material.brdf"):
-            lobes = sc.params["material.lafortune"]
-        arrays = [np.asarray(a) for a in (lobes.diffuse, lobes.Cxy, lobes.Cz)]
-        if not any(np.any(a != 0) for a in arrays):
-            raise InputError("every term is zero (diffuse and all lobes): this material "
-                             "reflects no light; expected a fit from jaxskin fit-brdf",
-                             config.brdf)
-    sp = config.spectral
-    if sp is not None and sp.melanin_image is not None:
-        inputs.append(sp.melanin_image)
-        _check_image(sp.melanin_image, sc.source, "skin.melanin_image")
-    for layer in sp.layers if sp is not None else ():
-        inputs.append(layer.material)
-        with _reading(layer.material):
-            cosmetics.load_material(layer.material, sp.grid)
-        if layer.image is not None:
-            inputs.append(layer.image)
-            _check_image(layer.image, sc.source, f"layer.{layer.name}.image")
-        for i, (_, vertices, _) in enumerate(layer.polygons):
-            if vertices is not None and max(vertices) >= len(mesh.vertices):
-                raise InputError(f"vertex {max(vertices)} does not exist; the mesh has "
-                                 f"{len(mesh.vertices)} vertices", sc.source,
-                                 key=f"layer.{layer.name}.polygon[{i}].vertices")
-    return inputs
-
-
-def _check_image(path, scene, key) -> None:
-    """A layer map: a readable 2-D greyscale (or grey-as-RGB) image of finite numbers."""
-    import imageio.v3 as iio
-    import numpy as np
-
-    try:
-        img = np.asarray(iio.imread(path))
-    except Exception as e:  # noqa: BLE001  (imageio raises many kinds; all mean unreadable)
-        raise InputError(f"cannot read as an image ({e.__class__.__name__})", path) from None
-    ok = img.dtype.kind in "uif b" and (img.ndim == 2 or (img.ndim == 3 and img.shape[-1] in (
-        1, 2, 3, 4))) and img.size > 0
-    if not ok:
-        raise InputError(f"expected a greyscale image (H, W), got an array of shape "
-                         f"{img.shape} and type {img.dtype}", path)
-    if img.dtype.kind == "f" and not np.all(np.isfinite(img)):
-        raise InputError("the image has non-finite values", path)
 
 
 def _render(args, run: _Run) -> int:

@@ -1,0 +1,81 @@
+"""The checks a scene passes before any render, shared by `jaxskin render`, `jaxskin
+fit-image` and the editor: memory, mesh, edits, BRDF, materials, images, polygons. Each
+failure is an `InputError` naming the file or key and what was expected."""
+
+from __future__ import annotations
+
+import contextlib
+
+from .io import InputError
+
+__all__ = ["check_scene", "reading"]
+
+
+@contextlib.contextmanager
+def reading(path, key=None):
+    """A file nested too deeply for Python's parsers is bad input, not a crash."""
+    try:
+        yield
+    except RecursionError:
+        raise InputError("nested too deeply to read", path, key=key) from None
+
+
+def check_scene(sc, count: int) -> list:
+    """Everything a `scene.Scene` reads, checked before any render of `count` images at
+    once: memory first (no allocation), then the mesh, edits, polygons, BRDF file,
+    materials and images (`maps.read_grey`, the reader the render uses). Returns the
+    scene's input files."""
+    import numpy as np
+
+    from . import cosmetics, maps, resources
+    from .mesh import BUILTIN as MESHES
+    from .mesh import load_mesh
+
+    config = sc.config
+    resources.check_memory(resources.render_bytes(config, count),
+                           f"scene {sc.name!r} (texture {config.texture.size}², image "
+                           f"{config.image}x{config.image_height or config.image}, "
+                           f"supersample {config.supersample}"
+                           + (f", {count} sweep values" if count > 1 else "") + ")",
+                           sc.source)
+    inputs = [sc.source]
+    mesh_name = config.texture.mesh
+    with reading(mesh_name):
+        mesh = load_mesh(mesh_name)
+    if mesh_name not in MESHES:
+        inputs.append(mesh_name)
+    if config.texture.projection == "uv" and mesh.uv is None:
+        raise InputError(f"mesh '{mesh.name}' has no texture coordinates; use planar or "
+                         "cylindrical projection", sc.source, key="mesh.projection")
+    for i, e in enumerate(config.texture.edits):
+        if e.vertex is not None and e.vertex >= len(mesh.vertices):
+            raise InputError(f"vertex {e.vertex} does not exist; the mesh has "
+                             f"{len(mesh.vertices)} vertices", sc.source,
+                             key=f"fields.edit[{i}].vertex")
+    if config.material == "lafortune":
+        if config.brdf != "skin":
+            inputs.append(config.brdf)
+        with reading(config.brdf, "material.brdf"):
+            lobes = sc.params["material.lafortune"]
+        arrays = [np.asarray(a) for a in (lobes.diffuse, lobes.Cxy, lobes.Cz)]
+        if not any(np.any(a != 0) for a in arrays):
+            raise InputError("every term is zero (diffuse and all lobes): this material "
+                             "reflects no light; expected a fit from jaxskin fit-brdf",
+                             config.brdf)
+    sp = config.spectral
+    if sp is not None and sp.melanin_image is not None:
+        inputs.append(sp.melanin_image)
+        maps.read_grey(sp.melanin_image, key="skin.melanin_image")
+    for layer in sp.layers if sp is not None else ():
+        inputs.append(layer.material)
+        with reading(layer.material):
+            cosmetics.load_material(layer.material, sp.grid)
+        if layer.image is not None:
+            inputs.append(layer.image)
+            maps.read_grey(layer.image, key=f"layer.{layer.name}.image")
+        for i, (_, vertices, _) in enumerate(layer.polygons):
+            if vertices is not None and max(vertices) >= len(mesh.vertices):
+                raise InputError(f"vertex {max(vertices)} does not exist; the mesh has "
+                                 f"{len(mesh.vertices)} vertices", sc.source,
+                                 key=f"layer.{layer.name}.polygon[{i}].vertices")
+    return inputs
