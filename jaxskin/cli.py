@@ -558,7 +558,7 @@ def _render(args, run: _Run) -> int:
     plans = []
     for sc in scenes:
         sweep = [_parse_sweep(text, sc) for text in args.sweep]
-        count = min(len(sweep[0][1]), cluster.SWEEP_BATCH) if sweep else 1  # per batch
+        count = cluster.SWEEP_BATCH if sweep else 1  # per batch: every batch is padded
         outputs.inputs += [Path(p) for p in _check_scene(sc, count)]
         plans.append((sc, sweep, _base_name(sc, args.overrides)))
     files = []
