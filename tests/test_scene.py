@@ -83,6 +83,26 @@ def test_overrides_are_checked_like_the_file(tmp_path):
         load_scene(path, ["texture.sise=32"])
 
 
+def test_a_camera_size_alone_keeps_the_frames_aspect(tmp_path):
+    """`-D camera.size=N` on a scene whose file sets camera.height (the arm: 1024 x 320)
+    scales the height with the width, as the user asking for a smaller image expects (it
+    once gave a 64 x 320 strip with the arm a sliver across it); an explicit height wins;
+    a square scene stays square; a height over the key's maximum is an error naming it."""
+    arm = load_scene("arm", ["camera.size=64"])
+    assert (arm.config.image, arm.config.image_height) == (64, 20)
+    assert load_scene("arm", ["camera.size=100"]).config.image_height == 31  # 31.25
+    assert load_scene("arm", ["camera.size=64", "camera.height=64"]).config.image_height == 64
+    assert load_scene("arm", ["camera.size=64", "camera.height=0"]).config.image_height == 0
+    assert load_scene("arm", ["camera.height=100"]).config.image == 1024
+    assert load_scene("hand", ["camera.size=64"]).config.image_height == 0
+    tall = tmp_path / "tall.toml"
+    tall.write_text(GOOD + "[camera]\nsize = 320\nheight = 1024\n")
+    assert load_scene(tall, ["camera.size=160"]).config.image_height == 512
+    with pytest.raises(InputError, match=r"-D camera.size=4096: key 'camera.size': expected "
+                                         r"at most 2560 .* give camera.height too"):
+        load_scene(tall, ["camera.size=4096"])
+
+
 def test_static_config_and_params_split(tmp_path):
     path = tmp_path / "s.toml"
     path.write_text(GOOD)
