@@ -79,3 +79,40 @@ def check_scene(sc, count: int) -> list:
                                  f"{len(mesh.vertices)} vertices", sc.source,
                                  key=f"layer.{layer.name}.polygon[{i}].vertices")
     return inputs
+
+
+def unused_overrides(sc, overrides) -> list[str]:
+    """The `-D` items of `overrides` that change nothing in scene `sc` (loaded with them):
+    a value the scene's material model does not use (`skin.subject` on the Blinn hand,
+    `material.melanin` on the spectral face). An item is unused when the scene loaded
+    without it has the same configuration and parameters although its value differs (a
+    static value the configuration keeps though no stage reads it, such as
+    `wrinkles.k_scale` with wrinkles off, is not found). For a warning: `-D` applies to every scene
+    of a command, so a key one scene does not use may serve another."""
+    import numpy as np
+
+    from .scene import _parse_override, load_scene
+
+    def same(a, b) -> bool:
+        import jax
+
+        la, ta = jax.tree.flatten(a)
+        lb, tb = jax.tree.flatten(b)
+        return ta == tb and all(np.array_equal(np.asarray(x), np.asarray(y))
+                                for x, y in zip(la, lb, strict=True))
+
+    out = []
+    for item in overrides:
+        key, _ = _parse_override(item)
+        if key == "name":  # names the outputs only
+            continue
+        rest = [o for o in overrides if _parse_override(o)[0] != key]
+        try:
+            without = load_scene(sc.source, rest)
+        except InputError:
+            continue
+        if without.values.get(key) == sc.values.get(key):
+            continue  # the scene's own value: nothing asked to change
+        if without.config == sc.config and same(without.params, sc.params):
+            out.append(item)
+    return out

@@ -37,6 +37,7 @@ from pathlib import Path
 from . import __version__, cluster
 from .checks import check_scene as _check_scene
 from .checks import reading as _reading
+from .checks import unused_overrides
 from .io import FitError, InputError
 from .outputs import Outputs, check_name, slug
 
@@ -249,7 +250,9 @@ def _parser() -> argparse.ArgumentParser:
         "render",
         help="render scenes to PNG (and their texture-space maps)",
         description="Render one or more scenes: a built-in name (hand, foot, arm: Bando 2001 "
-        "figs. 6.1-6.3) or a TOML scene file (format: docs/reference/scene.md). Writes "
+        "figs. 6.1-6.3; face, makeup: Huang et al. 2013; see jaxskin list) or a TOML scene "
+        "file (format: docs/reference/scene.md on the documentation site; every key with its "
+        "default and range: python -m pydoc jaxskin.scene). Writes "
         "DIR/<scene>.png "
         "(or .exr, --format); "
         "with --maps also DIR/<scene>_height.png (16-bit grey), DIR/<scene>_normal.png (the "
@@ -579,6 +582,10 @@ def _render(args, run: _Run) -> int:
             for kind in ("height", "normal", "field"):
                 planned[kind] = outputs.plan(f"{base}_{kind}.png", sc.source)
         files.append(planned)
+    for sc in scenes:  # after every check: a warning, not an error (-D serves every scene)
+        for item in unused_overrides(sc, args.overrides):
+            _say(f"jaxskin: warning: -D {item} changes nothing in scene {sc.name!r} (its "
+                 "material model or settings do not use it)")
     run.outputs.append(outputs)
     # The units of work: a scene's sweep in batches of cluster.SWEEP_BATCH values (one
     # compiled program per configuration), or the scene's one image; run here or on the

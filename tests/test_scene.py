@@ -175,3 +175,19 @@ def test_paths_from_the_file_and_from_the_command_line(tmp_path, monkeypatch):
     over = load_scene(scene, ["material.brdf=fits/other.json"])
     assert over.values["material.brdf"] == str(tmp_path / "fits" / "other.json")
     assert over.params["material.lafortune"].n.shape == (3, 3)
+
+
+def test_an_override_the_scene_does_not_use_is_found():
+    """`jaxskin render` warns (after its checks, before any work) about a -D value that
+    changes nothing: a newcomer's `-D skin.subject=50` on the Blinn hand once rendered the
+    default hand under a new name, without a word."""
+    from jaxskin.checks import unused_overrides
+
+    def unused(name, *items):
+        overrides = [*items, "texture.size=32"]
+        return unused_overrides(load_scene(name, overrides), overrides)
+
+    assert unused("hand", "skin.subject=50", "material.melanin=0.5") == ["skin.subject=50"]
+    assert unused("face", "skin.subject=50", "material.melanin=0.5") == ["material.melanin=0.5"]
+    assert unused("hand", "material.melanin=0.2", "name=x") == []  # the scene's own value
+    assert unused("makeup", "layer.blush.thickness_mm=0.02", "camera.size=64") == []
