@@ -284,7 +284,8 @@ def _parser() -> argparse.ArgumentParser:
                    "wrinkle normal map as textures (opens in Blender or any glTF viewer)")
     r.add_argument("--sweep", action="append", default=[], metavar="KEY=START:STOP:COUNT",
                    help="render COUNT images with a parameter from START to STOP, vmapped in "
-                   "batches of 8 values by one compiled program, e.g. --sweep "
+                   "batches of 8 values by one compiled program (fewer are padded to 8: a "
+                   "value's image has the same bytes in any sweep), e.g. --sweep "
                    "material.melanin=0:1:5; writes "
                    "DIR/<scene>_sweep-<i>_<key>-<value>.png")
     r.add_argument("-D", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
