@@ -515,9 +515,16 @@ def _parse_sweep(text: str, sc):
                          key=key)
     params = sc.params
     if key not in params or getattr(params[key], "ndim", 1) != 0:
-        scalars = ", ".join(k for k, v in params.items() if getattr(v, "ndim", 1) == 0)
-        raise InputError(f"--sweep: '{key}' is not a scalar parameter of this scene; "
-                         f"parameters: {scalars}", sc.source)
+        import difflib
+
+        from .scene import SCHEMA
+
+        names = [k for k, v in params.items() if getattr(v, "ndim", 1) == 0]
+        near = difflib.get_close_matches(key, names, n=1)
+        hint = (f"did you mean '{near[0]}'?" if near and key not in SCHEMA
+                else f"parameters: {', '.join(names)}")
+        raise InputError(f"--sweep: '{key}' is not a scalar parameter of this scene; {hint}",
+                         sc.source)
     layers = [layer.name for layer in sc.layers]
     for value in (start, stop):
         check_value(key, value, f"--sweep {text}", layers)
