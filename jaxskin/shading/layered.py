@@ -158,7 +158,9 @@ def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
     1280×720 (benchmarks/bench_gradients.py, the loaded 2-core machine, one process): the
     gradient of the whole render with respect to the thickness maps 1.97× the forward pass,
     with respect to the 21 scalars 3.06×, where JAX's transpose of the chunked JVP (the
-    rule before) took 6.32× and 6.51×. Earlier: plain reverse mode through this forward (the
+    rule before) took 6.32× and 6.51× (after main's faster SSS blur, on a quieter
+    machine: 2.25× and 3.15×; the rest of the render's backward is then the larger part of
+    what remains). Earlier: plain reverse mode through this forward (the
     `switch` inside a `map` keeps every branch's residuals) 162× and 21 GB; reverse mode
     over checkpointed chunks of `_joint` 5.8–14×.
     """
