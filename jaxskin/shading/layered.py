@@ -159,8 +159,9 @@ def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
     gradient of the whole render with respect to the thickness maps 1.97× the forward pass,
     with respect to the 21 scalars 3.06×, where JAX's transpose of the chunked JVP (the
     rule before) took 6.32× and 6.51× (after main's faster SSS blur, on a quieter
-    machine: 2.25× and 3.15×; the rest of the render's backward is then the larger part of
-    what remains). Earlier: plain reverse mode through this forward (the
+    machine: 2.25× and 3.15×; the render without the spectral pass is at 2× on its own,
+    this pass at about 2.3×: the primal's three products and the transpose's one pass,
+    1.3–1.6× their cost). Earlier: plain reverse mode through this forward (the
     `switch` inside a `map` keeps every branch's residuals) 162× and 21 GB; reverse mode
     over checkpointed chunks of `_joint` 5.8–14×.
     """
