@@ -41,21 +41,23 @@ from pathlib import Path
 
 import equinox as eqx
 import jax
+import jax.flatten_util
 import jax.numpy as jnp
+import lineax as lx
 import numpy as np
 import optax
 import optimistix as optx
 
 from jaxskin import render
 from jaxskin.io import InputError, atomic_write
-from jaxskin.scene import LAYER_SCHEMA, SCHEMA, Scene
+from jaxskin.scene import LAYER_SCHEMA, SCHEMA, SKIN_MAPS, Scene
 
-__all__ = ["DEGENERATE", "FitKey", "ImageFit", "MAP_SCALARS", "fit", "fit_keys", "weights",
-           "write_report"]
+__all__ = ["DEGENERATE", "FitKey", "ImageFit", "MAP_SCALARS", "fit", "fit_keys", "map_bounds",
+           "probe_stride", "texel_blocks", "view_diagonal", "weights", "write_report"]
 
 # A map key → the scalar it multiplies (the biophysical model's maps go here too). Layer
 # maps, `layer.NAME.map`, multiply `layer.NAME.thickness_mm`.
-MAP_SCALARS = {"skin.melanin_map": "skin.melanin"}
+MAP_SCALARS = {k: scalar for k, (scalar, _) in SKIN_MAPS.items()}
 # Pairs of keys that trade off against each other in an image (warned about when fitted
 # together): exact scale ambiguities and near ones.
 DEGENERATE = {
@@ -78,6 +80,10 @@ MAP_SOLVER_NOTE = (
     "(RMS 0.0102) in 31 s; optimistix.LBFGS and NonlinearCG never left the start's loss "
     "(0.295) in as many steps, their line searches rejecting every step in float32 "
     "(benchmarks/RESULTS.md, 'fit-image')")
+STEP_MAX = 3.0  # the Gauss–Newton step's largest change of a coordinate (e³ ≈ 20× a texel)
+GN_RTOL = 1e-5  # stop when the Gauss–Newton model predicts less than this share of the loss
+CG_RTOL = 1e-3  # the inner conjugate-gradient solve of each Gauss–Newton step: its tolerance
+CG_STEPS = 100  # … and its most iterations (each one texture-space prior HVP: cheap)
 ADAM_RATE = 0.3  # per step, in the transformed (log-like) coordinates: ~35 % at most
 PRIOR_EPS = 0.01  # the total variation's smoothing, in map units: sqrt(d² + ε²) − ε
 
@@ -108,8 +114,7 @@ def map_keys(scene: Scene) -> dict[str, str]:
         return {}
     out = {f"layer.{layer.name}.map": f"layer.{layer.name}.thickness_mm"
            for layer in scene.layers}
-    if scene.config.spectral.skin == "nist":  # the biophysical skin has no maps yet
-        out.update({k: s for k, s in MAP_SCALARS.items() if s in scene.params})
+    out.update({k: s for k, s in MAP_SCALARS.items() if s in scene.params})
     return out
 
 
@@ -321,11 +326,12 @@ def fit(config, params: dict, target, w, keys: tuple[FitKey, ...], steps: int = 
     - `target (H, W, 3)`: display values in [0, 1] from the scene's camera.
     - `w (H, W)`: per-pixel weights (`weights`).
     - `keys`: from `fit_keys`.
-    - `steps`: at most this many optimiser steps.
+    - `steps`: at most this many optimiser steps (for `"gn"`: tries, accepted or not).
     - `smooth`: the weight of the maps' total-variation prior (per map).
     - `progress`: called with the loss after each step.
-    - `solver`: `"auto"` (Levenberg–Marquardt for scalars only, Adam with maps), or one of
-      `"lm"`, `"adam"`, `"lbfgs"`, `"ncg"` (for comparisons).
+    - `solver`: `"auto"` (Levenberg–Marquardt for scalars only; with maps the per-texel
+      Gauss–Newton of `MAP_SOLVER_NOTE`, `"gn"`; Adam when Lafortune lobes are fitted with
+      maps), or one of `"lm"`, `"gn"`, `"adam"`, `"lbfgs"`, `"ncg"` (for comparisons).
     - `rate`: Adam's step size.
 
     **Returns:** an `ImageFit`.
@@ -373,17 +379,25 @@ def fit(config, params: dict, target, w, keys: tuple[FitKey, ...], steps: int = 
         prior = sum(total_variation(unpack(z)[fk.key], args["pairs"]) for fk in maps)
         return jnp.sum(r * r) + smooth * prior, None
 
-    name = solver if solver != "auto" else ("adam" if maps else "lm")
-    if name == "lm":
-        s = optx.LevenbergMarquardt(rtol=1e-4, atol=1e-4)  # |Δz| < 1e-4: x to 2.5e-5 of its range
-        fn = residual
-    else:
-        fn = loss
-        s = {"adam": lambda: optx.OptaxMinimiser(optax.adam(rate), rtol=0.0, atol=0.0),
-             "lbfgs": lambda: optx.LBFGS(rtol=0.0, atol=0.0),
-             "ncg": lambda: optx.NonlinearCG(rtol=0.0, atol=0.0)}[name]()
+    lobes = any(fk.kind == "lafortune" for fk in keys)
+    name = solver if solver != "auto" else (("adam" if lobes else "gn") if maps else "lm")
     args = {"arrays": arrays, "target": target, "sqrt_w": sqrt_w, "pairs": pairs}
-    z, history, n = _solve(s, fn, z0, args, steps, progress, stall=5 if name == "lm" else None)
+    if name == "gn":
+        if lobes or not maps:
+            raise ValueError("the per-texel Gauss–Newton needs maps and no Lafortune lobes")
+        z, history, n = _gauss_newton(config, keys, units, unpack, residual, loss, z0, args,
+                                      smooth, steps, progress)
+    else:
+        if name == "lm":
+            s = optx.LevenbergMarquardt(rtol=1e-4, atol=1e-4)  # |Δz| < 1e-4: 2.5e-5 of range
+            fn = residual
+        else:
+            fn = loss
+            s = {"adam": lambda: optx.OptaxMinimiser(optax.adam(rate), rtol=0.0, atol=0.0),
+                 "lbfgs": lambda: optx.LBFGS(rtol=0.0, atol=0.0),
+                 "ncg": lambda: optx.NonlinearCG(rtol=0.0, atol=0.0)}[name]()
+        z, history, n = _solve(s, fn, z0, args, steps, progress,
+                               stall=5 if name == "lm" else None)
     fitted = unpack(z)
     image = np.asarray(render.render_prepared(config, fitted, arrays))
     r = (np.clip(image, 0, 1) - np.asarray(target)) * np.asarray(sqrt_w)
@@ -398,13 +412,252 @@ def fit(config, params: dict, target, w, keys: tuple[FitKey, ...], steps: int = 
                     time.perf_counter() - t0, name, image)
 
 
+# --- the per-texel Gauss–Newton for maps -----------------------------------------------------
+
+def probe_stride(config, arrays) -> int:
+    """The spacing (texels) of the probe classes of `view_diagonal`: two texels of a class
+    never reach the same pixel through its samples' bilinear footprints — the largest
+    extent of a pixel's supersamples in texture space (the 99th percentile over covered
+    pixels; grazing silhouettes stretch further) plus 2, at most 8."""
+    tex = np.asarray(arrays["tex"], np.float64)
+    vm = np.asarray(arrays["view_mask"])
+    k = config.supersample
+    H, W = vm.shape[0] // k, vm.shape[1] // k
+    t = tex.reshape(H, k, W, k, 2)
+    full = vm.reshape(H, k, W, k).all(axis=(1, 3))
+    if not full.any():
+        return 2
+    ext = (t.max(axis=(1, 3)) - t.min(axis=(1, 3))).max(axis=-1)[full]
+    return int(min(8, np.ceil(np.percentile(ext, 99)) + 2))
+
+
+def view_diagonal(config, arrays, d, stride: int):
+    """diag(Aᵀ diag(d) A) `(Ht, Wt, 3)`: per texel and channel, Σ_p A_pt² d_p, A the linear
+    map from a texture-space colour to the image (`render.texture_to_view`) and `d (H, W, 3)`
+    per-pixel weights. By probing: the texels in classes `stride` apart (`probe_stride`) are
+    pushed through A together and pulled back by Aᵀ; a pixel sees at most one texel of a
+    class, so the pull-back at each texel is exactly its own Σ_p A_pt² d_p (where a pixel
+    does see two, the sum gains their cross term, which only overstates the curvature)."""
+    Ht, Wt = arrays["mask"].shape
+    yy, xx = np.mgrid[:Ht, :Wt]
+    cls = jnp.asarray((yy % stride) * stride + xx % stride, jnp.int32)
+    zero = jnp.zeros((Ht, Wt, 3), d.dtype)
+
+    def A(c):
+        return render.texture_to_view(config, arrays, c)
+
+    At = jax.linear_transpose(A, zero)
+
+    def one(k, acc):
+        v = jnp.broadcast_to((cls == k)[..., None], zero.shape).astype(d.dtype)
+        return acc + v * At(d * A(v))[0]
+
+    return jax.lax.fori_loop(0, stride * stride, one, zero)
+
+
+def texel_blocks(config, params: dict, arrays, names, tangents, d, stride: int):
+    """Per texel, the L × L block of JᵀJ for L maps (`names`, keys into `params`), as
+    `(Ht·Wt, L, L)`: Σ_channels D_tc a_l,tc a_m,tc with a_l = the texture-space colour's
+    derivative along map l's `tangents[l] (Ht, Wt)` (one JVP each, `render.texture_colour`)
+    and D = `view_diagonal` of the per-pixel `d (H, W, 3)` = (∂ pixel / ∂ linear pixel)² ×
+    weight. The colour of a texel depends on its own thicknesses except through the SSS
+    blur: the JVP along a whole map gives, at each texel, the sum of its neighbours'
+    influence on it (the blurred part of its response to a uniform change), so the block
+    overstates the curvature of a single texel's blurred share: steps err short, not long.
+    Also returns the texture colour `(Ht, Wt, 3)`."""
+    def colour(ms):
+        return render.texture_colour(config, {**params, **dict(zip(names, ms, strict=True))},
+                                     arrays)
+
+    base = tuple(params[k] for k in names)
+    c0, lin = jax.linearize(colour, base)
+    L = len(names)
+    eye = jnp.eye(L, dtype=c0.dtype)
+    stacked = tuple(eye[:, j, None, None] * tangents[j][None] for j in range(L))
+    dc = jax.vmap(lin)(stacked)  # (L, Ht, Wt, 3)
+    D = view_diagonal(config, arrays, d, stride)
+    B = jnp.einsum("thc,lthc,mthc->thlm", D, dc, dc)
+    return B.reshape(-1, L, L), c0
+
+
+def map_bounds(config, params: dict, names, w, sigma: float) -> dict:
+    """How well an image can pin each texel of the maps `names` (keys in `params`, factor
+    maps `(Ht, Wt)`), by the Cramér–Rao bound: the smallest standard deviation of an unbiased
+    estimate of log(value) at each texel, from pixels with weights `w (H, W)` and Gaussian
+    noise `sigma` in display values, the L maps at a texel estimated together (the inverse
+    of its L × L Fisher block, `texel_blocks` with tangents m ∂/∂m) and their neighbours
+    known. A texel whose bound is 0.025 has its value in the image to ±2.5 % (1σ); a
+    saturated texel (an opaque lipstick) or one that matches the skin has a large bound;
+    `inf` where no pixel sees it. Returns name → `(Ht, Wt)` relative bounds (float64)."""
+    arrays = render.prepare(config).arrays
+    p = dict(params)
+    c0 = render.texture_colour(config, p, arrays)
+    _, slope = _display_slope(config, p, arrays, c0)
+    d = slope ** 2 * jnp.asarray(w, jnp.float32)[..., None] / sigma ** 2
+    tangents = [jnp.asarray(p[k], jnp.float32) for k in names]
+    B, _ = jax.jit(texel_blocks, static_argnums=(0, 3, 6))(
+        config, p, arrays, tuple(names), tangents, d, probe_stride(config, arrays))
+    B = np.asarray(B, np.float64)
+    L = len(names)
+    diag = np.diagonal(B, axis1=1, axis2=2)
+    ok = np.all(diag > 0, axis=1) & (np.linalg.det(B) > 1e-12 * np.prod(diag, axis=1))
+    inv = np.full(B.shape, np.inf)
+    inv[ok] = np.linalg.inv(B[ok])
+    shape = np.asarray(arrays["mask"]).shape
+    return {k: np.sqrt(np.diagonal(inv, axis1=1, axis2=2)[:, i]).reshape(shape)
+            for i, k in enumerate(names[:L])}
+
+
+def _display_slope(config, params, arrays, c0):
+    """The linear image of texture colour `c0` and d(display)/d(linear) per pixel: the
+    exposure, the sRGB curve and the clip to [0, 1] (0 where clipped)."""
+    lin = render.texture_to_view(config, arrays, c0)
+
+    def display(x):
+        return jnp.clip(render.encode_srgb(render.expose(x, params["camera.exposure"])),
+                        0.0, 1.0)
+
+    return jax.jvp(display, (lin,), (jnp.ones_like(lin),))
+
+
+def _gauss_newton(config, keys, units, unpack, residual, loss, z0, args, smooth, steps,
+                  progress):
+    """Levenberg–Marquardt with a block-diagonal Gauss–Newton matrix (`MAP_SOLVER_NOTE`):
+    per texel the L × L block of the maps (`texel_blocks`), the TV prior's curvature on
+    its diagonal, one dense block for the scalars (forward-mode Jacobian through the whole
+    render); no cross terms between blocks. The gradient is the exact one. Nielsen's
+    damping update; a try whose loss does not fall is rejected (one forward render) and
+    retried with more damping. Stops when the model's predicted decrease is below 1e-5
+    of the loss, or after `steps` tries. Returns z, the loss history, the number of tries."""
+    maps = [fk for fk in keys if fk.kind == "map"]
+    names = [fk.key for fk in maps]
+    others = [fk.key for fk in keys if fk.kind != "map"]
+    stride = probe_stride(config, args["arrays"])
+    n_pairs = int(args["pairs"].shape[1])
+
+    def flat_others(z):
+        return jax.flatten_util.ravel_pytree({k: z[k] for k in others})
+
+    @jax.jit
+    def linearise(z, args):
+        (f, _), g = jax.value_and_grad(loss, has_aux=True)(z, args)
+        p = unpack(z)
+        tangents = []
+        for fk in maps:  # dm/dz of the sigmoid: m (1 − m / top)
+            m = p[fk.key]
+            tangents.append(m * (1.0 - m / (fk.hi / units[fk.key])))
+        c0 = render.texture_colour(config, p, args["arrays"])
+        _, slope = _display_slope(config, p, args["arrays"], c0)
+        d = (slope * args["sqrt_w"]) ** 2
+        B, _ = texel_blocks(config, p, args["arrays"], names, tangents, d, stride)
+        B = 2.0 * B
+        if others:
+            x0, unflat = flat_others(z)
+
+            def r_of(x):
+                return residual({**z, **unflat(x)}, args)[0].reshape(-1)
+
+            J = jax.jacfwd(r_of)(x0)
+            S = 2.0 * J.T @ J
+        else:
+            S = jnp.zeros((0, 0), jnp.float32)
+        return f, g, B, S
+
+    def prior_of_maps(ms, args):  # the prior as a function of the maps' values m
+        return smooth * sum(total_variation(m, args["pairs"]) for m in ms)
+
+    @jax.jit
+    def propose(z, g, B, S, lam, args):
+        L = len(names)
+        p = unpack(z)
+        ms = [p[k] for k in names]
+        shape = ms[0].shape
+        t = jnp.stack([(m * (1.0 - m / (fk.hi / units[fk.key]))).reshape(-1)
+                       for m, fk in zip(ms, maps, strict=True)], axis=-1)  # dm/dz (T, L)
+        gm = jnp.stack([g[k].reshape(-1) for k in names], axis=-1)  # (T, L)
+        dB = jnp.diagonal(B, axis1=1, axis2=2)
+        floor = 1e-6 * jnp.max(dB) + 1e-30
+        Bd = B + (lam * dB + floor)[..., None] * jnp.eye(L, dtype=B.dtype)
+
+        def hvp_prior(v):  # Jᵀ H_TV J v, J = dm/dz: the prior's Gauss–Newton part, exact
+            tv = [(t[:, i] * v[:, i]).reshape(shape) for i in range(L)]
+            _, h = jax.jvp(lambda m: jax.grad(prior_of_maps)(m, args), (ms,), (tv,))
+            return jnp.stack([hi.reshape(-1) for hi in h], axis=-1) * t
+
+        def matvec(v):  # (the data term's blocks, damped, + the prior's Hessian) v
+            return jnp.einsum("tlm,tm->tl", Bd, v) + hvp_prior(v)
+
+        inv = jnp.linalg.inv(Bd + jax.vmap(jnp.diag)(B_prior_diag(t, ms, args)))
+        struct = jax.ShapeDtypeStruct(gm.shape, gm.dtype)
+        psd = frozenset({lx.positive_semidefinite_tag, lx.symmetric_tag})
+        op = lx.FunctionLinearOperator(matvec, struct, tags=psd)
+        pre = lx.FunctionLinearOperator(lambda v: jnp.einsum("tlm,tm->tl", inv, v), struct,
+                                        tags=psd)
+        sol = lx.linear_solve(op, -gm, lx.CG(rtol=CG_RTOL, atol=0.0, max_steps=CG_STEPS),
+                              options={"preconditioner": pre}, throw=False)
+        step = jnp.clip(sol.value, -STEP_MAX, STEP_MAX)
+        pred = -(jnp.sum(gm * step) + 0.5 * (jnp.einsum("tl,tlm,tm->", step, B, step)
+                                             + jnp.sum(step * hvp_prior(step))))
+        new = dict(z)
+        for i, k in enumerate(names):
+            new[k] = z[k] + step[:, i].reshape(shape)
+        if others:
+            x0, unflat = flat_others(z)
+            gs, _ = flat_others(g)
+            dS = jnp.diag(S)
+            Sd = S + jnp.diag(lam * dS + 1e-6 * jnp.max(dS) + 1e-30)
+            ds = -jnp.linalg.solve(Sd, gs)
+            pred = pred - (gs @ ds + 0.5 * ds @ S @ ds)
+            new.update(unflat(x0 + ds))
+        f_new = loss(new, args)[0]
+        return new, f_new, pred
+
+    def B_prior_diag(t, ms, args):  # the diagonal of the prior's Gauss–Newton matrix
+        a, b = args["pairs"]
+        out = []
+        for i, m in enumerate(ms):
+            flat = m.reshape(-1)
+            dd = flat[a] - flat[b]
+            c = PRIOR_EPS ** 2 / (dd * dd + PRIOR_EPS ** 2) ** 1.5 * smooth / n_pairs
+            h = jnp.zeros_like(flat).at[a].add(c).at[b].add(c)
+            out.append(h * t[:, i] ** 2)
+        return jnp.stack(out, axis=-1)
+
+    z = z0
+    f, g, B, S = linearise(z, args)
+    lam, nu, history = 1e-2, 2.0, []
+    while len(history) < steps:
+        new, f_new, pred = propose(z, g, B, S, jnp.float32(lam), args)
+        f_new, pred, f0 = float(f_new), float(pred), float(f)
+        rho = (f0 - f_new) / pred if pred > 0 else -1.0
+        if np.isfinite(f_new) and f_new < f0 and rho > 0:
+            z = new
+            lam *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            nu = 2.0
+            history.append(f_new)
+            if progress is not None:
+                progress(f_new)
+            if pred < GN_RTOL * f_new:
+                break
+            f, g, B, S = linearise(z, args)
+        else:
+            lam *= nu
+            nu *= 2.0
+            history.append(f0)
+            if progress is not None:
+                progress(f0)
+            if lam > 1e8:
+                break
+    return z, history, len(history)
+
+
 def _start_map(config, params, fk: FitKey, unit: float, arrays, mask):
     """A map's start `(H, W)`, in units of `unit`: the scene's own map (its image or
     regions) × its scalar, with off-mesh texels at the mesh's mean."""
     texels = np.asarray(arrays["texels"])
     H, W = mask.shape
-    if fk.key == "skin.melanin_map":
-        own = arrays.get("melanin_cover")
+    if fk.key in SKIN_MAPS:
+        own = arrays.get(render.map_cover(fk.key))
     else:
         names = [layer.name for layer in config.spectral.layers]
         own = arrays["cover"][names.index(fk.key.split(".")[1])]

@@ -551,6 +551,7 @@ def _check_scene(sc, count: int) -> list:
     from . import cosmetics, resources
     from .mesh import BUILTIN as MESHES
     from .mesh import load_mesh
+    from .scene import SKIN_MAPS
 
     config = sc.config
     resources.check_memory(resources.render_bytes(config, count),
@@ -584,9 +585,11 @@ def _check_scene(sc, count: int) -> list:
                              "reflects no light; expected a fit from jaxskin fit-brdf",
                              config.brdf)
     sp = config.spectral
-    if sp is not None and sp.melanin_image is not None:
-        inputs.append(sp.melanin_image)
-        _check_image(sp.melanin_image, sc.source, "skin.melanin_image")
+    for map_key, (_, image_key) in SKIN_MAPS.items():
+        image = sp.image_of(map_key) if sp is not None else None
+        if image is not None:
+            inputs.append(image)
+            _check_image(image, sc.source, image_key)
     for layer in sp.layers if sp is not None else ():
         inputs.append(layer.material)
         with _reading(layer.material):
