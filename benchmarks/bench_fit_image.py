@@ -125,20 +125,27 @@ def maps(size, steps, solvers, smooth, rate=fi.ADAM_RATE, noise=0.01, seed=0, na
 
 
 def ambiguity(size=48, n=21, out="benchmarks/fit_image_ambiguity.png"):
-    """The loss over two pairs of keys around the truth, on the hand (Blinn): albedo against
+    """The loss over pairs of keys around the truth: on the hand (Blinn), albedo against
     intensity (material.melanin × light.intensity: a valley) and an exact one
-    (camera.exposure × light.intensity, with ambient 0: a line of zero loss)."""
+    (camera.exposure × light.intensity, with ambient 0: a line of zero loss); on the
+    makeup face (spectral, 32² texture and image), melanin against thickness
+    (skin.melanin × layer.foundation.thickness_mm: a valley)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    panels = [("material.melanin", (0.05, 0.6), "light.intensity", (0.3, 1.2), []),
-              ("camera.exposure", (-1.0, 1.0), "light.intensity", (0.3, 1.2),
-               ["light.ambient=0.0"])]
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), constrained_layout=True)
-    for ax, (kx, rx, ky, ry, extra) in zip(axes, panels, strict=True):
-        sc = load_scene("hand", [f"texture.size={size}", f"camera.size={size}", *extra])
+    hand = [f"texture.size={size}", f"camera.size={size}"]
+    face = ["texture.size=32", "camera.size=32", "camera.supersample=1",
+            "wrinkles.enabled=false", "light.shadows=false", "skin.melanin=0.5"]
+    panels = [("hand", hand, "material.melanin", (0.05, 0.6), "light.intensity", (0.3, 1.2)),
+              ("hand", hand + ["light.ambient=0.0"], "camera.exposure", (-1.0, 1.0),
+               "light.intensity", (0.3, 1.2)),
+              ("makeup", face, "skin.melanin", (0.0, 1.5), "layer.foundation.thickness_mm",
+               (0.0, 0.03))]
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2), constrained_layout=True)
+    for ax, (name, ov, kx, rx, ky, ry) in zip(axes, panels, strict=True):
+        sc = load_scene(name, ov)
         arrays = render.prepare(sc.config).arrays
         target = render.render(sc.config, sc.params)
         w = jnp.asarray(fi.weights(sc.config, sc.params))[..., None]
@@ -149,16 +156,19 @@ def ambiguity(size=48, n=21, out="benchmarks/fit_image_ambiguity.png"):
             return jnp.sum(w * (render.render_prepared(sc.config, p, arrays) - target) ** 2) \
                 / jnp.sum(w)
 
-        grid = jax.jit(jax.vmap(jax.vmap(loss, (0, None)), (None, 0)))(
-            jnp.asarray(xs, jnp.float32), jnp.asarray(ys, jnp.float32))
-        im = ax.contourf(xs, ys, np.log10(np.asarray(grid) + 1e-8), 20, cmap="viridis")
+        row = jax.jit(jax.vmap(loss, (0, None)))  # a row at a time: the face's memory
+        grid = np.stack([np.asarray(row(jnp.asarray(xs, jnp.float32), jnp.float32(y)))
+                         for y in ys])
+        im = ax.contourf(xs, ys, np.log10(grid + 1e-8), 20, cmap="viridis")
         ax.plot(float(sc.params[kx]), float(sc.params[ky]), "r*", ms=12, label="truth")
         ax.set_xlabel(kx)
         ax.set_ylabel(ky)
         ax.legend(loc="upper right")
         fig.colorbar(im, ax=ax, label="log10 loss")
-    axes[0].set_title("albedo against intensity: a valley")
-    axes[1].set_title("exposure against intensity (ambient 0): exact")
+    axes[0].set_title("albedo against intensity: a valley\n(fix light.intensity)")
+    axes[1].set_title("exposure against intensity (ambient 0): exact\n(fix either)")
+    axes[2].set_title("melanin against foundation thickness: a valley\n"
+                      "(fix skin.melanin, from bare skin)")
     fig.savefig(out, dpi=90)
     print(f"wrote {out}")
 
@@ -170,7 +180,9 @@ def speed(size=512, steps=4, solvers=("gn", "adam"), names=MAPS):
     ov = [f"texture.size={size}", f"camera.size={size}"]
     truth = load_scene("makeup", ov)
     target = np.asarray(render.render(truth.config, truth.params))
-    start = without_regions(load_scene("makeup", ov), names)
+    start = without_regions(load_scene("makeup", ov + [
+        f"layer.{n}.thickness_mm={truth.values[f'layer.{n}.thickness_mm'] / START}"
+        for n in names]), names)  # as in `maps`
     w = fi.weights(start.config, start.params)
     keys = fi.fit_keys(start, ",".join(f"layer.{n}.map" for n in names))
     t = time.perf_counter()
@@ -185,7 +197,8 @@ def speed(size=512, steps=4, solvers=("gn", "adam"), names=MAPS):
                    progress=lambda _loss, s=stamps: s.append(time.perf_counter()))
         d = np.diff(stamps)
         print(f"{solver}: {r.steps} steps, first (with compile) {d[0]:.1f} s, then "
-              + ", ".join(f"{x:.1f}" for x in d[1:]) + f" s; loss {r.history}")
+              + ", ".join(f"{x:.1f}" for x in d[1:]) + f" s, total {d.sum():.0f} s; loss "
+              + " ".join(f"{h:.3e}" for h in r.history))
 
 
 def main():

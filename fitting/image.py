@@ -43,7 +43,6 @@ import equinox as eqx
 import jax
 import jax.flatten_util
 import jax.numpy as jnp
-import lineax as lx
 import numpy as np
 import optax
 import optimistix as optx
@@ -52,8 +51,9 @@ from jaxskin import render
 from jaxskin.io import InputError, atomic_write
 from jaxskin.scene import LAYER_SCHEMA, SCHEMA, SKIN_MAPS, Scene
 
-__all__ = ["DEGENERATE", "FitKey", "ImageFit", "MAP_SCALARS", "fit", "fit_keys", "map_bounds",
-           "probe_stride", "texel_blocks", "view_diagonal", "weights", "write_report"]
+__all__ = ["DEGENERATE", "FitKey", "ImageFit", "MAP_SCALARS", "blur_gain", "fit", "fit_keys",
+           "map_bounds", "pcg", "probe_stride", "texel_blocks", "view_diagonal", "weights",
+           "write_report"]
 
 # A map key → the scalar it multiplies (the biophysical model's maps go here too). Layer
 # maps, `layer.NAME.map`, multiply `layer.NAME.thickness_mm`.
@@ -84,6 +84,7 @@ STEP_MAX = 3.0  # the Gauss–Newton step's largest change of a coordinate (e³ 
 GN_RTOL = 1e-5  # stop when the Gauss–Newton model predicts less than this share of the loss
 CG_RTOL = 1e-3  # the inner conjugate-gradient solve of each Gauss–Newton step: its tolerance
 CG_STEPS = 100  # … and its most iterations (each one texture-space prior HVP: cheap)
+_DEBUG = bool(__import__("os").environ.get("JAXSKIN_FIT_DEBUG"))
 ADAM_RATE = 0.3  # per step, in the transformed (log-like) coordinates: ~35 % at most
 PRIOR_EPS = 0.01  # the total variation's smoothing, in map units: sqrt(d² + ε²) − ε
 
@@ -455,19 +456,45 @@ def view_diagonal(config, arrays, d, stride: int):
     return jax.lax.fori_loop(0, stride * stride, one, zero)
 
 
-def texel_blocks(config, params: dict, arrays, names, tangents, d, stride: int):
+def blur_gain(config, arrays):
+    """The SSS blur's share of a texel's own light that stays at the texel, as a root sum of
+    squares: sqrt(Σ_t' w_t'←t²) per channel `(3,)` for the blur of a single texel at the
+    mesh's most inland texel (1: no blur, or a blur under a texel). In a Gauss–Newton block
+    the blurred part b of a texel's response then counts as sqrt(κ) b: its square κ b² is
+    the blurred part's exact self-curvature, Σ_t' (w_t'←t b)²."""
+    sp = config.spectral
+    if sp is None or sp.sss is None:
+        return jnp.ones(3, jnp.float32)
+    from scipy.ndimage import distance_transform_edt
+
+    from jaxskin import sss
+
+    mask = np.asarray(arrays["mask"])
+    inland = np.unravel_index(np.argmax(distance_transform_edt(mask)), mask.shape)
+    delta = np.zeros((*mask.shape, 3), np.float32)
+    delta[inland] = 1.0
+    out = sss.blur(jnp.asarray(delta), render.prepare(config).texel_mm, arrays["mask"],
+                   sp.sss, norm=arrays.get("sss_norm"))
+    return jnp.sqrt(jnp.sum(out * out, axis=(0, 1)))
+
+
+def texel_blocks(config, params: dict, arrays, names, tangents, d, stride: int, gain=None):
     """Per texel, the L × L block of JᵀJ for L maps (`names`, keys into `params`), as
     `(Ht·Wt, L, L)`: Σ_channels D_tc a_l,tc a_m,tc with a_l = the texture-space colour's
     derivative along map l's `tangents[l] (Ht, Wt)` (one JVP each, `render.texture_colour`)
     and D = `view_diagonal` of the per-pixel `d (H, W, 3)` = (∂ pixel / ∂ linear pixel)² ×
     weight. The colour of a texel depends on its own thicknesses except through the SSS
-    blur: the JVP along a whole map gives, at each texel, the sum of its neighbours'
-    influence on it (the blurred part of its response to a uniform change), so the block
-    overstates the curvature of a single texel's blurred share: steps err short, not long.
+    blur, which spreads the part of its response that enters the skin over its
+    neighbours: in the JVP the blur's derivative is `gain` × identity (`blur_gain`, its
+    own-texel root sum of squares; None: the blur's own derivative, which along a whole
+    map sums the neighbours' shares — right for a blur under a texel, and wrong for a wide
+    one when the surface and the blurred parts of a response have opposite signs and
+    cancel). Exact without SSS (tests/test_fit_image.py); with it, the cross term between
+    a texel's local and blurred parts uses sqrt(κ) for the kernel's centre weight.
     Also returns the texture colour `(Ht, Wt, 3)`."""
     def colour(ms):
         return render.texture_colour(config, {**params, **dict(zip(names, ms, strict=True))},
-                                     arrays)
+                                     arrays, gain)
 
     base = tuple(params[k] for k in names)
     c0, lin = jax.linearize(colour, base)
@@ -496,7 +523,8 @@ def map_bounds(config, params: dict, names, w, sigma: float) -> dict:
     d = slope ** 2 * jnp.asarray(w, jnp.float32)[..., None] / sigma ** 2
     tangents = [jnp.asarray(p[k], jnp.float32) for k in names]
     B, _ = jax.jit(texel_blocks, static_argnums=(0, 3, 6))(
-        config, p, arrays, tuple(names), tangents, d, probe_stride(config, arrays))
+        config, p, arrays, tuple(names), tangents, d, probe_stride(config, arrays),
+        blur_gain(config, arrays))
     B = np.asarray(B, np.float64)
     L = len(names)
     diag = np.diagonal(B, axis1=1, axis2=2)
@@ -520,6 +548,38 @@ def _display_slope(config, params, arrays, c0):
     return jax.jvp(display, (lin,), (jnp.ones_like(lin),))
 
 
+def pcg(matvec, b, precondition, rtol: float, steps: int):
+    """Preconditioned conjugate gradients for `matvec(x) = b` (symmetric positive
+    semidefinite), from 0, until ‖r‖ ≤ rtol ‖b‖ or `steps` iterations; a direction of zero
+    curvature ends it (the iterate so far is kept). (`lineax.CG` with this preconditioner
+    returned NaN at 256² in float32 where this does not; measured on the makeup face.)"""
+    def dot(u, v):
+        return jnp.sum(u * v)
+
+    z = precondition(b)
+    state = (jnp.zeros_like(b), b, z, dot(b, z), 0)
+    limit = (rtol * jnp.sqrt(dot(b, b))) ** 2
+
+    def cond(s):
+        _, r, p, rz, i = s
+        return (i < steps) & (dot(r, r) > limit) & (rz > 0)
+
+    def body(s):
+        x, r, p, rz, i = s
+        Ap = matvec(p)
+        pAp = dot(p, Ap)
+        ok = pAp > 0
+        alpha = jnp.where(ok, rz / jnp.where(ok, pAp, 1.0), 0.0)
+        x = x + alpha * p
+        r = r - alpha * Ap
+        z = precondition(r)
+        rz_new = jnp.where(ok, dot(r, z), 0.0)
+        p = z + (rz_new / jnp.where(rz > 0, rz, 1.0)) * p
+        return x, r, p, rz_new, i + 1
+
+    return jax.lax.while_loop(cond, body, state)[0]
+
+
 def _gauss_newton(config, keys, units, unpack, residual, loss, z0, args, smooth, steps,
                   progress):
     """Levenberg–Marquardt with a block-diagonal Gauss–Newton matrix (`MAP_SOLVER_NOTE`):
@@ -533,6 +593,7 @@ def _gauss_newton(config, keys, units, unpack, residual, loss, z0, args, smooth,
     names = [fk.key for fk in maps]
     others = [fk.key for fk in keys if fk.kind != "map"]
     stride = probe_stride(config, args["arrays"])
+    gain = blur_gain(config, args["arrays"])
     n_pairs = int(args["pairs"].shape[1])
 
     def flat_others(z):
@@ -549,7 +610,7 @@ def _gauss_newton(config, keys, units, unpack, residual, loss, z0, args, smooth,
         c0 = render.texture_colour(config, p, args["arrays"])
         _, slope = _display_slope(config, p, args["arrays"], c0)
         d = (slope * args["sqrt_w"]) ** 2
-        B, _ = texel_blocks(config, p, args["arrays"], names, tangents, d, stride)
+        B, _ = texel_blocks(config, p, args["arrays"], names, tangents, d, stride, gain)
         B = 2.0 * B
         if others:
             x0, unflat = flat_others(z)
@@ -575,9 +636,11 @@ def _gauss_newton(config, keys, units, unpack, residual, loss, z0, args, smooth,
         t = jnp.stack([(m * (1.0 - m / (fk.hi / units[fk.key]))).reshape(-1)
                        for m, fk in zip(ms, maps, strict=True)], axis=-1)  # dm/dz (T, L)
         gm = jnp.stack([g[k].reshape(-1) for k in names], axis=-1)  # (T, L)
-        dB = jnp.diagonal(B, axis1=1, axis2=2)
-        floor = 1e-6 * jnp.max(dB) + 1e-30
-        Bd = B + (lam * dB + floor)[..., None] * jnp.eye(L, dtype=B.dtype)
+        # In units of the largest curvature (float32: the raw blocks are ~1e-7 at 256²).
+        scale = jnp.maximum(jnp.max(jnp.diagonal(B, axis1=1, axis2=2)), 1e-30)
+        Bs, gs_m = B / scale, gm / scale
+        dB = jnp.diagonal(Bs, axis1=1, axis2=2)
+        Bd = Bs + (lam * dB + 1e-6)[..., None] * jnp.eye(L, dtype=B.dtype)
 
         def hvp_prior(v):  # Jᵀ H_TV J v, J = dm/dz: the prior's Gauss–Newton part, exact
             tv = [(t[:, i] * v[:, i]).reshape(shape) for i in range(L)]
@@ -585,17 +648,11 @@ def _gauss_newton(config, keys, units, unpack, residual, loss, z0, args, smooth,
             return jnp.stack([hi.reshape(-1) for hi in h], axis=-1) * t
 
         def matvec(v):  # (the data term's blocks, damped, + the prior's Hessian) v
-            return jnp.einsum("tlm,tm->tl", Bd, v) + hvp_prior(v)
+            return jnp.einsum("tlm,tm->tl", Bd, v) + hvp_prior(v) / scale
 
-        inv = jnp.linalg.inv(Bd + jax.vmap(jnp.diag)(B_prior_diag(t, ms, args)))
-        struct = jax.ShapeDtypeStruct(gm.shape, gm.dtype)
-        psd = frozenset({lx.positive_semidefinite_tag, lx.symmetric_tag})
-        op = lx.FunctionLinearOperator(matvec, struct, tags=psd)
-        pre = lx.FunctionLinearOperator(lambda v: jnp.einsum("tlm,tm->tl", inv, v), struct,
-                                        tags=psd)
-        sol = lx.linear_solve(op, -gm, lx.CG(rtol=CG_RTOL, atol=0.0, max_steps=CG_STEPS),
-                              options={"preconditioner": pre}, throw=False)
-        step = jnp.clip(sol.value, -STEP_MAX, STEP_MAX)
+        inv = jnp.linalg.inv(Bd + jax.vmap(jnp.diag)(B_prior_diag(t, ms, args) / scale))
+        x = pcg(matvec, -gs_m, lambda v: jnp.einsum("tlm,tm->tl", inv, v), CG_RTOL, CG_STEPS)
+        step = jnp.clip(x, -STEP_MAX, STEP_MAX)
         pred = -(jnp.sum(gm * step) + 0.5 * (jnp.einsum("tl,tlm,tm->", step, B, step)
                                              + jnp.sum(step * hvp_prior(step))))
         new = dict(z)
@@ -630,6 +687,8 @@ def _gauss_newton(config, keys, units, unpack, residual, loss, z0, args, smooth,
         new, f_new, pred = propose(z, g, B, S, jnp.float32(lam), args)
         f_new, pred, f0 = float(f_new), float(pred), float(f)
         rho = (f0 - f_new) / pred if pred > 0 else -1.0
+        if _DEBUG:
+            print(f"gn: f {f0:.4e} try {f_new:.4e} predicted {pred:.3e} λ {lam:.2e}")
         if np.isfinite(f_new) and f_new < f0 and rho > 0:
             z = new
             lam *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)

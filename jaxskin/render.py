@@ -219,11 +219,13 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
     return _finish(colour, view_mask, k, output, params["camera.exposure"])
 
 
-def texture_colour(config: SceneConfig, params: dict, arrays: dict):
+def texture_colour(config: SceneConfig, params: dict, arrays: dict, blur_gain=None):
     """The cosmetics model's linear colour in texture space, `(Ht, Wt, 3)` (0 off the
     mesh): what `render_prepared` samples into the view. `texture_to_view` of it, exposed
     and encoded, is the display image (`fitting.image` uses the pair for its per-texel
-    Gauss–Newton blocks)."""
+    Gauss–Newton blocks). `blur_gain (3,)`: the SSS blur's value unchanged, its derivative
+    replaced by this gain per channel times the identity (a texel's own share, as
+    `fitting.image.blur_gain` sizes it); None: the blur as it is."""
     p = prepare(config)
     if config.needs_furrows:
         frame = {k: arrays[k] for k in ("grad_s", "grad_t") if k in arrays}
@@ -231,7 +233,7 @@ def texture_colour(config: SceneConfig, params: dict, arrays: dict):
                                  arrays["noise"], params, frame, p.setup.tmap.wrap_x)["normals"]
     else:
         normals = arrays["normals"]
-    return _cosmetics_texture(config, p, params, arrays, normals)
+    return _cosmetics_texture(config, p, params, arrays, normals, blur_gain)
 
 
 def texture_to_view(config: SceneConfig, arrays: dict, texture_image):
@@ -285,7 +287,8 @@ def _finish(samples, view_mask, k: int, output: str, stops):
     return jnp.concatenate([encode_srgb(straight) if linear else straight, alpha], axis=-1)
 
 
-def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: dict, normals):
+def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: dict, normals,
+                       blur_gain=None):
     """The cosmetics model's colour in texture space, `(H, W, 3)` (Huang et al. 2013),
     computed on the list of texels on the mesh, `arrays["texels"]` (flat indices)."""
     sp = config.spectral
@@ -308,8 +311,12 @@ def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: d
     blur = None
     if sp.sss is not None:
         def blur(colour):
-            return to_list(sss.blur(to_image(colour), p.texel_mm, mask, sp.sss,
-                                    norm=arrays.get("sss_norm")))
+            out = to_list(sss.blur(to_image(colour), p.texel_mm, mask, sp.sss,
+                                   norm=arrays.get("sss_norm")))
+            if blur_gain is None:
+                return out
+            return jax.lax.stop_gradient(out) + blur_gain * (colour - jax.lax.stop_gradient(
+                colour))
     skin_R = skin_reflectance(sp, params, arrays, texels)
     layers = {}
     if sp.layers:
