@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 import time
 import warnings
 from collections.abc import Callable
@@ -52,7 +53,7 @@ from jaxskin.io import InputError, atomic_write
 from jaxskin.scene import LAYER_SCHEMA, SCHEMA, SKIN_MAPS, Scene
 
 __all__ = ["DEGENERATE", "FitKey", "ImageFit", "MAP_SCALARS", "blur_gain", "fit", "fit_keys",
-           "map_bounds", "pcg", "probe_stride", "texel_blocks", "view_diagonal", "weights",
+           "map_bounds", "pcg", "texel_blocks", "view_diagonal", "view_matrix", "weights",
            "write_report"]
 
 # A map key → the scalar it multiplies (the biophysical model's maps go here too). Layer
@@ -80,7 +81,7 @@ MAP_SOLVER_NOTE = (
     "(RMS 0.0102) in 31 s; optimistix.LBFGS and NonlinearCG never left the start's loss "
     "(0.295) in as many steps, their line searches rejecting every step in float32 "
     "(benchmarks/RESULTS.md, 'fit-image')")
-STEP_MAX = 3.0  # the Gauss–Newton step's largest change of a coordinate (e³ ≈ 20× a texel)
+STEP_MAX = 1.0  # the Gauss–Newton step's largest change of a coordinate (e ≈ 2.7× a texel)
 GN_RTOL = 1e-5  # stop when the Gauss–Newton model predicts less than this share of the loss
 CG_RTOL = 1e-3  # the inner conjugate-gradient solve of each Gauss–Newton step: its tolerance
 CG_STEPS = 100  # … and its most iterations (each one texture-space prior HVP: cheap)
@@ -415,45 +416,49 @@ def fit(config, params: dict, target, w, keys: tuple[FitKey, ...], steps: int = 
 
 # --- the per-texel Gauss–Newton for maps -----------------------------------------------------
 
-def probe_stride(config, arrays) -> int:
-    """The spacing (texels) of the probe classes of `view_diagonal`: two texels of a class
-    never reach the same pixel through its samples' bilinear footprints — the largest
-    extent of a pixel's supersamples in texture space (the 99th percentile over covered
-    pixels; grazing silhouettes stretch further) plus 2, at most 8."""
+@functools.lru_cache(maxsize=4)
+def view_matrix(config) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The linear map A from a texture-space colour to the image (`render.texture_to_view`:
+    the padded texture's bilinear samples averaged over each pixel's supersamples) as a
+    sparse matrix: `(pixel, texel, weight)` arrays, flat indices, duplicates summed (host
+    NumPy, once per configuration)."""
+    arrays = render.prepare(config).arrays
+    view = render.prepare(config).view
     tex = np.asarray(arrays["tex"], np.float64)
     vm = np.asarray(arrays["view_mask"])
+    pad = np.asarray(arrays["pad"]).reshape(-1)
+    Ht, Wt = np.asarray(arrays["mask"]).shape
     k = config.supersample
-    H, W = vm.shape[0] // k, vm.shape[1] // k
-    t = tex.reshape(H, k, W, k, 2)
-    full = vm.reshape(H, k, W, k).all(axis=(1, 3))
-    if not full.any():
-        return 2
-    ext = (t.max(axis=(1, 3)) - t.min(axis=(1, 3))).max(axis=-1)[full]
-    return int(min(8, np.ceil(np.percentile(ext, 99)) + 2))
+    sy, sx = np.nonzero(vm)
+    x, y = tex[sy, sx, 0] - 0.5, tex[sy, sx, 1] - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = x - x0, y - y0
+    pixel = (sy // k) * (vm.shape[1] // k) + sx // k
+    rows, cols, vals = [], [], []
+    for dx, dy, wgt in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)),
+                        (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):
+        xi = x0 + dx
+        xi = np.mod(xi, Wt) if view.wrap_x else np.clip(xi, 0, Wt - 1)
+        yi = np.clip(y0 + dy, 0, Ht - 1)
+        rows.append(pixel)
+        cols.append(pad[(yi * Wt + xi).astype(np.int64)])
+        vals.append(wgt / (k * k))
+    rows, cols, vals = (np.concatenate(v) for v in (rows, cols, vals))
+    key, inverse = np.unique(rows.astype(np.int64) * (Ht * Wt) + cols, return_inverse=True)
+    summed = np.bincount(inverse.reshape(-1), weights=vals, minlength=len(key))
+    keep = summed != 0
+    return ((key[keep] // (Ht * Wt)).astype(np.int32), (key[keep] % (Ht * Wt)).astype(np.int32),
+            summed[keep].astype(np.float32))
 
 
-def view_diagonal(config, arrays, d, stride: int):
+def view_diagonal(config, d):
     """diag(Aᵀ diag(d) A) `(Ht, Wt, 3)`: per texel and channel, Σ_p A_pt² d_p, A the linear
-    map from a texture-space colour to the image (`render.texture_to_view`) and `d (H, W, 3)`
-    per-pixel weights. By probing: the texels in classes `stride` apart (`probe_stride`) are
-    pushed through A together and pulled back by Aᵀ; a pixel sees at most one texel of a
-    class, so the pull-back at each texel is exactly its own Σ_p A_pt² d_p (where a pixel
-    does see two, the sum gains their cross term, which only overstates the curvature)."""
-    Ht, Wt = arrays["mask"].shape
-    yy, xx = np.mgrid[:Ht, :Wt]
-    cls = jnp.asarray((yy % stride) * stride + xx % stride, jnp.int32)
-    zero = jnp.zeros((Ht, Wt, 3), d.dtype)
-
-    def A(c):
-        return render.texture_to_view(config, arrays, c)
-
-    At = jax.linear_transpose(A, zero)
-
-    def one(k, acc):
-        v = jnp.broadcast_to((cls == k)[..., None], zero.shape).astype(d.dtype)
-        return acc + v * At(d * A(v))[0]
-
-    return jax.lax.fori_loop(0, stride * stride, one, zero)
+    map from a texture-space colour to the image (`view_matrix`) and `d (H, W, 3)`
+    per-pixel weights. Exact."""
+    rows, cols, vals = (jnp.asarray(v) for v in view_matrix(config))
+    Ht, Wt = render.prepare(config).setup.mask.shape
+    contrib = (vals * vals)[:, None] * d.reshape(-1, 3)[rows]
+    return jax.ops.segment_sum(contrib, cols, num_segments=Ht * Wt).reshape(Ht, Wt, 3)
 
 
 def blur_gain(config, arrays):
@@ -478,7 +483,7 @@ def blur_gain(config, arrays):
     return jnp.sqrt(jnp.sum(out * out, axis=(0, 1)))
 
 
-def texel_blocks(config, params: dict, arrays, names, tangents, d, stride: int, gain=None):
+def texel_blocks(config, params: dict, arrays, names, tangents, d, gain=None):
     """Per texel, the L × L block of JᵀJ for L maps (`names`, keys into `params`), as
     `(Ht·Wt, L, L)`: Σ_channels D_tc a_l,tc a_m,tc with a_l = the texture-space colour's
     derivative along map l's `tangents[l] (Ht, Wt)` (one JVP each, `render.texture_colour`)
@@ -502,7 +507,7 @@ def texel_blocks(config, params: dict, arrays, names, tangents, d, stride: int, 
     eye = jnp.eye(L, dtype=c0.dtype)
     stacked = tuple(eye[:, j, None, None] * tangents[j][None] for j in range(L))
     dc = jax.vmap(lin)(stacked)  # (L, Ht, Wt, 3)
-    D = view_diagonal(config, arrays, d, stride)
+    D = view_diagonal(config, d)
     B = jnp.einsum("thc,lthc,mthc->thlm", D, dc, dc)
     return B.reshape(-1, L, L), c0
 
@@ -522,9 +527,8 @@ def map_bounds(config, params: dict, names, w, sigma: float) -> dict:
     _, slope = _display_slope(config, p, arrays, c0)
     d = slope ** 2 * jnp.asarray(w, jnp.float32)[..., None] / sigma ** 2
     tangents = [jnp.asarray(p[k], jnp.float32) for k in names]
-    B, _ = jax.jit(texel_blocks, static_argnums=(0, 3, 6))(
-        config, p, arrays, tuple(names), tangents, d, probe_stride(config, arrays),
-        blur_gain(config, arrays))
+    B, _ = jax.jit(texel_blocks, static_argnums=(0, 3))(
+        config, p, arrays, tuple(names), tangents, d, blur_gain(config, arrays))
     B = np.asarray(B, np.float64)
     L = len(names)
     diag = np.diagonal(B, axis1=1, axis2=2)
@@ -592,7 +596,6 @@ def _gauss_newton(config, keys, units, unpack, residual, loss, z0, args, smooth,
     maps = [fk for fk in keys if fk.kind == "map"]
     names = [fk.key for fk in maps]
     others = [fk.key for fk in keys if fk.kind != "map"]
-    stride = probe_stride(config, args["arrays"])
     gain = blur_gain(config, args["arrays"])
     n_pairs = int(args["pairs"].shape[1])
 
@@ -610,7 +613,7 @@ def _gauss_newton(config, keys, units, unpack, residual, loss, z0, args, smooth,
         c0 = render.texture_colour(config, p, args["arrays"])
         _, slope = _display_slope(config, p, args["arrays"], c0)
         d = (slope * args["sqrt_w"]) ** 2
-        B, _ = texel_blocks(config, p, args["arrays"], names, tangents, d, stride, gain)
+        B, _ = texel_blocks(config, p, args["arrays"], names, tangents, d, gain)
         B = 2.0 * B
         if others:
             x0, unflat = flat_others(z)
