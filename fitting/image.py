@@ -23,8 +23,13 @@ prior. Optimisers (optimistix, stepped one iteration at a time for the progress 
 
 - scalars only: Levenberg–Marquardt (`optimistix.LevenbergMarquardt`) on the residual image,
   its Jacobian by forward mode (one JVP per scalar);
-- with maps: `optimistix.OptaxMinimiser(optax.adam)`. Measured on the makeup face
-  (benchmarks/bench_fit_image.py): see `MAP_SOLVER_NOTE`.
+- with maps: Levenberg–Marquardt with a per-texel block-diagonal Gauss–Newton matrix
+  (`_gauss_newton`, `texel_blocks`; why and what it measured: `MAP_SOLVER_NOTE`). Adam
+  (`optimistix.OptaxMinimiser(optax.adam)`), L-BFGS and nonlinear CG stay as `solver=`
+  choices for comparison.
+
+How well an image can pin a map at all is `map_bounds`: the Cramér–Rao bound of each
+texel's log value from the noise and the image's sensitivity to it.
 
 The optics stays in `jaxskin.render`; reading and writing files is the CLI's
 (`jaxskin.cli`, `write_report` here for the PNG report).
@@ -76,11 +81,19 @@ DEGENERATE = {
         "albedo against exposure: melanin darkens much as a lower exposure does",
 }
 MAP_SOLVER_NOTE = (
-    "Adam (optax, through optimistix.OptaxMinimiser) for maps: on the makeup face (three "
-    "thickness maps, 48² texture, 96² image, σ 0.01, 150 steps) Adam reached the noise floor "
-    "(RMS 0.0102) in 31 s; optimistix.LBFGS and NonlinearCG never left the start's loss "
-    "(0.295) in as many steps, their line searches rejecting every step in float32 "
-    "(benchmarks/RESULTS.md, 'fit-image')")
+    "Maps: Levenberg–Marquardt on a block-diagonal Gauss–Newton matrix. A texel's colour "
+    "depends on its own values (the SSS blur aside), so JᵀJ is nearly block-diagonal: per "
+    "texel an L × L block for L maps, from L forward-mode JVPs of the texture-space colour "
+    "and the exact diagonal of the view map's AᵀDA (`view_matrix`); the SSS blur's share "
+    "counted by its own-texel gain (`blur_gain`). The prior's Hessian enters exactly, the "
+    "coupled system solved by block-preconditioned CG in texture space (cheap: no render). "
+    "optimistix.LevenbergMarquardt / GaussNewton take their curvature from the residual's "
+    "Jacobian operator, which does not expose the per-texel structure: materialising JᵀJ is "
+    "out of reach (a column per texel), and CG through J costs a JVP and a VJP of the whole "
+    "render per inner iteration; so the step is our own, in the loop `_solve` runs for the "
+    "optimistix solvers. Measured against Adam (benchmarks/RESULTS.md, 'fit-image'): see "
+    "there. L-BFGS and NonlinearCG (optimistix, float32) never left the start's loss in "
+    "150 steps on the makeup face (their line searches rejected every step).")
 STEP_MAX = 1.0  # the Gauss–Newton step's largest change of a coordinate (e ≈ 2.7× a texel)
 GN_RTOL = 1e-5  # stop when the Gauss–Newton model predicts less than this share of the loss
 CG_RTOL = 1e-3  # the inner conjugate-gradient solve of each Gauss–Newton step: its tolerance
