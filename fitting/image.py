@@ -817,6 +817,13 @@ def run_command(args, run) -> int:
     with cli._reading(args.scene):
         scene = load_scene(args.scene, args.overrides)
     keys = fit_keys(scene, args.fit)
+    has_maps = any(fk.kind == "map" for fk in keys)
+    solver = getattr(args, "solver", "auto")
+    if solver == "gn" and (not has_maps or any(fk.kind == "lafortune" for fk in keys)):
+        raise InputError("the Gauss-Newton solver is for maps (and not with "
+                         "material.lafortune); use --solver auto", "--solver")
+    if not has_maps:
+        solver = "auto"
     config = scene.config
     height, width = config.image_height or config.image, config.image
     target, target_alpha = maps.read_image(args.target, "image")
@@ -856,7 +863,7 @@ def run_command(args, run) -> int:
             bar.update(1)
 
         result = fit(config, params, target, w, keys, steps=args.steps, smooth=args.smooth,
-                     progress=progress)
+                     progress=progress, solver=solver)
     run.stage = "writing"
     tmask = np.asarray(render.prepare(config).arrays["mask"])
     values = dict(result.values)

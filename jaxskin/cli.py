@@ -313,6 +313,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="at most N optimiser steps (100)")
     f.add_argument("--smooth", type=_number(lo=0.0, hi=1e6), default=1e-5, metavar="W",
                    help="weight of the maps' total-variation prior (1e-5)")
+    f.add_argument("--solver", choices=("auto", "gn", "adam"), default="auto",
+                   help="maps: gn, the per-texel Gauss-Newton (auto's choice: fewer steps, "
+                   "fits to the noise), or adam (cheaper steps); scalars alone: "
+                   "Levenberg-Marquardt either way")
     f.add_argument("-D", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene value (the fit's start), as for render")
 
