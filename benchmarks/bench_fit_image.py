@@ -175,6 +175,65 @@ def ambiguity(size=48, n=21, out="benchmarks/fit_image_ambiguity.png"):
     print(f"wrote {out}")
 
 
+def figure(size=24, noise=0.01, smooth=1e-6, out="benchmarks/fit_image_maps.png"):
+    """Gauss–Newton against Adam on the makeup face (three maps, `size`² texture): loss
+    against step and against time, and for the blush the truth, both fits and the
+    Cramér–Rao bound per texel."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = MAPS
+    ov = [f"texture.size={size}", f"camera.size={2 * size}"]
+    truth = load_scene("makeup", ov)
+    target = np.asarray(render.render(truth.config, truth.params))
+    target = np.clip(target + np.random.default_rng(0).normal(0, noise, target.shape), 0, 1)
+    start = without_regions(load_scene("makeup", ov + [
+        f"layer.{n}.thickness_mm={truth.values[f'layer.{n}.thickness_mm'] / START}"
+        for n in names]), names)
+    w = fi.weights(start.config, start.params)
+    keys = fi.fit_keys(start, ",".join(f"layer.{n}.map" for n in names))
+    _, bounds = recoverable(truth, w, noise, names)
+    mask = np.asarray(render.prepare(truth.config).arrays["mask"])
+    runs = {}
+    for solver, steps in (("gn", 30), ("adam", 150)):
+        stamps = [time.perf_counter()]
+        r = fi.fit(start.config, start.params, target, w, keys, steps=steps, smooth=smooth,
+                   solver=solver, progress=lambda _loss, s=stamps: s.append(time.perf_counter()))
+        runs[solver] = (r, np.cumsum(np.diff(stamps)))
+    fig, axes = plt.subplots(1, 5, figsize=(22, 4), constrained_layout=True)
+    for solver, (r, t) in runs.items():
+        label = {"gn": "Gauss–Newton (tries)", "adam": "Adam"}[solver]
+        axes[0].semilogy(np.arange(1, len(r.history) + 1), r.history, label=label)
+        axes[1].semilogy(t, r.history, label=label)
+    for ax, xl in zip(axes[:2], ("step", "seconds (first includes compiling)"), strict=True):
+        ax.axhline(noise ** 2, color="grey", ls=":", label="σ²")
+        ax.set_xlabel(xl)
+        ax.set_ylabel("loss")
+        ax.legend()
+        ax.grid(alpha=0.3)
+    axes[0].set_title(f"makeup face, 3 maps, {size}² texture, σ {noise}")
+    tm = true_maps(truth)["blush"]
+    top = tm.max()
+    panels = [("blush truth (mm)", tm), *[(f"blush, {s} (mm)", np.asarray(
+        r.params["layer.blush.map"]) * float(r.params["layer.blush.thickness_mm"]))
+        for s, (r, _) in runs.items()]]
+    for ax, (title, m) in zip(axes[2:4], panels[:2], strict=True):
+        im = ax.imshow(np.where(mask, m, np.nan), vmin=0, vmax=top, cmap="viridis")
+        ax.set_title(title)
+        ax.set_axis_off()
+        fig.colorbar(im, ax=ax, shrink=0.8)
+    b = np.where(mask & (tm > 0), np.log10(bounds["blush"]), np.nan)
+    im = axes[4].imshow(b, cmap="magma_r")
+    axes[4].set_title("blush: log10 Cramér–Rao bound\n(relative; −1.6 = 2.5 %)")
+    axes[4].set_axis_off()
+    fig.colorbar(im, ax=axes[4], shrink=0.8)
+    axes[3].set_title(panels[1][0])
+    fig.savefig(out, dpi=80)
+    print(f"wrote {out}")
+
+
 def speed(size=512, steps=4, solvers=("gn", "adam"), names=MAPS):
     """Seconds per step of each solver on the makeup face at `size`² (texture and image,
     supersample 2, SSS, shadows, the three maps), from the progress callback's clock: the
@@ -205,7 +264,7 @@ def speed(size=512, steps=4, solvers=("gn", "adam"), names=MAPS):
 
 def main():
     p = argparse.ArgumentParser()
-    p.add_argument("what", choices=("maps", "ambiguity", "speed"))
+    p.add_argument("what", choices=("maps", "ambiguity", "speed", "figure"))
     p.add_argument("--size", type=int, default=64)
     p.add_argument("--steps", type=int, default=100)
     p.add_argument("--solvers", default="adam")
@@ -216,6 +275,8 @@ def main():
     a = p.parse_args()
     if a.what == "ambiguity":
         ambiguity()
+    if a.what == "figure":
+        figure()
     if a.what == "speed":
         speed(a.size, a.steps, a.solvers.split(","))
     if a.what == "maps":

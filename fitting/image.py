@@ -545,12 +545,19 @@ def map_bounds(config, params: dict, names, w, sigma: float) -> dict:
     B = np.asarray(B, np.float64)
     L = len(names)
     diag = np.diagonal(B, axis1=1, axis2=2)
-    ok = np.all(diag > 0, axis=1) & (np.linalg.det(B) > 1e-12 * np.prod(diag, axis=1))
-    inv = np.full(B.shape, np.inf)
-    inv[ok] = np.linalg.inv(B[ok])
+    # A map that is 0 at a texel (a layer absent there) or unseen carries no information
+    # and has no log value: it leaves the texel's block (its bound: inf).
+    absent = ~(diag > 1e-30 * max(float(diag.max()), 1e-300))
+    keep = ~absent[:, :, None] & ~absent[:, None, :]
+    Bk = np.where(keep, B, 0.0) + np.eye(L) * absent[:, None, :]
+    sign, logdet = np.linalg.slogdet(Bk)
+    scale = np.sum(np.log(np.where(absent, 1.0, diag)), axis=1)
+    ok = (sign > 0) & (logdet - scale > np.log(1e-12))
+    var = np.full(diag.shape, np.inf)
+    var[ok] = np.diagonal(np.linalg.inv(Bk[ok]), axis1=1, axis2=2)
+    var[absent] = np.inf
     shape = np.asarray(arrays["mask"]).shape
-    return {k: np.sqrt(np.diagonal(inv, axis1=1, axis2=2)[:, i]).reshape(shape)
-            for i, k in enumerate(names[:L])}
+    return {k: np.sqrt(var[:, i]).reshape(shape) for i, k in enumerate(names)}
 
 
 def _display_slope(config, params, arrays, c0):
