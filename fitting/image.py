@@ -492,7 +492,7 @@ def blur_gain(config, arrays):
     delta = np.zeros((*mask.shape, 3), np.float32)
     delta[inland] = 1.0
     out = sss.blur(jnp.asarray(delta), render.prepare(config).texel_mm, arrays["mask"],
-                   sp.sss, norm=arrays.get("sss_norm"))
+                   sp.sss, norm=arrays.get("sss_norm"), kernels=arrays.get("sss_kernels"))
     return jnp.sqrt(jnp.sum(out * out, axis=(0, 1)))
 
 
@@ -816,12 +816,13 @@ def run_command(args, run) -> int:
     from tqdm import tqdm
 
     from jaxskin import cli, maps
+    from jaxskin.checks import check_scene, reading
     from jaxskin.outputs import Outputs, check_name
     from jaxskin.scene import load_scene
     from jaxskin.scene_writer import scene_toml
 
     outputs = Outputs(args.output)
-    with cli._reading(args.scene):
+    with reading(args.scene):
         scene = load_scene(args.scene, args.overrides)
     keys = fit_keys(scene, args.fit)
     has_maps = any(fk.kind == "map" for fk in keys)
@@ -845,7 +846,7 @@ def run_command(args, run) -> int:
             raise InputError(f"the mask is {rgb.shape[1]}x{rgb.shape[0]} pixels, the target "
                              f"{width}x{height}", args.mask)
         mask = rgb.mean(axis=-1)
-    outputs.inputs += [Path(p) for p in cli._check_scene(scene, 1)]
+    outputs.inputs += [Path(p) for p in check_scene(scene, 1)]
     outputs.inputs += [Path(p) for p in (args.target, args.mask) if p is not None]
     name = check_name(scene.name, scene.source)
     toml_path = outputs.plan(f"{name}.toml", "the fitted scene")

@@ -35,6 +35,9 @@ import warnings
 from pathlib import Path
 
 from . import __version__, cluster
+from .checks import check_scene as _check_scene
+from .checks import reading as _reading
+from .checks import unused_overrides
 from .io import FitError, InputError
 from .outputs import Outputs, check_name, slug
 
@@ -247,7 +250,9 @@ def _parser() -> argparse.ArgumentParser:
         "render",
         help="render scenes to PNG (and their texture-space maps)",
         description="Render one or more scenes: a built-in name (hand, foot, arm: Bando 2001 "
-        "figs. 6.1-6.3) or a TOML scene file (format: docs/reference/scene.md). Writes "
+        "figs. 6.1-6.3; face, makeup: Huang et al. 2013; see jaxskin list) or a TOML scene "
+        "file (format: docs/reference/scene.md on the documentation site; every key with its "
+        "default and range: python -m pydoc jaxskin.scene). Writes "
         "DIR/<scene>.png "
         "(or .exr, --format); "
         "with --maps also DIR/<scene>_height.png (16-bit grey), DIR/<scene>_normal.png (the "
@@ -279,7 +284,8 @@ def _parser() -> argparse.ArgumentParser:
                    "wrinkle normal map as textures (opens in Blender or any glTF viewer)")
     r.add_argument("--sweep", action="append", default=[], metavar="KEY=START:STOP:COUNT",
                    help="render COUNT images with a parameter from START to STOP, vmapped in "
-                   "batches of 8 values by one compiled program, e.g. --sweep "
+                   "batches of 8 values by one compiled program (fewer are padded to 8: a "
+                   "value's image has the same bytes in any sweep), e.g. --sweep "
                    "material.melanin=0:1:5; writes "
                    "DIR/<scene>_sweep-<i>_<key>-<value>.png")
     r.add_argument("-D", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
@@ -515,9 +521,16 @@ def _parse_sweep(text: str, sc):
                          key=key)
     params = sc.params
     if key not in params or getattr(params[key], "ndim", 1) != 0:
-        scalars = ", ".join(k for k, v in params.items() if getattr(v, "ndim", 1) == 0)
-        raise InputError(f"--sweep: '{key}' is not a scalar parameter of this scene; "
-                         f"parameters: {scalars}", sc.source)
+        import difflib
+
+        from .scene import SCHEMA
+
+        names = [k for k, v in params.items() if getattr(v, "ndim", 1) == 0]
+        near = difflib.get_close_matches(key, names, n=1)
+        hint = (f"did you mean '{near[0]}'?" if near and key not in SCHEMA
+                else f"parameters: {', '.join(names)}")
+        raise InputError(f"--sweep: '{key}' is not a scalar parameter of this scene; {hint}",
+                         sc.source)
     layers = [layer.name for layer in sc.layers]
     for value in (start, stop):
         check_value(key, value, f"--sweep {text}", layers)
@@ -537,96 +550,6 @@ def _base_name(sc, overrides) -> str:
     if len(suffix) > 120:  # many overrides: a digest keeps runs apart and names short
         suffix = "D-" + hashlib.sha1("\0".join(overrides).encode()).hexdigest()[:12]
     return f"{base}_{suffix}" if suffix else base
-
-
-@contextlib.contextmanager
-def _reading(path, key=None):
-    """A file nested too deeply for Python's parsers is bad input, not a crash."""
-    try:
-        yield
-    except RecursionError:
-        raise InputError("nested too deeply to read", path, key=key) from None
-
-
-def _check_scene(sc, count: int) -> list:
-    """Everything a scene reads, checked before any render: memory first (no allocation),
-    then the mesh, edits, polygons, BRDF file, materials and layer images. Returns the
-    scene's input files."""
-    import numpy as np
-
-    from . import cosmetics, resources
-    from .mesh import BUILTIN as MESHES
-    from .mesh import load_mesh
-    from .scene import SKIN_MAPS
-
-    config = sc.config
-    resources.check_memory(resources.render_bytes(config, count),
-                           f"scene {sc.name!r} (texture {config.texture.size}², image "
-                           f"{config.image}x{config.image_height or config.image}, "
-                           f"supersample {config.supersample}"
-                           + (f", {count} sweep values" if count > 1 else "") + ")",
-                           sc.source)
-    inputs = [sc.source]
-    mesh_name = config.texture.mesh
-    with _reading(mesh_name):
-        mesh = load_mesh(mesh_name)
-    if mesh_name not in MESHES:
-        inputs.append(mesh_name)
-    if config.texture.projection == "uv" and mesh.uv is None:
-        raise InputError(f"mesh '{mesh.name}' has no texture coordinates; use planar or "
-                         "cylindrical projection", sc.source, key="mesh.projection")
-    for i, e in enumerate(config.texture.edits):
-        if e.vertex is not None and e.vertex >= len(mesh.vertices):
-            raise InputError(f"vertex {e.vertex} does not exist; the mesh has "
-                             f"{len(mesh.vertices)} vertices", sc.source,
-                             key=f"fields.edit[{i}].vertex")
-    if config.material == "lafortune":
-        if config.brdf != "skin":
-            inputs.append(config.brdf)
-        with _reading(config.brdf, "material.brdf"):
-            lobes = sc.params["material.lafortune"]
-        arrays = [np.asarray(a) for a in (lobes.diffuse, lobes.Cxy, lobes.Cz)]
-        if not any(np.any(a != 0) for a in arrays):
-            raise InputError("every term is zero (diffuse and all lobes): this material "
-                             "reflects no light; expected a fit from jaxskin fit-brdf",
-                             config.brdf)
-    sp = config.spectral
-    for map_key, (_, image_key) in SKIN_MAPS.items():
-        image = sp.image_of(map_key) if sp is not None else None
-        if image is not None:
-            inputs.append(image)
-            _check_image(image, sc.source, image_key)
-    for layer in sp.layers if sp is not None else ():
-        inputs.append(layer.material)
-        with _reading(layer.material):
-            cosmetics.load_material(layer.material, sp.grid)
-        if layer.image is not None:
-            inputs.append(layer.image)
-            _check_image(layer.image, sc.source, f"layer.{layer.name}.image")
-        for i, (_, vertices, _) in enumerate(layer.polygons):
-            if vertices is not None and max(vertices) >= len(mesh.vertices):
-                raise InputError(f"vertex {max(vertices)} does not exist; the mesh has "
-                                 f"{len(mesh.vertices)} vertices", sc.source,
-                                 key=f"layer.{layer.name}.polygon[{i}].vertices")
-    return inputs
-
-
-def _check_image(path, scene, key) -> None:
-    """A layer map: a readable 2-D greyscale (or grey-as-RGB) image of finite numbers."""
-    import imageio.v3 as iio
-    import numpy as np
-
-    try:
-        img = np.asarray(iio.imread(path))
-    except Exception as e:  # noqa: BLE001  (imageio raises many kinds; all mean unreadable)
-        raise InputError(f"cannot read as an image ({e.__class__.__name__})", path) from None
-    ok = img.dtype.kind in "uif b" and (img.ndim == 2 or (img.ndim == 3 and img.shape[-1] in (
-        1, 2, 3, 4))) and img.size > 0
-    if not ok:
-        raise InputError(f"expected a greyscale image (H, W), got an array of shape "
-                         f"{img.shape} and type {img.dtype}", path)
-    if img.dtype.kind == "f" and not np.all(np.isfinite(img)):
-        raise InputError("the image has non-finite values", path)
 
 
 def _render(args, run: _Run) -> int:
@@ -652,7 +575,7 @@ def _render(args, run: _Run) -> int:
     plans = []
     for sc in scenes:
         sweep = [_parse_sweep(text, sc) for text in args.sweep]
-        count = min(len(sweep[0][1]), cluster.SWEEP_BATCH) if sweep else 1  # per batch
+        count = cluster.SWEEP_BATCH if sweep else 1  # per batch: every batch is padded
         outputs.inputs += [Path(p) for p in _check_scene(sc, count)]
         plans.append((sc, sweep, _base_name(sc, args.overrides)))
     files = []
@@ -673,6 +596,10 @@ def _render(args, run: _Run) -> int:
             for kind in ("height", "normal", "field"):
                 planned[kind] = outputs.plan(f"{base}_{kind}.png", sc.source)
         files.append(planned)
+    for sc in scenes:  # after every check: a warning, not an error (-D serves every scene)
+        for item in unused_overrides(sc, args.overrides):
+            _say(f"jaxskin: warning: -D {item} changes nothing in scene {sc.name!r} (its "
+                 "material model or settings do not use it)")
     run.outputs.append(outputs)
     # The units of work: a scene's sweep in batches of cluster.SWEEP_BATCH values (one
     # compiled program per configuration), or the scene's one image; run here or on the

@@ -6,7 +6,8 @@
   (`"extrapolate": "hold"` or `"linear"`); `Material.extrapolated` marks those bands.
 - A thickness map (mm per texel, texture space) comes from named regions drawn on the
   mesh's UVs — ellipses and polygons, with a feathered edge — or from a greyscale image
-  (value × a thickness scale). UVs follow the OBJ convention: u right, v up.
+  (value × a thickness scale), given as an array: files are read at the edge
+  (`maps.read_grey`). UVs follow the OBJ convention: u right, v up.
 - `layers` composes a stack per texel and band with the KM core: `km.Slab (H, W, n)`;
   zero thickness everywhere gives exactly R = 0, T = 1 (no makeup, no change).
 """
@@ -150,26 +151,16 @@ def polygon_map(height, width, points, thickness_mm, feather=0.0):
     return thickness_mm * _feather(signed, feather)
 
 
-def image_map(path, height, width, scale_mm):
-    """Thickness (mm) from a greyscale image: value (0–1 of its range) × `scale_mm`,
-    resampled (nearest texel) to the texture size; row 0 is the image's top (v = 1)."""
-    import imageio.v3 as iio
-
-    try:
-        raw = np.asarray(iio.imread(path))
-        img = raw.astype(np.float64)
-    except Exception as e:  # noqa: BLE001  (imageio raises many kinds; all mean unreadable)
-        raise InputError(f"cannot read as an image ({e.__class__.__name__})", path) from None
-    # The full scale from the file's sample type (a 16-bit map whose values all lie below
-    # 256, a faint one, is still 16-bit); other types by their values.
-    top = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(raw.dtype)
-    if img.ndim == 3:
-        img = img[..., :3].mean(axis=-1)
-    if top is None:
-        top = 65535.0 if img.max() > 255 else 255.0
+def image_map(image, height, width, scale_mm):
+    """Thickness (mm) from a greyscale map `image (H', W')` in [0, 1] (`maps.read_grey`
+    reads one from a file): value × `scale_mm`, resampled (nearest texel) to
+    `(height, width)`; row 0 is the image's top (v = 1)."""
+    img = np.asarray(image, np.float64)
+    if img.ndim != 2:
+        raise ValueError(f"expected a greyscale map (H, W), got shape {img.shape}")
     rows = (np.arange(height) + 0.5) * img.shape[0] / height
     cols = (np.arange(width) + 0.5) * img.shape[1] / width
-    return scale_mm * img[rows.astype(int)][:, cols.astype(int)] / top
+    return scale_mm * img[rows.astype(int)][:, cols.astype(int)]
 
 
 def layers(S, K, thickness):
@@ -180,13 +171,18 @@ def layers(S, K, thickness):
     return km.stack(R, T)
 
 
-def coverage(spec, vertex_uv: np.ndarray, height: int, width: int) -> np.ndarray:
-    """A layer's map `(H, W)` in [0, 1] from its `scene.LayerSpec`: its image, or the union
-    (maximum) of its ellipses and polygons, or 1 everywhere when it has neither. Regions
-    are in texture coordinates (u right, v up; the mesh's UVs for the uv projection);
-    polygons given by mesh vertices use `vertex_uv (V, 2)`, those vertices' coordinates."""
+def coverage(spec, vertex_uv: np.ndarray, height: int, width: int,
+             image: np.ndarray | None = None) -> np.ndarray:
+    """A layer's map `(H, W)` in [0, 1] from its `scene.LayerSpec`: its image (the array
+    `image (H', W')` that `maps.read_grey` read from `spec.image`), or the union (maximum)
+    of its ellipses and polygons, or 1 everywhere when it has neither. Regions are in
+    texture coordinates (u right, v up; the mesh's UVs for the uv projection); polygons
+    given by mesh vertices use `vertex_uv (V, 2)`, those vertices' coordinates."""
     if spec.image is not None:
-        return np.clip(image_map(spec.image, height, width, 1.0), 0.0, 1.0)
+        if image is None:
+            raise ValueError(f"layer {spec.name!r} has an image ({spec.image}): pass its "
+                             "array, maps.read_grey(spec.image)")
+        return np.clip(image_map(image, height, width, 1.0), 0.0, 1.0)
     if not spec.ellipses and not spec.polygons:
         return np.ones((height, width))
     out = np.zeros((height, width))

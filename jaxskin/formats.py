@@ -98,7 +98,9 @@ def read_text(path, fallback: str | None = None) -> str:
             with contextlib.suppress(UnicodeDecodeError):
                 return raw.decode(fallback)
         line = raw[:e.start].count(b"\n") + 1
-        raise InputError(f"not UTF-8 text (byte 0x{raw[e.start]:02x})", path, line) from None
+        nor = "" if fallback is None else f" nor {fallback}"
+        raise InputError(f"not UTF-8{nor} text (byte 0x{raw[e.start]:02x})", path,
+                         line) from None
 
 
 def _split(line: str, delimiter: str) -> list[str]:
@@ -123,7 +125,9 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1) -> T
     **Returns:** a `Table`. **Raises:** `InputError` on anything malformed.
     """
     path = Path(path)
-    text = read_text(path)
+    # Instruments' Windows software writes Windows-1252 (µm, °, curly quotes in the header
+    # and comments); a table's numbers read the same either way.
+    text = read_text(path, fallback="cp1252")
     lines = text.splitlines()
     meta: dict[str, tuple[str, int]] = {}
     header = delimiter = None

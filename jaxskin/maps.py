@@ -1,5 +1,7 @@
-"""Writing images and texture-space maps: renders as 8- or 16-bit PNG (RGB or RGBA) or
-linear OpenEXR, 16-bit height, normal map, and the field picture (fig. 3.4)."""
+"""Reading and writing images, at the edge: renders as 8- or 16-bit PNG (RGB or RGBA) or
+linear OpenEXR, 16-bit height, normal map, and the field picture (fig. 3.4); the one image
+reader (`read_image`, and `read_grey` for the greyscale maps a scene loads), which the
+optics modules never call: they receive its arrays."""
 
 from __future__ import annotations
 
@@ -13,7 +15,7 @@ import numpy as np
 from .io import InputError, atomic_write
 
 __all__ = ["FORMATS", "exr_available", "image_bytes", "png16_bytes", "png_bytes", "quantize",
-           "read_exr", "read_image", "write_exr", "write_field_plot", "write_grey16",
+           "read_exr", "read_grey", "read_image", "write_exr", "write_field_plot", "write_grey16",
            "write_height", "write_image", "write_normals", "write_render"]
 
 FORMATS = ("png", "png16", "exr")
@@ -111,30 +113,47 @@ def read_exr(path) -> np.ndarray:
         return np.stack([channels[c].pixels for c in "RGBA"], axis=-1).astype(np.float32)
 
 
-def read_image(path, what: str = "image"):
+def _a(what: str) -> str:
+    return f"{'an' if what[:1] in 'aeiou' else 'a'} {what}"
+
+
+def read_image(path, what: str = "image", key=None):
     """A PNG (or any image imageio reads) as display values in [0, 1]: `(rgb (H, W, 3),
-    alpha (H, W) or None)`; grey is repeated to RGB; 8- and 16-bit at their full scale.
-    `InputError` naming the file if it is not a readable 2-D image of finite values."""
+    alpha (H, W) or None)`; grey is repeated to RGB; integer samples at the full scale of
+    their type (a 16-bit file whose values all lie below 256 is still on the 65535 scale),
+    floating-point samples as they are. `InputError` naming the file if it is not a readable
+    2-D image of finite values; `what` names the image in that message, `key` the scene key
+    that gave the file (the editor marks that field)."""
     import imageio.v3 as iio
 
     try:
         img = np.asarray(iio.imread(path))
     except Exception as e:  # noqa: BLE001  (imageio raises many kinds; all mean unreadable)
-        raise InputError(f"cannot read as an {what} ({e.__class__.__name__})", path) from None
+        raise InputError(f"cannot read as {_a(what)} ({e.__class__.__name__})", path,
+                         key=key) from None
     if img.dtype.kind not in "uifb" or img.size == 0 or not (
             img.ndim == 2 or (img.ndim == 3 and img.shape[-1] in (1, 2, 3, 4))):
-        raise InputError(f"expected an {what} (H, W) or (H, W, 1-4 channels), got an array of "
-                         f"shape {img.shape} and type {img.dtype}", path)
+        raise InputError(f"expected {_a(what)} (H, W) or (H, W, 1-4 channels), got an array of "
+                         f"shape {img.shape} and type {img.dtype}", path, key=key)
     if img.dtype.kind in "ui":
         img = img.astype(np.float64) / float(np.iinfo(img.dtype).max)
     img = np.asarray(img, np.float64)
     if not np.all(np.isfinite(img)):
-        raise InputError(f"the {what} has non-finite values", path)
+        raise InputError(f"the {what} has non-finite values", path, key=key)
     if img.ndim == 2:
         img = img[..., None]
     alpha = img[..., -1] if img.shape[-1] in (2, 4) else None
     grey_or_rgb = img[..., :3] if img.shape[-1] >= 3 else img[..., :1]
     return np.broadcast_to(grey_or_rgb, (*img.shape[:2], 3)).copy(), alpha
+
+
+def read_grey(path, what: str = "greyscale image", key=None) -> np.ndarray:
+    """A greyscale map `(H, W)` float64 in [0, 1] (a layer's thickness map, the melanin
+    map): `read_image`'s values, colour averaged over R, G, B, alpha ignored, clipped to
+    [0, 1]. Row 0 is the image's top. `InputError` naming the file as `read_image`."""
+    rgb, _ = read_image(path, what, key)
+    grey = rgb[..., 0] if np.all(rgb[..., 1:] == rgb[..., :1]) else rgb.mean(axis=-1)
+    return np.clip(grey, 0.0, 1.0)  # grey as read, not (g + g + g) / 3 rounded
 
 
 def write_grey16(values, path) -> None:

@@ -35,7 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import biophysical, cosmetics, formats, shadow, skin, sss, texture
+from . import biophysical, cosmetics, formats, maps, shadow, skin, sss, texture
 from .precision import matmul
 from .raster import interpolate
 from .scene import BIOPHYSICAL_KEYS, SKIN_MAPS, SceneConfig
@@ -98,23 +98,27 @@ def _prepare(config: SceneConfig) -> Prepared:
         # The model shades the texels on the mesh only, as a list (the rest stay black).
         texels = np.flatnonzero(np.asarray(s.mask))
         arrays["texels"] = jnp.asarray(texels, jnp.int32)
-        if sp.sss == "fft":  # the blur's edge normalisation: the mask is fixed
+        if sp.sss == "fft":  # the blur's kernels and edge normalisation: the mask is fixed
+            # Arguments, not constants: XLA would fold a constant kernel into the program.
+            arrays["sss_kernels"] = jnp.asarray(sss.profile_kernels(texel_mm, s.mask.shape),
+                                                jnp.float32)
             arrays["sss_norm"] = jax.jit(sss.mask_norm, static_argnums=1)(
-                s.mask.astype(jnp.float32), texel_mm)
+                s.mask.astype(jnp.float32), texel_mm, arrays["sss_kernels"])
         if sp.layers:
             materials = [cosmetics.load_material(layer.material, grid) for layer in sp.layers]
             arrays["S"] = jnp.asarray(np.stack([m.S for m in materials]), jnp.float32)
             arrays["K"] = jnp.asarray(np.stack([m.K for m in materials]), jnp.float32)
             t = s.tmap
             vertex_uv = np.stack([t.xy[:, 0] / t.width, 1.0 - t.xy[:, 1] / t.height], axis=1)
-            cover = [cosmetics.coverage(layer, vertex_uv, t.height, t.width)
+            cover = [cosmetics.coverage(layer, vertex_uv, t.height, t.width, None if
+                                        layer.image is None else maps.read_grey(layer.image))
                      for layer in sp.layers]
             arrays["cover"] = jnp.asarray(np.stack(cover).reshape(len(cover), -1)[:, texels],
                                           jnp.float32)
         for map_key in SKIN_MAPS:  # e.g. skin.melanin × skin.melanin_image, per texel
             if sp.image_of(map_key) is not None:
-                factor = cosmetics.image_map(sp.image_of(map_key), s.tmap.height,
-                                             s.tmap.width, 1.0)
+                factor = cosmetics.image_map(maps.read_grey(sp.image_of(map_key)),
+                                             s.tmap.height, s.tmap.width, 1.0)
                 arrays[map_cover(map_key)] = jnp.asarray(factor.reshape(-1)[texels],
                                                          jnp.float32)
     if config.shadow is not None and config.mode != "height":
@@ -312,7 +316,8 @@ def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: d
     if sp.sss is not None:
         def blur(colour):
             out = to_list(sss.blur(to_image(colour), p.texel_mm, mask, sp.sss,
-                                   norm=arrays.get("sss_norm")))
+                                   norm=arrays.get("sss_norm"),
+                                   kernels=arrays.get("sss_kernels")))
             if blur_gain is None:
                 return out
             return jax.lax.stop_gradient(out) + blur_gain * (colour - jax.lax.stop_gradient(

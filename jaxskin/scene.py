@@ -34,7 +34,8 @@ shadows = false                    # a shadow map from the light (static: the di
 projection = "orthographic"        # orthographic | perspective
 exposure = 0.0                     # stops: the linear image × 2^exposure, then sRGB
 size = 512                         # image pixels across
-height = 0                         # image pixels high; 0: square
+height = 0                         # image pixels high; 0: square. A -D camera.size alone
+                                   #   scales a height set here with it (same aspect)
 supersample = 2                    # 1–4 samples per pixel per axis (2: antialiased)
 fov = 30.0                         # perspective only, degrees
 rotate = [0.0, 0.0, 0.0]           # degrees about x, y, z: turns the mesh
@@ -452,6 +453,9 @@ def parse_scene(doc: dict, path, overrides=()) -> Scene:
         k, v = _parse_override(item)
         values[k] = _check(k, v, f"-D {item}", names)
         from_command_line.add(k)
+    if "camera.size" in from_command_line and "camera.height" not in from_command_line:
+        values["camera.height"] = _kept_aspect(values, flat.get("camera.size",
+                                                                SCHEMA["camera.size"].default))
     if layers and values["material.model"] not in SPECTRAL_MODELS:
         raise InputError("cosmetic layers need material.model = \"spectral\" or "
                          "\"biophysical\" (the Huang et al. model); this scene's is "
@@ -486,6 +490,24 @@ def parse_scene(doc: dict, path, overrides=()) -> Scene:
         values[image_key] = str(image_path)
     edits = tuple(_edit(i, e, path) for i, e in enumerate(edits_raw))
     return Scene(values["name"], str(path), values, edits, layers)
+
+
+def _kept_aspect(values: dict, file_size: int) -> int:
+    """`camera.height` for a `-D camera.size` given alone: a scene file that sets
+    `camera.height` (a wide or tall frame) keeps its aspect, the height scaled with the
+    width (rounded, at least 1 pixel); `InputError` when that height is over the key's
+    maximum. A square scene (height 0) stays square."""
+    height, size = values["camera.height"], values["camera.size"]
+    if not height:
+        return 0
+    scaled = max(1, round(height * size / file_size))
+    top = SCHEMA["camera.height"].hi
+    if scaled > top:
+        raise InputError(f"expected at most {top * file_size // height} for this scene's "
+                         f"{file_size}x{height} frame (the height keeps its aspect: "
+                         f"{size}x{scaled}, over {top}); give camera.height too (0: square)",
+                         f"-D camera.size={size}", key="camera.size")
+    return scaled
 
 
 def _flatten(doc, path, prefix="") -> dict:

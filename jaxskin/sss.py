@@ -18,7 +18,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["VARIANCES_MM2", "WEIGHTS_RGB", "blur", "blur_fft", "kernel_radius", "mask_norm"]
+__all__ = ["VARIANCES_MM2", "WEIGHTS_RGB", "blur", "blur_fft", "kernel_radius", "mask_norm",
+           "profile_kernels"]
 
 VARIANCES_MM2 = (0.0064, 0.0484, 0.187, 0.567, 1.99, 7.41)
 WEIGHTS_RGB = (
@@ -72,18 +73,41 @@ def _profile_kernels(texel_mm: float) -> np.ndarray:
                      for c in range(3)])
 
 
+def profile_kernels(texel_mm: float, shape: tuple[int, int]) -> np.ndarray:
+    """The sampled 2-D profile per RGB channel that `blur` (FFT) convolves an image of
+    `shape (H, W)` with, float64 `(3, 2 ry + 1, 2 rx + 1)`: each Gaussian sampled to 4σ of
+    the widest and normalised there (on the texel grid), then cut to what the image can
+    reach, `ry ≤ H − 1`, `rx ≤ W − 1` (beyond, the kernel meets only the zeros around the
+    image: the same convolution). Built separably, each Gaussian as the outer product of
+    its 1-D samples, so the whole 4σ window (9083² texels for 0.0036 mm texels) is never
+    made. Inside jit, pass it as an argument (`blur(..., kernels=)`): as a closure it is a
+    constant XLA folds into the program."""
+    H, W = shape
+    r = kernel_radius(VARIANCES_MM2[-1], texel_mm, cut=4.0)
+    ry, rx = min(r, H - 1), min(r, W - 1)
+    full = np.arange(-r, r + 1) * texel_mm
+    y, x = np.arange(-ry, ry + 1) * texel_mm, np.arange(-rx, rx + 1) * texel_mm
+    out = np.zeros((3, 2 * ry + 1, 2 * rx + 1))
+    for v, w in zip(VARIANCES_MM2, WEIGHTS_RGB, strict=True):
+        total = np.exp(-full * full / (2 * v)).sum() ** 2  # the whole window's mass
+        g = np.outer(np.exp(-y * y / (2 * v)), np.exp(-x * x / (2 * v))) / total
+        out += np.asarray(w)[:, None, None] * g
+    return out
+
+
 def _fft_convolve(images, kernels):
-    """Same-size linear convolution of `images (B, H, W)` with `kernels (B, k, k)`."""
+    """Same-size linear convolution of `images (B, H, W)` with `kernels (B, ky, kx)` (odd
+    sizes, centred)."""
     B, H, W = images.shape
-    k = kernels.shape[-1]
-    shape = (H + k - 1, W + k - 1)
+    ky, kx = kernels.shape[-2:]
+    shape = (H + ky - 1, W + kx - 1)
     f = jnp.fft.rfft2(images, shape) * jnp.fft.rfft2(kernels, shape)
-    r = (k - 1) // 2
-    return jnp.fft.irfft2(f, shape)[:, r:r + H, r:r + W]
+    ry, rx = (ky - 1) // 2, (kx - 1) // 2
+    return jnp.fft.irfft2(f, shape)[:, ry:ry + H, rx:rx + W]
 
 
 def blur(irradiance, texel_mm: float, mask=None, method: str = "fft", cut: float = 3.0,
-         norm=None):
+         norm=None, kernels=None):
     """The skin profile applied to `irradiance (H, W, 3)` (linear RGB) in texture space.
 
     **Arguments:**
@@ -99,6 +123,10 @@ def blur(irradiance, texel_mm: float, mask=None, method: str = "fft", cut: float
 
     - `norm`: `mask_norm(mask, texel_mm)`, computed once for a fixed mask (FFT only;
       default: computed here). A renderer passes it to save three FFTs a frame.
+    - `kernels`: `profile_kernels(texel_mm, (H, W))` (FFT only; default: made here). Inside
+      jit pass it as an argument, as the renderer does: made here it is a constant of the
+      program (up to 3 × (2H − 1) × (2W − 1) floats), which XLA pads and folds at compile
+      time.
 
     **Returns:** the light leaving the skin per texel, `(H, W, 3)`. Differentiable in
     `irradiance`.
@@ -107,9 +135,11 @@ def blur(irradiance, texel_mm: float, mask=None, method: str = "fft", cut: float
     m = jnp.ones(E.shape[:2], E.dtype) if mask is None else jnp.asarray(mask, E.dtype)
     Em = E * m[..., None]
     if method == "fft":
-        kernels = jnp.asarray(_profile_kernels(texel_mm), E.dtype)
+        if kernels is None:
+            kernels = profile_kernels(texel_mm, E.shape[:2])
+        kernels = jnp.asarray(kernels, E.dtype)
         num = _fft_convolve(jnp.moveaxis(Em, -1, 0), kernels)
-        den = mask_norm(m, texel_mm) if norm is None else jnp.asarray(norm, E.dtype)
+        den = mask_norm(m, texel_mm, kernels) if norm is None else jnp.asarray(norm, E.dtype)
         ok = den > 1e-6
         out = jnp.moveaxis(jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0), 0, -1)
         return out * m[..., None]
@@ -125,12 +155,14 @@ def blur(irradiance, texel_mm: float, mask=None, method: str = "fft", cut: float
     return out * m[..., None]
 
 
-def mask_norm(mask, texel_mm: float):
+def mask_norm(mask, texel_mm: float, kernels=None):
     """The mask blurred by each channel's profile, `(3, H, W)`: what `blur` (FFT) divides
-    by so that the mesh's edges do not darken."""
+    by so that the mesh's edges do not darken. `kernels`: as `blur`'s."""
     m = jnp.asarray(mask)
     m = m.astype(m.dtype if jnp.issubdtype(m.dtype, jnp.floating) else jnp.float32)
-    kernels = jnp.asarray(_profile_kernels(texel_mm), m.dtype)
+    if kernels is None:
+        kernels = profile_kernels(texel_mm, m.shape)
+    kernels = jnp.asarray(kernels, m.dtype)
     return _fft_convolve(jnp.broadcast_to(m, (3, *m.shape)), kernels)
 
 

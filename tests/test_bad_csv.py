@@ -29,8 +29,9 @@ CASES = [
     ("one data row", HEADER + rows(ROWS[:1]), 1, None, "needs at least 2 data rows"),
     ("binary garbage", bytes(np.random.default_rng(0).integers(0, 256, 4096, np.uint8)), 2,
      None, "binary"),
-    ("latin-1 µ", GOOD.replace("# name: good", "# unit: \xb5m").encode("latin-1"), 1, None,
-     "not UTF-8"),
+    ("neither UTF-8 nor Windows-1252", GOOD.encode().replace(b"# name: good",
+                                                               b"# unit: \x81\x8dm"), 1, None,
+     "not UTF-8 nor cp1252"),
     ("UTF-16 with a BOM", GOOD.encode("utf-16"), 1, None, "binary"),
     ("mixed delimiters", GOOD.replace("0.31,0.41,0.46,0.04", "0.31;0.41;0.46;0.04"), 4, None,
      "semicolons"),
@@ -100,6 +101,19 @@ def _run(tmp_path, capsys, contents, command):
     assert path.read_bytes() == contents, "the input was changed"
     assert not out.exists(), "something was written"
     return path, rc, err
+
+
+def test_a_windows_1252_export_reads(tmp_path):
+    """Instrument software on Windows writes cp1252 (µ, curly quotes): read, not refused,
+    and the numbers are the file's."""
+    from jaxskin.fitting.measurements import read_measurement
+
+    path = tmp_path / "win.csv"
+    text = GOOD.replace("# name: good", "# \u201cwin\u201d blush, unit \xb5m\n# name: win")
+    path.write_bytes(text.encode("cp1252"))
+    m = read_measurement(path)
+    assert m.name == "win"
+    np.testing.assert_array_equal(m.wavelength_nm, [400, 410, 420])
 
 
 @pytest.mark.parametrize("contents, line, column, words",

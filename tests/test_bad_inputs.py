@@ -193,6 +193,8 @@ CASES = {
     "image-text": lambda t: image(t, content="not an image\n"),
     "image-animated": lambda t: image(t, array=np.zeros((3, 8, 8, 4), np.uint8),
                                       name="map.png"),
+    "melanin-image-text": lambda t: layered(t, "blush_rose", "", "-D",
+                                            f"skin.melanin_image={write(t, 'm.png', 'text')}"),
     # --- polygons
     "polygon-vertex-missing": lambda t: polygon(t, "vertices = [1, 2, 99999]"),
     "polygon-two-points": lambda t: polygon(t, "points = [[0.1, 0.1], [0.2, 0.2]]"),

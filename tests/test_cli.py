@@ -259,3 +259,17 @@ def test_same_inputs_same_bytes(tmp_path, capsys):
                      "material.melanin=0:1:2", *SMALL]) == 0
         runs.append({p.name: p.read_bytes() for p in out.iterdir()})
     assert len(runs[0]) == 5 and runs[0] == runs[1]
+
+
+def test_a_sweep_key_typo_gets_a_suggestion():
+    """`--sweep layer.lipstik.thickness_mm=…` once answered with the scene's 28 parameters;
+    a near miss now names the one meant (a static key still gets the list)."""
+    from jaxskin.cli import _parse_sweep
+    from jaxskin.io import InputError
+    from jaxskin.scene import load_scene
+
+    makeup = load_scene("makeup")
+    with pytest.raises(InputError, match="did you mean 'layer.lipstick.thickness_mm'"):
+        _parse_sweep("layer.lipstik.thickness_mm=0:0.03:3", makeup)
+    with pytest.raises(InputError, match="parameters: wrinkles.k_noise"):
+        _parse_sweep("camera.size=16:32:2", makeup)

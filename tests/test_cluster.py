@@ -257,7 +257,7 @@ sys.exit(main(sys.argv[1:]))
 
 def test_a_sweep_sharded_over_two_devices_matches_one_device(tmp_path, capsys):
     """XLA_FLAGS gives the subprocess two CPU devices (it must be set before JAX starts):
-    a sweep of 5 (padded to 6, 3 per device) writes the bytes this one-device process does."""
+    a sweep of 5 (padded to 8, 4 per device) writes the bytes this one-device process does."""
     args = ["render", "hand", *SMALL, "--sweep", "material.melanin=0.1:0.9:5"]
     assert main([*args, "-o", str(tmp_path / "one")]) == 0
     env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}

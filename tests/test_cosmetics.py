@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import check_grads_scaled
 
-from jaxskin import cosmetics, km, spectral, sss
+from jaxskin import cosmetics, km, maps, spectral, sss
 from jaxskin.io import InputError
 from jaxskin.shading import kelemen
 
@@ -61,6 +61,23 @@ def test_blur_matches_a_direct_sum(method, tolerance):
         b, _ = _direct_blur(E, texel, pixels)
         err = np.abs(a[pixels[:, 0], pixels[:, 1]] - b).max()
         assert err < tolerance, (method, texel, err)
+
+
+def test_a_kernel_wider_than_the_image_is_cut_without_changing_the_blur(x64):
+    """Texels of 0.1 mm: the profile's 4σ window is 109 texels each side, the image 20 x 24.
+    `profile_kernels` cuts the kernel to what the image reaches (19 and 23 texels); the blur
+    equals the direct sum over the whole window (zeros around the image), renormalised by
+    the blurred all-ones mask, at every texel."""
+    rng = np.random.default_rng(3)
+    E = rng.uniform(0, 1, (20, 24, 3))
+    texel = 0.1
+    assert sss.profile_kernels(texel, E.shape[:2]).shape == (3, 39, 47)
+    got = np.asarray(sss.blur(jnp.asarray(E), texel))
+    r = int(np.ceil(4 * np.sqrt(7.41) / texel))
+    pixels = np.stack(np.mgrid[0:20, 0:24], -1).reshape(-1, 2) + r
+    num, _ = _direct_blur(np.pad(E, ((r, r), (r, r), (0, 0))), texel, pixels)
+    den, _ = _direct_blur(np.pad(np.ones_like(E), ((r, r), (r, r), (0, 0))), texel, pixels)
+    np.testing.assert_allclose(got.reshape(-1, 3), num / den, rtol=1e-10, atol=0)
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -184,10 +201,38 @@ def test_region_and_image_maps(tmp_path):
     assert 0 < np.mean((p > 0) & (p < 0.03)) < 0.1  # a soft edge
     img = np.array([[255, 0], [0, 128]], np.uint8)
     iio.imwrite(tmp_path / "map.png", img)
-    m = cosmetics.image_map(tmp_path / "map.png", 4, 4, 0.05)
+    m = cosmetics.image_map(maps.read_grey(tmp_path / "map.png"), 4, 4, 0.05)
     np.testing.assert_allclose(m[:2, :2], 0.05)
     np.testing.assert_allclose(m[2:, 2:], 0.05 * 128 / 255)
     np.testing.assert_allclose(m[:2, 2:], 0.0)
+
+def test_a_grey_and_alpha_map_reads_its_grey_not_its_alpha(tmp_path):
+    """A layer map saved as grey + alpha (2 channels): the thickness is the grey. (The
+    cosmetics module's own reader once averaged the alpha in: 0 grey, opaque, read 0.5.)"""
+    la = np.zeros((2, 2, 2), np.uint8)
+    la[..., 0] = [[0, 100], [200, 255]]
+    la[..., 1] = 255
+    (tmp_path / "la.png").write_bytes(maps.png_bytes(la))
+    assert iio.imread(tmp_path / "la.png").shape == (2, 2, 2)  # saved as grey + alpha
+    np.testing.assert_array_equal(maps.read_grey(tmp_path / "la.png"), la[..., 0] / 255)
+    m = cosmetics.image_map(maps.read_grey(tmp_path / "la.png"), 4, 4, 1.0)
+    assert m[0, 0] == 0.0 and m[3, 3] == 1.0 and m[0, 3] == 100 / 255
+
+
+def test_the_optics_modules_read_no_files():
+    """Optics and geometry are pure functions of arrays: images are read at the edge
+    (`maps.read_grey`), never inside them."""
+    import inspect
+
+    from jaxskin import biophysical, bump, km, spectral, sss, wrinkles
+
+    for module in (cosmetics, km, spectral, sss, biophysical, bump, wrinkles):
+        source = inspect.getsource(module)
+        assert "imageio" not in source and "imread" not in source, module.__name__
+    with pytest.raises(ValueError, match="pass its array"):
+        spec = type("Spec", (), {"name": "blush", "image": "map.png"})()
+        cosmetics.coverage(spec, np.zeros((0, 2)), 4, 4)
+
 
 # ------------------------------------------------------------------ layering
 

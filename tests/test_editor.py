@@ -563,13 +563,13 @@ def test_the_brush_dab_and_stroke_spacing():
 def test_a_faint_16_bit_map_reads_at_its_full_scale(tmp_path):
     """A painted map saved with every value below 256 (faint paint) is still 16-bit: read
     as value / 65535, not / 255 (`cosmetics.image_map` once judged the scale by the
-    largest value)."""
-    from jaxskin import cosmetics, maps
+    largest value; `maps.read_grey` reads every map now)."""
+    from jaxskin import maps
 
     q = np.zeros((4, 4), np.uint16)
     q[1, 2] = 200
     (tmp_path / "faint.png").write_bytes(maps.png16_bytes(q))
-    got = cosmetics.image_map(tmp_path / "faint.png", 4, 4, 1.0)
+    got = maps.read_grey(tmp_path / "faint.png")
     assert got[1, 2] == 200 / 65535 and got.sum() == got[1, 2]
     (tmp_path / "eight.png").write_bytes(maps.png_bytes(q.astype(np.uint8)))
-    assert cosmetics.image_map(tmp_path / "eight.png", 4, 4, 1.0)[1, 2] == 200 / 255
+    assert maps.read_grey(tmp_path / "eight.png")[1, 2] == 200 / 255

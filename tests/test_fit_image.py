@@ -199,10 +199,10 @@ def test_degenerate_pairs_warn():
 
 def test_image_map_reads_16_bit_at_full_scale(tmp_path):
     """A 16-bit map whose values stay below 256 is still on the 65535 scale."""
-    from jaxskin.cosmetics import image_map
+    from jaxskin.maps import read_grey
 
     iio.imwrite(tmp_path / "m.png", np.full((4, 4), 200, np.uint16))
-    assert image_map(tmp_path / "m.png", 4, 4, 1.0)[0, 0] == pytest.approx(200 / 65535)
+    assert read_grey(tmp_path / "m.png")[0, 0] == pytest.approx(200 / 65535)
 
 
 def _files(root):

@@ -310,3 +310,20 @@ def test_glb_albedo_of_the_makeup_is_the_layers_over_the_skin(tmp_path):
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "makeup_texture.size-64_camera.size-16.glb").stat().st_size > 1000
+
+
+def test_the_spectral_render_bakes_no_large_constant():
+    """The SSS kernels are an argument of the compiled render, not a constant: the spectral
+    hand at its old scale (1 mm per mesh unit: 0.03 mm texels at 64²) once baked a 3 x 1137 x 1137 kernel into its program (31 MB
+    of StableHLO; 3 x 9083² floats, 2 GB, at the default 512², with XLA's "constant folding
+    pad" warning), padded at compile time to a 1200² FFT for a 64² texture."""
+    import re
+
+    scene = load_scene("hand", ["material.model=spectral", "texture.size=64", "camera.size=32",
+                                "wrinkles.enabled=false", "mesh.unit_mm=1"])
+    arrays = render.prepare(scene.config).arrays
+    assert arrays["sss_kernels"].shape == (3, 127, 127)  # cut to what 64² reaches
+    text = render._render.lower(scene.config, scene.params, arrays, "display").as_text()
+    sizes = [np.prod([int(d) for d in shape.split("x")[:-1]], dtype=np.int64)
+             for shape in re.findall(r"stablehlo\.constant dense<.*?> : tensor<([^>]*)>", text)]
+    assert max(sizes, default=0) <= 1024 and len(text) < 500_000, (max(sizes), len(text))

@@ -83,6 +83,26 @@ def test_overrides_are_checked_like_the_file(tmp_path):
         load_scene(path, ["texture.sise=32"])
 
 
+def test_a_camera_size_alone_keeps_the_frames_aspect(tmp_path):
+    """`-D camera.size=N` on a scene whose file sets camera.height (the arm: 1024 x 320)
+    scales the height with the width, as the user asking for a smaller image expects (it
+    once gave a 64 x 320 strip with the arm a sliver across it); an explicit height wins;
+    a square scene stays square; a height over the key's maximum is an error naming it."""
+    arm = load_scene("arm", ["camera.size=64"])
+    assert (arm.config.image, arm.config.image_height) == (64, 20)
+    assert load_scene("arm", ["camera.size=100"]).config.image_height == 31  # 31.25
+    assert load_scene("arm", ["camera.size=64", "camera.height=64"]).config.image_height == 64
+    assert load_scene("arm", ["camera.size=64", "camera.height=0"]).config.image_height == 0
+    assert load_scene("arm", ["camera.height=100"]).config.image == 1024
+    assert load_scene("hand", ["camera.size=64"]).config.image_height == 0
+    tall = tmp_path / "tall.toml"
+    tall.write_text(GOOD + "[camera]\nsize = 320\nheight = 1024\n")
+    assert load_scene(tall, ["camera.size=160"]).config.image_height == 512
+    with pytest.raises(InputError, match=r"-D camera.size=4096: key 'camera.size': expected "
+                                         r"at most 2560 .* give camera.height too"):
+        load_scene(tall, ["camera.size=4096"])
+
+
 def test_static_config_and_params_split(tmp_path):
     path = tmp_path / "s.toml"
     path.write_text(GOOD)
@@ -155,3 +175,19 @@ def test_paths_from_the_file_and_from_the_command_line(tmp_path, monkeypatch):
     over = load_scene(scene, ["material.brdf=fits/other.json"])
     assert over.values["material.brdf"] == str(tmp_path / "fits" / "other.json")
     assert over.params["material.lafortune"].n.shape == (3, 3)
+
+
+def test_an_override_the_scene_does_not_use_is_found():
+    """`jaxskin render` warns (after its checks, before any work) about a -D value that
+    changes nothing: a newcomer's `-D skin.subject=50` on the Blinn hand once rendered the
+    default hand under a new name, without a word."""
+    from jaxskin.checks import unused_overrides
+
+    def unused(name, *items):
+        overrides = [*items, "texture.size=32"]
+        return unused_overrides(load_scene(name, overrides), overrides)
+
+    assert unused("hand", "skin.subject=50", "material.melanin=0.5") == ["skin.subject=50"]
+    assert unused("face", "skin.subject=50", "material.melanin=0.5") == ["material.melanin=0.5"]
+    assert unused("hand", "material.melanin=0.2", "name=x") == []  # the scene's own value
+    assert unused("makeup", "layer.blush.thickness_mm=0.02", "camera.size=64") == []

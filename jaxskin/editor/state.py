@@ -178,10 +178,10 @@ class Session:
 
     def _check(self, scene: Scene) -> None:
         """What the CLI checks before a render (memory, mesh, vertices, materials, images)."""
-        from ..cli import _check_scene
+        from ..checks import check_scene
 
         try:
-            _check_scene(scene, 1)
+            check_scene(scene, 1)
         except InputError as e:
             raise EditorError(str(e), 400, e.key) from None
         except RecursionError:
@@ -348,7 +348,7 @@ class Session:
         texels = np.asarray(arrays["texels"])
         cover = np.array(arrays["cover"])
         for i, name in enumerate(names):
-            if name in self.paint:  # as cosmetics.image_map reads the saved 16-bit PNG
+            if name in self.paint:  # as maps.read_grey reads the saved 16-bit PNG
                 q = self.paint[name]
                 cover[i] = np.clip(q.astype(np.float64) / 65535.0, 0.0, 1.0).reshape(-1)[
                     texels].astype(np.float32)

@@ -1,0 +1,121 @@
+"""The checks a scene passes before any render, shared by `jaxskin render`, `jaxskin
+fit-image` and the editor: memory, mesh, edits, BRDF, materials, images, polygons. Each
+failure is an `InputError` naming the file or key and what was expected."""
+
+from __future__ import annotations
+
+import contextlib
+
+from .io import InputError
+
+__all__ = ["check_scene", "reading"]
+
+
+@contextlib.contextmanager
+def reading(path, key=None):
+    """A file nested too deeply for Python's parsers is bad input, not a crash."""
+    try:
+        yield
+    except RecursionError:
+        raise InputError("nested too deeply to read", path, key=key) from None
+
+
+def check_scene(sc, count: int) -> list:
+    """Everything a `scene.Scene` reads, checked before any render of `count` images at
+    once: memory first (no allocation), then the mesh, edits, polygons, BRDF file,
+    materials and images (`maps.read_grey`, the reader the render uses). Returns the
+    scene's input files."""
+    import numpy as np
+
+    from . import cosmetics, maps, resources
+    from .mesh import BUILTIN as MESHES
+    from .mesh import load_mesh
+    from .scene import SKIN_MAPS
+
+    config = sc.config
+    resources.check_memory(resources.render_bytes(config, count),
+                           f"scene {sc.name!r} (texture {config.texture.size}², image "
+                           f"{config.image}x{config.image_height or config.image}, "
+                           f"supersample {config.supersample}"
+                           + (f", {count} sweep values" if count > 1 else "") + ")",
+                           sc.source)
+    inputs = [sc.source]
+    mesh_name = config.texture.mesh
+    with reading(mesh_name):
+        mesh = load_mesh(mesh_name)
+    if mesh_name not in MESHES:
+        inputs.append(mesh_name)
+    if config.texture.projection == "uv" and mesh.uv is None:
+        raise InputError(f"mesh '{mesh.name}' has no texture coordinates; use planar or "
+                         "cylindrical projection", sc.source, key="mesh.projection")
+    for i, e in enumerate(config.texture.edits):
+        if e.vertex is not None and e.vertex >= len(mesh.vertices):
+            raise InputError(f"vertex {e.vertex} does not exist; the mesh has "
+                             f"{len(mesh.vertices)} vertices", sc.source,
+                             key=f"fields.edit[{i}].vertex")
+    if config.material == "lafortune":
+        if config.brdf != "skin":
+            inputs.append(config.brdf)
+        with reading(config.brdf, "material.brdf"):
+            lobes = sc.params["material.lafortune"]
+        arrays = [np.asarray(a) for a in (lobes.diffuse, lobes.Cxy, lobes.Cz)]
+        if not any(np.any(a != 0) for a in arrays):
+            raise InputError("every term is zero (diffuse and all lobes): this material "
+                             "reflects no light; expected a fit from jaxskin fit-brdf",
+                             config.brdf)
+    sp = config.spectral
+    for map_key, (_, image_key) in SKIN_MAPS.items():
+        image = sp.image_of(map_key) if sp is not None else None
+        if image is not None:
+            inputs.append(image)
+            maps.read_grey(image, key=image_key)
+    for layer in sp.layers if sp is not None else ():
+        inputs.append(layer.material)
+        with reading(layer.material):
+            cosmetics.load_material(layer.material, sp.grid)
+        if layer.image is not None:
+            inputs.append(layer.image)
+            maps.read_grey(layer.image, key=f"layer.{layer.name}.image")
+        for i, (_, vertices, _) in enumerate(layer.polygons):
+            if vertices is not None and max(vertices) >= len(mesh.vertices):
+                raise InputError(f"vertex {max(vertices)} does not exist; the mesh has "
+                                 f"{len(mesh.vertices)} vertices", sc.source,
+                                 key=f"layer.{layer.name}.polygon[{i}].vertices")
+    return inputs
+
+
+def unused_overrides(sc, overrides) -> list[str]:
+    """The `-D` items of `overrides` that change nothing in scene `sc` (loaded with them):
+    a value the scene's material model does not use (`skin.subject` on the Blinn hand,
+    `material.melanin` on the spectral face). An item is unused when the scene loaded
+    without it has the same configuration and parameters although its value differs (a
+    static value the configuration keeps though no stage reads it, such as
+    `wrinkles.k_scale` with wrinkles off, is not found). For a warning: `-D` applies to every scene
+    of a command, so a key one scene does not use may serve another."""
+    import numpy as np
+
+    from .scene import _parse_override, load_scene
+
+    def same(a, b) -> bool:
+        import jax
+
+        la, ta = jax.tree.flatten(a)
+        lb, tb = jax.tree.flatten(b)
+        return ta == tb and all(np.array_equal(np.asarray(x), np.asarray(y))
+                                for x, y in zip(la, lb, strict=True))
+
+    out = []
+    for item in overrides:
+        key, _ = _parse_override(item)
+        if key == "name":  # names the outputs only
+            continue
+        rest = [o for o in overrides if _parse_override(o)[0] != key]
+        try:
+            without = load_scene(sc.source, rest)
+        except InputError:
+            continue
+        if without.values.get(key) == sc.values.get(key):
+            continue  # the scene's own value: nothing asked to change
+        if without.config == sc.config and same(without.params, sc.params):
+            out.append(item)
+    return out
