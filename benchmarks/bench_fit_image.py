@@ -1,14 +1,19 @@
-"""fit-image on ground truth: makeup thickness maps recovered from the face, scalars from the
-hand, and the optimiser comparison for maps (Adam, L-BFGS, nonlinear CG).
+"""fit-image on ground truth: makeup thickness maps recovered from the face, the optimiser
+comparison for maps (the per-texel Gauss–Newton, Adam, L-BFGS, nonlinear CG), the speed
+at 512², the ambiguity and maps figures.
 
-    python benchmarks/bench_fit_image.py maps [--size 64] [--steps 100] [--solvers adam,lbfgs]
+    python benchmarks/bench_fit_image.py maps [--size 48] [--steps 30] [--solvers gn,adam]
+        [--noise 0.01] [--smooth 1e-6]
+    python benchmarks/bench_fit_image.py speed --size 512 --steps 25 --solvers gn
     python benchmarks/bench_fit_image.py ambiguity      # writes fit_image_ambiguity.png
+    python benchmarks/bench_fit_image.py figure         # writes fit_image_maps.png
 
-Targets are rendered with known values, plus Gaussian noise (σ = 0.01 in display values);
-the fits start from other values (maps: each layer everywhere at its thickness). Printed:
-time, steps, the final loss, and per map the RMS relative error over the visible texels
-(those whose value changes the image: |∂ channel / ∂ texel| above 1 % of its 99th
-percentile, for some channel).
+Targets are rendered with known values, plus Gaussian noise σ in display values; the fits
+start from each layer everywhere at 1/20 of its thickness. Printed: time, steps, the final
+loss and data RMS, and per map the RMS relative error over the texels whose Cramér–Rao
+bound (`fitting.image.map_bounds`, at the truth, the layers together) is under 2.5 % and
+under 10 %, and over all the texels the layer covers; and the fraction of each layer's
+texels under those bounds.
 """
 
 from __future__ import annotations
@@ -36,14 +41,24 @@ def without_regions(scene: Scene, names) -> Scene:
     return dataclasses.replace(scene, layers=layers)
 
 
-def visible(config, params, w, key):
-    """Texels of map `key` that change the weighted image."""
-    arrays = render.prepare(config).arrays
-    wj = jnp.asarray(w, jnp.float32)[..., None]
-    g = np.max([np.abs(np.asarray(jax.grad(lambda m, c=c: jnp.sum(
-        wj * render.render_prepared(config, {**params, key: m}, arrays)[..., c]))(
-        params[key]))) for c in range(3)], axis=0)  # per channel: a hue change sums to ~0
-    return g > 0.01 * np.percentile(g[g > 0], 99)
+def recoverable(truth: Scene, w, noise, names=MAPS, bound=0.025):
+    """The texels of each layer whose thickness the image pins to `bound` (relative, 1σ),
+    by the Cramér–Rao bound at the truth (`fitting.image.map_bounds`, the layers fitted
+    together) with noise `noise`, among the texels the layer covers. Returns name →
+    mask and name → the bounds."""
+    arrays = render.prepare(truth.config).arrays
+    mask = np.asarray(arrays["mask"])
+    texels = np.asarray(arrays["texels"])
+    params = dict(truth.params)
+    for i, layer in enumerate(truth.layers):
+        m = np.zeros(mask.size, np.float32)
+        m[texels] = np.asarray(arrays["cover"][i])
+        params[f"layer.{layer.name}.map"] = jnp.asarray(m.reshape(mask.shape))
+    keys = [f"layer.{n}.map" for n in names]
+    b = fi.map_bounds(truth.config, params, keys, w, noise)
+    tm = true_maps(truth)
+    return ({n: (b[f"layer.{n}.map"] < bound) & (tm[n] > 0) for n in names},
+            {n: b[f"layer.{n}.map"] for n in names})
 
 
 def true_maps(scene: Scene):
@@ -74,9 +89,7 @@ def maps(size, steps, solvers, smooth, rate=fi.ADAM_RATE, noise=0.01, seed=0, na
     w = fi.weights(start.config, start.params)
     keys = fi.fit_keys(start, ",".join(f"layer.{n}.map" for n in names))
     truth_mm = true_maps(truth)
-    probe = {**start.params, **{k.key: jnp.ones(np.asarray(
-        render.prepare(start.config).arrays["mask"]).shape, jnp.float32) for k in keys}}
-    seen = {k.key: visible(start.config, probe, w, k.key) for k in keys}
+    seen, bounds = recoverable(truth, w, noise, names)
     rows = []
     for solver in solvers:
         t0 = time.perf_counter()
@@ -86,37 +99,50 @@ def maps(size, steps, solvers, smooth, rate=fi.ADAM_RATE, noise=0.01, seed=0, na
         for k in keys:
             name = k.key.split(".")[1]
             fit_mm = np.asarray(r.params[k.key]) * float(r.params[k.scalar])
-            v = seen[k.key]
-            errs[name] = np.sqrt(np.mean((fit_mm[v] - truth_mm[name][v]) ** 2)) / np.sqrt(
-                np.mean(truth_mm[name][v] ** 2))
+            c = truth_mm[name] > 0
+            errs[name] = tuple(
+                np.sqrt(np.mean((fit_mm[v] / truth_mm[name][v] - 1) ** 2)) if v.any()
+                else np.nan for v in (seen[name], c & (bounds[name] < 0.1), c))
         rows.append((solver, time.perf_counter() - t0, r.steps, r.history[-1], r.rms, errs,
-                     {n: float(seen[f"layer.{n}.map"].mean()) for n in names}))
+                     {n: [float(((bounds[n] < b) & (truth_mm[n] > 0)).sum()
+                                / max(1, (truth_mm[n] > 0).sum())) for b in (0.025, 0.1)]
+                      for n in names}))
+        print(solver, "loss by step:", " ".join(f"{h:.3e}" for h in r.history[:40]))
     print(f"makeup face, texture {size}², image {2 * size}², noise σ {noise}, smooth {smooth}")
     print(f"{'solver':<7} {'time s':>7} {'steps':>5} {'loss':>10} {'rms':>7}  "
           + "  ".join(f"{n:>10}" for n in names))
     for solver, dt, n, loss, rms, errs, _ in rows:
         print(f"{solver:<7} {dt:>7.1f} {n:>5} {loss:>10.3e} {rms:>7.4f}  "
-              + "  ".join(f"{100 * errs[m]:>9.1f}%" for m in names))
-    print("visible fraction of texels: " + ", ".join(f"{n} {100 * f:.0f}%"
-                                                    for n, f in rows[0][6].items()))
+              + "  ".join("/".join(f"{100 * e:.1f}" for e in errs[m]) + "%" for m in names))
+    print("(per layer: RMS relative error over the texels whose CRB is < 2.5 % / < 10 % / "
+          "over all the layer covers)")
+    print("fraction of each layer's texels with CRB < 2.5 % / < 10 %: "
+          + ", ".join(f"{n} {100 * f[0]:.0f}/{100 * f[1]:.0f}%" for n, f in rows[0][6].items()))
     return rows
 
 
 def ambiguity(size=48, n=21, out="benchmarks/fit_image_ambiguity.png"):
-    """The loss over two pairs of keys around the truth, on the hand (Blinn): albedo against
+    """The loss over pairs of keys around the truth: on the hand (Blinn), albedo against
     intensity (material.melanin × light.intensity: a valley) and an exact one
-    (camera.exposure × light.intensity, with ambient 0: a line of zero loss)."""
+    (camera.exposure × light.intensity, with ambient 0: a line of zero loss); on the
+    makeup face (spectral, 32² texture and image), melanin against thickness
+    (skin.melanin × layer.foundation.thickness_mm: a valley)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    panels = [("material.melanin", (0.05, 0.6), "light.intensity", (0.3, 1.2), []),
-              ("camera.exposure", (-1.0, 1.0), "light.intensity", (0.3, 1.2),
-               ["light.ambient=0.0"])]
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), constrained_layout=True)
-    for ax, (kx, rx, ky, ry, extra) in zip(axes, panels, strict=True):
-        sc = load_scene("hand", [f"texture.size={size}", f"camera.size={size}", *extra])
+    hand = [f"texture.size={size}", f"camera.size={size}"]
+    face = ["texture.size=32", "camera.size=32", "camera.supersample=1",
+            "wrinkles.enabled=false", "light.shadows=false", "skin.melanin=0.5"]
+    panels = [("hand", hand, "material.melanin", (0.05, 0.6), "light.intensity", (0.3, 1.2)),
+              ("hand", hand + ["light.ambient=0.0"], "camera.exposure", (-1.0, 1.0),
+               "light.intensity", (0.3, 1.2)),
+              ("makeup", face, "skin.melanin", (0.0, 1.5), "layer.foundation.thickness_mm",
+               (0.0, 0.03))]
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2), constrained_layout=True)
+    for ax, (name, ov, kx, rx, ky, ry) in zip(axes, panels, strict=True):
+        sc = load_scene(name, ov)
         arrays = render.prepare(sc.config).arrays
         target = render.render(sc.config, sc.params)
         w = jnp.asarray(fi.weights(sc.config, sc.params))[..., None]
@@ -127,23 +153,113 @@ def ambiguity(size=48, n=21, out="benchmarks/fit_image_ambiguity.png"):
             return jnp.sum(w * (render.render_prepared(sc.config, p, arrays) - target) ** 2) \
                 / jnp.sum(w)
 
-        grid = jax.jit(jax.vmap(jax.vmap(loss, (0, None)), (None, 0)))(
-            jnp.asarray(xs, jnp.float32), jnp.asarray(ys, jnp.float32))
-        im = ax.contourf(xs, ys, np.log10(np.asarray(grid) + 1e-8), 20, cmap="viridis")
+        row = jax.jit(jax.vmap(loss, (0, None)))  # a row at a time: the face's memory
+        grid = np.stack([np.asarray(row(jnp.asarray(xs, jnp.float32), jnp.float32(y)))
+                         for y in ys])
+        im = ax.contourf(xs, ys, np.log10(grid + 1e-8), 20, cmap="viridis")
         ax.plot(float(sc.params[kx]), float(sc.params[ky]), "r*", ms=12, label="truth")
         ax.set_xlabel(kx)
         ax.set_ylabel(ky)
         ax.legend(loc="upper right")
         fig.colorbar(im, ax=ax, label="log10 loss")
-    axes[0].set_title("albedo against intensity: a valley")
-    axes[1].set_title("exposure against intensity (ambient 0): exact")
+    axes[0].set_title("albedo against intensity: a valley\n(fix light.intensity)")
+    axes[1].set_title("exposure against intensity (ambient 0): exact\n(fix either)")
+    axes[2].set_title("melanin against foundation thickness: a valley\n"
+                      "(fix skin.melanin, from bare skin)")
     fig.savefig(out, dpi=90)
     print(f"wrote {out}")
 
 
+def figure(size=24, noise=0.01, smooth=1e-6, out="benchmarks/fit_image_maps.png"):
+    """Gauss–Newton against Adam on the makeup face (three maps, `size`² texture): loss
+    against step and against time, and for the blush the truth, both fits and the
+    Cramér–Rao bound per texel."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = MAPS
+    ov = [f"texture.size={size}", f"camera.size={2 * size}"]
+    truth = load_scene("makeup", ov)
+    target = np.asarray(render.render(truth.config, truth.params))
+    target = np.clip(target + np.random.default_rng(0).normal(0, noise, target.shape), 0, 1)
+    start = without_regions(load_scene("makeup", ov + [
+        f"layer.{n}.thickness_mm={truth.values[f'layer.{n}.thickness_mm'] / START}"
+        for n in names]), names)
+    w = fi.weights(start.config, start.params)
+    keys = fi.fit_keys(start, ",".join(f"layer.{n}.map" for n in names))
+    _, bounds = recoverable(truth, w, noise, names)
+    mask = np.asarray(render.prepare(truth.config).arrays["mask"])
+    runs = {}
+    for solver, steps in (("gn", 30), ("adam", 150)):
+        stamps = [time.perf_counter()]
+        r = fi.fit(start.config, start.params, target, w, keys, steps=steps, smooth=smooth,
+                   solver=solver, progress=lambda _loss, s=stamps: s.append(time.perf_counter()))
+        runs[solver] = (r, np.cumsum(np.diff(stamps)))
+    fig, axes = plt.subplots(1, 5, figsize=(22, 4), constrained_layout=True)
+    for solver, (r, t) in runs.items():
+        label = {"gn": "Gauss–Newton (tries)", "adam": "Adam"}[solver]
+        axes[0].semilogy(np.arange(1, len(r.history) + 1), r.history, label=label)
+        axes[1].semilogy(t, r.history, label=label)
+    for ax, xl in zip(axes[:2], ("step", "seconds (first includes compiling)"), strict=True):
+        ax.axhline(noise ** 2, color="grey", ls=":", label="σ²")
+        ax.set_xlabel(xl)
+        ax.set_ylabel("loss")
+        ax.legend()
+        ax.grid(alpha=0.3)
+    axes[0].set_title(f"makeup face, 3 maps, {size}² texture, σ {noise}")
+    tm = true_maps(truth)["blush"]
+    top = tm.max()
+    panels = [("blush truth (mm)", tm), *[(f"blush, {s} (mm)", np.asarray(
+        r.params["layer.blush.map"]) * float(r.params["layer.blush.thickness_mm"]))
+        for s, (r, _) in runs.items()]]
+    for ax, (title, m) in zip(axes[2:4], panels[:2], strict=True):
+        im = ax.imshow(np.where(mask, m, np.nan), vmin=0, vmax=top, cmap="viridis")
+        ax.set_title(title)
+        ax.set_axis_off()
+        fig.colorbar(im, ax=ax, shrink=0.8)
+    b = np.where(mask & (tm > 0), np.log10(bounds["blush"]), np.nan)
+    im = axes[4].imshow(b, cmap="magma_r")
+    axes[4].set_title("blush: log10 Cramér–Rao bound\n(relative; −1.6 = 2.5 %)")
+    axes[4].set_axis_off()
+    fig.colorbar(im, ax=axes[4], shrink=0.8)
+    axes[3].set_title(panels[1][0])
+    fig.savefig(out, dpi=80)
+    print(f"wrote {out}")
+
+
+def speed(size=512, steps=4, solvers=("gn", "adam"), names=MAPS):
+    """Seconds per step of each solver on the makeup face at `size`² (texture and image,
+    supersample 2, SSS, shadows, the three maps), from the progress callback's clock: the
+    first step includes compilation, the others are printed as they are."""
+    ov = [f"texture.size={size}", f"camera.size={size}"]
+    truth = load_scene("makeup", ov)
+    target = np.asarray(render.render(truth.config, truth.params))
+    start = without_regions(load_scene("makeup", ov + [
+        f"layer.{n}.thickness_mm={truth.values[f'layer.{n}.thickness_mm'] / START}"
+        for n in names]), names)  # as in `maps`
+    w = fi.weights(start.config, start.params)
+    keys = fi.fit_keys(start, ",".join(f"layer.{n}.map" for n in names))
+    t = time.perf_counter()
+    jax.block_until_ready(render.render(start.config, start.params))
+    t0 = time.perf_counter()
+    jax.block_until_ready(render.render(start.config, start.params))
+    print(f"{size}²: prepare + first render {t0 - t:.1f} s, "
+          f"forward {time.perf_counter() - t0:.2f} s")
+    for solver in solvers:
+        stamps = [time.perf_counter()]
+        r = fi.fit(start.config, start.params, target, w, keys, steps=steps, solver=solver,
+                   progress=lambda _loss, s=stamps: s.append(time.perf_counter()))
+        d = np.diff(stamps)
+        print(f"{solver}: {r.steps} steps, first (with compile) {d[0]:.1f} s, then "
+              + ", ".join(f"{x:.1f}" for x in d[1:]) + f" s, total {d.sum():.0f} s; loss "
+              + " ".join(f"{h:.3e}" for h in r.history))
+
+
 def main():
     p = argparse.ArgumentParser()
-    p.add_argument("what", choices=("maps", "ambiguity"))
+    p.add_argument("what", choices=("maps", "ambiguity", "speed", "figure"))
     p.add_argument("--size", type=int, default=64)
     p.add_argument("--steps", type=int, default=100)
     p.add_argument("--solvers", default="adam")
@@ -154,6 +270,10 @@ def main():
     a = p.parse_args()
     if a.what == "ambiguity":
         ambiguity()
+    if a.what == "figure":
+        figure()
+    if a.what == "speed":
+        speed(a.size, a.steps, a.solvers.split(","))
     if a.what == "maps":
         maps(a.size, a.steps, a.solvers.split(","), a.smooth, a.rate,
              noise=a.noise, names=tuple(a.maps.split(",")))

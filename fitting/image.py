@@ -23,8 +23,13 @@ prior. Optimisers (optimistix, stepped one iteration at a time for the progress 
 
 - scalars only: Levenberg–Marquardt (`optimistix.LevenbergMarquardt`) on the residual image,
   its Jacobian by forward mode (one JVP per scalar);
-- with maps: `optimistix.OptaxMinimiser(optax.adam)`. Measured on the makeup face
-  (benchmarks/bench_fit_image.py): see `MAP_SOLVER_NOTE`.
+- with maps: Levenberg–Marquardt with a per-texel block-diagonal Gauss–Newton matrix
+  (`_gauss_newton`, `texel_blocks`; why and what it measured: `MAP_SOLVER_NOTE`). Adam
+  (`optimistix.OptaxMinimiser(optax.adam)`), L-BFGS and nonlinear CG stay as `solver=`
+  choices for comparison.
+
+How well an image can pin a map at all is `map_bounds`: the Cramér–Rao bound of each
+texel's log value from the noise and the image's sensitivity to it.
 
 The optics stays in `jaxskin.render`; reading and writing files is the CLI's
 (`jaxskin.cli`, `write_report` here for the PNG report).
@@ -34,6 +39,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 import time
 import warnings
 from collections.abc import Callable
@@ -41,6 +47,7 @@ from pathlib import Path
 
 import equinox as eqx
 import jax
+import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
 import optax
@@ -48,14 +55,15 @@ import optimistix as optx
 
 from jaxskin import render
 from jaxskin.io import InputError, atomic_write
-from jaxskin.scene import LAYER_SCHEMA, SCHEMA, Scene
+from jaxskin.scene import LAYER_SCHEMA, SCHEMA, SKIN_MAPS, Scene
 
-__all__ = ["DEGENERATE", "FitKey", "ImageFit", "MAP_SCALARS", "fit", "fit_keys", "weights",
+__all__ = ["DEGENERATE", "FitKey", "ImageFit", "MAP_SCALARS", "blur_gain", "fit", "fit_keys",
+           "map_bounds", "pcg", "texel_blocks", "view_diagonal", "view_matrix", "weights",
            "write_report"]
 
 # A map key → the scalar it multiplies (the biophysical model's maps go here too). Layer
 # maps, `layer.NAME.map`, multiply `layer.NAME.thickness_mm`.
-MAP_SCALARS = {"skin.melanin_map": "skin.melanin"}
+MAP_SCALARS = {k: scalar for k, (scalar, _) in SKIN_MAPS.items()}
 # Pairs of keys that trade off against each other in an image (warned about when fitted
 # together): exact scale ambiguities and near ones.
 DEGENERATE = {
@@ -73,11 +81,24 @@ DEGENERATE = {
         "albedo against exposure: melanin darkens much as a lower exposure does",
 }
 MAP_SOLVER_NOTE = (
-    "Adam (optax, through optimistix.OptaxMinimiser) for maps: on the makeup face (three "
-    "thickness maps, 48² texture, 96² image, σ 0.01, 150 steps) Adam reached the noise floor "
-    "(RMS 0.0102) in 31 s; optimistix.LBFGS and NonlinearCG never left the start's loss "
-    "(0.295) in as many steps, their line searches rejecting every step in float32 "
-    "(benchmarks/RESULTS.md, 'fit-image')")
+    "Maps: Levenberg–Marquardt on a block-diagonal Gauss–Newton matrix. A texel's colour "
+    "depends on its own values (the SSS blur aside), so JᵀJ is nearly block-diagonal: per "
+    "texel an L × L block for L maps, from L forward-mode JVPs of the texture-space colour "
+    "and the exact diagonal of the view map's AᵀDA (`view_matrix`); the SSS blur's share "
+    "counted by its own-texel gain (`blur_gain`). The prior's Hessian enters exactly, the "
+    "coupled system solved by block-preconditioned CG in texture space (cheap: no render). "
+    "optimistix.LevenbergMarquardt / GaussNewton take their curvature from the residual's "
+    "Jacobian operator, which does not expose the per-texel structure: materialising JᵀJ is "
+    "out of reach (a column per texel), and CG through J costs a JVP and a VJP of the whole "
+    "render per inner iteration; so the step is our own, in the loop `_solve` runs for the "
+    "optimistix solvers. Measured against Adam (benchmarks/RESULTS.md, 'fit-image'): see "
+    "there. L-BFGS and NonlinearCG (optimistix, float32) never left the start's loss in "
+    "150 steps on the makeup face (their line searches rejected every step).")
+STEP_MAX = 1.0  # the Gauss–Newton step's largest change of a coordinate (e ≈ 2.7× a texel)
+GN_RTOL = 1e-5  # stop when the Gauss–Newton model predicts less than this share of the loss
+CG_RTOL = 1e-3  # the inner conjugate-gradient solve of each Gauss–Newton step: its tolerance
+CG_STEPS = 100  # … and its most iterations (each one texture-space prior HVP: cheap)
+_DEBUG = bool(__import__("os").environ.get("JAXSKIN_FIT_DEBUG"))
 ADAM_RATE = 0.3  # per step, in the transformed (log-like) coordinates: ~35 % at most
 PRIOR_EPS = 0.01  # the total variation's smoothing, in map units: sqrt(d² + ε²) − ε
 
@@ -108,8 +129,7 @@ def map_keys(scene: Scene) -> dict[str, str]:
         return {}
     out = {f"layer.{layer.name}.map": f"layer.{layer.name}.thickness_mm"
            for layer in scene.layers}
-    if scene.config.spectral.skin == "nist":  # the biophysical skin has no maps yet
-        out.update({k: s for k, s in MAP_SCALARS.items() if s in scene.params})
+    out.update({k: s for k, s in MAP_SCALARS.items() if s in scene.params})
     return out
 
 
@@ -321,11 +341,12 @@ def fit(config, params: dict, target, w, keys: tuple[FitKey, ...], steps: int = 
     - `target (H, W, 3)`: display values in [0, 1] from the scene's camera.
     - `w (H, W)`: per-pixel weights (`weights`).
     - `keys`: from `fit_keys`.
-    - `steps`: at most this many optimiser steps.
+    - `steps`: at most this many optimiser steps (for `"gn"`: tries, accepted or not).
     - `smooth`: the weight of the maps' total-variation prior (per map).
     - `progress`: called with the loss after each step.
-    - `solver`: `"auto"` (Levenberg–Marquardt for scalars only, Adam with maps), or one of
-      `"lm"`, `"adam"`, `"lbfgs"`, `"ncg"` (for comparisons).
+    - `solver`: `"auto"` (Levenberg–Marquardt for scalars only; with maps the per-texel
+      Gauss–Newton of `MAP_SOLVER_NOTE`, `"gn"`; Adam when Lafortune lobes are fitted with
+      maps), or one of `"lm"`, `"gn"`, `"adam"`, `"lbfgs"`, `"ncg"` (for comparisons).
     - `rate`: Adam's step size.
 
     **Returns:** an `ImageFit`.
@@ -373,17 +394,25 @@ def fit(config, params: dict, target, w, keys: tuple[FitKey, ...], steps: int = 
         prior = sum(total_variation(unpack(z)[fk.key], args["pairs"]) for fk in maps)
         return jnp.sum(r * r) + smooth * prior, None
 
-    name = solver if solver != "auto" else ("adam" if maps else "lm")
-    if name == "lm":
-        s = optx.LevenbergMarquardt(rtol=1e-4, atol=1e-4)  # |Δz| < 1e-4: x to 2.5e-5 of its range
-        fn = residual
-    else:
-        fn = loss
-        s = {"adam": lambda: optx.OptaxMinimiser(optax.adam(rate), rtol=0.0, atol=0.0),
-             "lbfgs": lambda: optx.LBFGS(rtol=0.0, atol=0.0),
-             "ncg": lambda: optx.NonlinearCG(rtol=0.0, atol=0.0)}[name]()
+    lobes = any(fk.kind == "lafortune" for fk in keys)
+    name = solver if solver != "auto" else (("adam" if lobes else "gn") if maps else "lm")
     args = {"arrays": arrays, "target": target, "sqrt_w": sqrt_w, "pairs": pairs}
-    z, history, n = _solve(s, fn, z0, args, steps, progress, stall=5 if name == "lm" else None)
+    if name == "gn":
+        if lobes or not maps:
+            raise ValueError("the per-texel Gauss–Newton needs maps and no Lafortune lobes")
+        z, history, n = _gauss_newton(config, keys, units, unpack, residual, loss, z0, args,
+                                      smooth, steps, progress)
+    else:
+        if name == "lm":
+            s = optx.LevenbergMarquardt(rtol=1e-4, atol=1e-4)  # |Δz| < 1e-4: 2.5e-5 of range
+            fn = residual
+        else:
+            fn = loss
+            s = {"adam": lambda: optx.OptaxMinimiser(optax.adam(rate), rtol=0.0, atol=0.0),
+                 "lbfgs": lambda: optx.LBFGS(rtol=0.0, atol=0.0),
+                 "ncg": lambda: optx.NonlinearCG(rtol=0.0, atol=0.0)}[name]()
+        z, history, n = _solve(s, fn, z0, args, steps, progress,
+                               stall=5 if name == "lm" else None)
     fitted = unpack(z)
     image = np.asarray(render.render_prepared(config, fitted, arrays))
     r = (np.clip(image, 0, 1) - np.asarray(target)) * np.asarray(sqrt_w)
@@ -398,13 +427,319 @@ def fit(config, params: dict, target, w, keys: tuple[FitKey, ...], steps: int = 
                     time.perf_counter() - t0, name, image)
 
 
+# --- the per-texel Gauss–Newton for maps -----------------------------------------------------
+
+@functools.lru_cache(maxsize=4)
+def view_matrix(config) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The linear map A from a texture-space colour to the image (`render.texture_to_view`:
+    the padded texture's bilinear samples averaged over each pixel's supersamples) as a
+    sparse matrix: `(pixel, texel, weight)` arrays, flat indices, duplicates summed (host
+    NumPy, once per configuration)."""
+    arrays = render.prepare(config).arrays
+    view = render.prepare(config).view
+    tex = np.asarray(arrays["tex"], np.float64)
+    vm = np.asarray(arrays["view_mask"])
+    pad = np.asarray(arrays["pad"]).reshape(-1)
+    Ht, Wt = np.asarray(arrays["mask"]).shape
+    k = config.supersample
+    sy, sx = np.nonzero(vm)
+    x, y = tex[sy, sx, 0] - 0.5, tex[sy, sx, 1] - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = x - x0, y - y0
+    pixel = (sy // k) * (vm.shape[1] // k) + sx // k
+    rows, cols, vals = [], [], []
+    for dx, dy, wgt in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)),
+                        (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):
+        xi = x0 + dx
+        xi = np.mod(xi, Wt) if view.wrap_x else np.clip(xi, 0, Wt - 1)
+        yi = np.clip(y0 + dy, 0, Ht - 1)
+        rows.append(pixel)
+        cols.append(pad[(yi * Wt + xi).astype(np.int64)])
+        vals.append(wgt / (k * k))
+    rows, cols, vals = (np.concatenate(v) for v in (rows, cols, vals))
+    key, inverse = np.unique(rows.astype(np.int64) * (Ht * Wt) + cols, return_inverse=True)
+    summed = np.bincount(inverse.reshape(-1), weights=vals, minlength=len(key))
+    keep = summed != 0
+    return ((key[keep] // (Ht * Wt)).astype(np.int32), (key[keep] % (Ht * Wt)).astype(np.int32),
+            summed[keep].astype(np.float32))
+
+
+def view_diagonal(config, d):
+    """diag(Aᵀ diag(d) A) `(Ht, Wt, 3)`: per texel and channel, Σ_p A_pt² d_p, A the linear
+    map from a texture-space colour to the image (`view_matrix`) and `d (H, W, 3)`
+    per-pixel weights. Exact."""
+    rows, cols, vals = (jnp.asarray(v) for v in view_matrix(config))
+    Ht, Wt = render.prepare(config).setup.mask.shape
+    contrib = (vals * vals)[:, None] * d.reshape(-1, 3)[rows]
+    return jax.ops.segment_sum(contrib, cols, num_segments=Ht * Wt).reshape(Ht, Wt, 3)
+
+
+def blur_gain(config, arrays):
+    """The SSS blur's share of a texel's own light that stays at the texel, as a root sum of
+    squares: sqrt(Σ_t' w_t'←t²) per channel `(3,)` for the blur of a single texel at the
+    mesh's most inland texel (1: no blur, or a blur under a texel). In a Gauss–Newton block
+    the blurred part b of a texel's response then counts as sqrt(κ) b: its square κ b² is
+    the blurred part's exact self-curvature, Σ_t' (w_t'←t b)²."""
+    sp = config.spectral
+    if sp is None or sp.sss is None:
+        return jnp.ones(3, jnp.float32)
+    from scipy.ndimage import distance_transform_edt
+
+    from jaxskin import sss
+
+    mask = np.asarray(arrays["mask"])
+    inland = np.unravel_index(np.argmax(distance_transform_edt(mask)), mask.shape)
+    delta = np.zeros((*mask.shape, 3), np.float32)
+    delta[inland] = 1.0
+    out = sss.blur(jnp.asarray(delta), render.prepare(config).texel_mm, arrays["mask"],
+                   sp.sss, norm=arrays.get("sss_norm"), kernels=arrays.get("sss_kernels"))
+    return jnp.sqrt(jnp.sum(out * out, axis=(0, 1)))
+
+
+def texel_blocks(config, params: dict, arrays, names, tangents, d, gain=None):
+    """Per texel, the L × L block of JᵀJ for L maps (`names`, keys into `params`), as
+    `(Ht·Wt, L, L)`: Σ_channels D_tc a_l,tc a_m,tc with a_l = the texture-space colour's
+    derivative along map l's `tangents[l] (Ht, Wt)` (one JVP each, `render.texture_colour`)
+    and D = `view_diagonal` of the per-pixel `d (H, W, 3)` = (∂ pixel / ∂ linear pixel)² ×
+    weight. The colour of a texel depends on its own thicknesses except through the SSS
+    blur, which spreads the part of its response that enters the skin over its
+    neighbours: in the JVP the blur's derivative is `gain` × identity (`blur_gain`, its
+    own-texel root sum of squares; None: the blur's own derivative, which along a whole
+    map sums the neighbours' shares — right for a blur under a texel, and wrong for a wide
+    one when the surface and the blurred parts of a response have opposite signs and
+    cancel). Exact without SSS (tests/test_fit_image.py); with it, the cross term between
+    a texel's local and blurred parts uses sqrt(κ) for the kernel's centre weight.
+    Also returns the texture colour `(Ht, Wt, 3)`."""
+    def colour(ms):
+        return render.texture_colour(config, {**params, **dict(zip(names, ms, strict=True))},
+                                     arrays, gain)
+
+    base = tuple(params[k] for k in names)
+    c0, lin = jax.linearize(colour, base)
+    L = len(names)
+    eye = jnp.eye(L, dtype=c0.dtype)
+    stacked = tuple(eye[:, j, None, None] * tangents[j][None] for j in range(L))
+    dc = jax.vmap(lin)(stacked)  # (L, Ht, Wt, 3)
+    D = view_diagonal(config, d)
+    B = jnp.einsum("thc,lthc,mthc->thlm", D, dc, dc)
+    return B.reshape(-1, L, L), c0
+
+
+def map_bounds(config, params: dict, names, w, sigma: float) -> dict:
+    """How well an image can pin each texel of the maps `names` (keys in `params`, factor
+    maps `(Ht, Wt)`), by the Cramér–Rao bound: the smallest standard deviation of an unbiased
+    estimate of log(value) at each texel, from pixels with weights `w (H, W)` and Gaussian
+    noise `sigma` in display values, the L maps at a texel estimated together (the inverse
+    of its L × L Fisher block, `texel_blocks` with tangents m ∂/∂m) and their neighbours
+    known. A texel whose bound is 0.025 has its value in the image to ±2.5 % (1σ); a
+    saturated texel (an opaque lipstick) or one that matches the skin has a large bound;
+    `inf` where no pixel sees it. Returns name → `(Ht, Wt)` relative bounds (float64)."""
+    arrays = render.prepare(config).arrays
+    p = dict(params)
+    c0 = render.texture_colour(config, p, arrays)
+    _, slope = _display_slope(config, p, arrays, c0)
+    d = slope ** 2 * jnp.asarray(w, jnp.float32)[..., None] / sigma ** 2
+    tangents = [jnp.asarray(p[k], jnp.float32) for k in names]
+    B, _ = jax.jit(texel_blocks, static_argnums=(0, 3))(
+        config, p, arrays, tuple(names), tangents, d, blur_gain(config, arrays))
+    B = np.asarray(B, np.float64)
+    L = len(names)
+    diag = np.diagonal(B, axis1=1, axis2=2)
+    # A map that is 0 at a texel (a layer absent there) or unseen carries no information
+    # and has no log value: it leaves the texel's block (its bound: inf).
+    absent = ~(diag > 1e-30 * max(float(diag.max()), 1e-300))
+    keep = ~absent[:, :, None] & ~absent[:, None, :]
+    Bk = np.where(keep, B, 0.0) + np.eye(L) * absent[:, None, :]
+    sign, logdet = np.linalg.slogdet(Bk)
+    scale = np.sum(np.log(np.where(absent, 1.0, diag)), axis=1)
+    ok = (sign > 0) & (logdet - scale > np.log(1e-12))
+    var = np.full(diag.shape, np.inf)
+    var[ok] = np.diagonal(np.linalg.inv(Bk[ok]), axis1=1, axis2=2)
+    var[absent] = np.inf
+    shape = np.asarray(arrays["mask"]).shape
+    return {k: np.sqrt(var[:, i]).reshape(shape) for i, k in enumerate(names)}
+
+
+def _display_slope(config, params, arrays, c0):
+    """The linear image of texture colour `c0` and d(display)/d(linear) per pixel: the
+    exposure, the sRGB curve and the clip to [0, 1] (0 where clipped)."""
+    lin = render.texture_to_view(config, arrays, c0)
+
+    def display(x):
+        return jnp.clip(render.encode_srgb(render.expose(x, params["camera.exposure"])),
+                        0.0, 1.0)
+
+    return jax.jvp(display, (lin,), (jnp.ones_like(lin),))
+
+
+def pcg(matvec, b, precondition, rtol: float, steps: int):
+    """Preconditioned conjugate gradients for `matvec(x) = b` (symmetric positive
+    semidefinite), from 0, until ‖r‖ ≤ rtol ‖b‖ or `steps` iterations; a direction of zero
+    curvature ends it (the iterate so far is kept). (`lineax.CG` with this preconditioner
+    returned NaN at 256² in float32 where this does not; measured on the makeup face.)"""
+    def dot(u, v):
+        return jnp.sum(u * v)
+
+    z = precondition(b)
+    state = (jnp.zeros_like(b), b, z, dot(b, z), 0)
+    limit = (rtol * jnp.sqrt(dot(b, b))) ** 2
+
+    def cond(s):
+        _, r, p, rz, i = s
+        return (i < steps) & (dot(r, r) > limit) & (rz > 0)
+
+    def body(s):
+        x, r, p, rz, i = s
+        Ap = matvec(p)
+        pAp = dot(p, Ap)
+        ok = pAp > 0
+        alpha = jnp.where(ok, rz / jnp.where(ok, pAp, 1.0), 0.0)
+        x = x + alpha * p
+        r = r - alpha * Ap
+        z = precondition(r)
+        rz_new = jnp.where(ok, dot(r, z), 0.0)
+        p = z + (rz_new / jnp.where(rz > 0, rz, 1.0)) * p
+        return x, r, p, rz_new, i + 1
+
+    return jax.lax.while_loop(cond, body, state)[0]
+
+
+def _gauss_newton(config, keys, units, unpack, residual, loss, z0, args, smooth, steps,
+                  progress):
+    """Levenberg–Marquardt with a block-diagonal Gauss–Newton matrix (`MAP_SOLVER_NOTE`):
+    per texel the L × L block of the maps (`texel_blocks`), the TV prior's curvature on
+    its diagonal, one dense block for the scalars (forward-mode Jacobian through the whole
+    render); no cross terms between blocks. The gradient is the exact one. Nielsen's
+    damping update; a try whose loss does not fall is rejected (one forward render) and
+    retried with more damping. Stops when the model's predicted decrease is below 1e-5
+    of the loss, or after `steps` tries. Returns z, the loss history, the number of tries."""
+    maps = [fk for fk in keys if fk.kind == "map"]
+    names = [fk.key for fk in maps]
+    others = [fk.key for fk in keys if fk.kind != "map"]
+    gain = blur_gain(config, args["arrays"])
+    n_pairs = int(args["pairs"].shape[1])
+
+    def flat_others(z):
+        return jax.flatten_util.ravel_pytree({k: z[k] for k in others})
+
+    @jax.jit
+    def linearise(z, args):
+        (f, _), g = jax.value_and_grad(loss, has_aux=True)(z, args)
+        p = unpack(z)
+        tangents = []
+        for fk in maps:  # dm/dz of the sigmoid: m (1 − m / top)
+            m = p[fk.key]
+            tangents.append(m * (1.0 - m / (fk.hi / units[fk.key])))
+        c0 = render.texture_colour(config, p, args["arrays"])
+        _, slope = _display_slope(config, p, args["arrays"], c0)
+        d = (slope * args["sqrt_w"]) ** 2
+        B, _ = texel_blocks(config, p, args["arrays"], names, tangents, d, gain)
+        B = 2.0 * B
+        if others:
+            x0, unflat = flat_others(z)
+
+            def r_of(x):
+                return residual({**z, **unflat(x)}, args)[0].reshape(-1)
+
+            J = jax.jacfwd(r_of)(x0)
+            S = 2.0 * J.T @ J
+        else:
+            S = jnp.zeros((0, 0), jnp.float32)
+        return f, g, B, S
+
+    def prior_of_maps(ms, args):  # the prior as a function of the maps' values m
+        return smooth * sum(total_variation(m, args["pairs"]) for m in ms)
+
+    @jax.jit
+    def propose(z, g, B, S, lam, args):
+        L = len(names)
+        p = unpack(z)
+        ms = [p[k] for k in names]
+        shape = ms[0].shape
+        t = jnp.stack([(m * (1.0 - m / (fk.hi / units[fk.key]))).reshape(-1)
+                       for m, fk in zip(ms, maps, strict=True)], axis=-1)  # dm/dz (T, L)
+        gm = jnp.stack([g[k].reshape(-1) for k in names], axis=-1)  # (T, L)
+        # In units of the largest curvature (float32: the raw blocks are ~1e-7 at 256²).
+        scale = jnp.maximum(jnp.max(jnp.diagonal(B, axis1=1, axis2=2)), 1e-30)
+        Bs, gs_m = B / scale, gm / scale
+        dB = jnp.diagonal(Bs, axis1=1, axis2=2)
+        Bd = Bs + (lam * dB + 1e-6)[..., None] * jnp.eye(L, dtype=B.dtype)
+
+        def hvp_prior(v):  # Jᵀ H_TV J v, J = dm/dz: the prior's Gauss–Newton part, exact
+            tv = [(t[:, i] * v[:, i]).reshape(shape) for i in range(L)]
+            _, h = jax.jvp(lambda m: jax.grad(prior_of_maps)(m, args), (ms,), (tv,))
+            return jnp.stack([hi.reshape(-1) for hi in h], axis=-1) * t
+
+        def matvec(v):  # (the data term's blocks, damped, + the prior's Hessian) v
+            return jnp.einsum("tlm,tm->tl", Bd, v) + hvp_prior(v) / scale
+
+        inv = jnp.linalg.inv(Bd + jax.vmap(jnp.diag)(B_prior_diag(t, ms, args) / scale))
+        x = pcg(matvec, -gs_m, lambda v: jnp.einsum("tlm,tm->tl", inv, v), CG_RTOL, CG_STEPS)
+        step = jnp.clip(x, -STEP_MAX, STEP_MAX)
+        pred = -(jnp.sum(gm * step) + 0.5 * (jnp.einsum("tl,tlm,tm->", step, B, step)
+                                             + jnp.sum(step * hvp_prior(step))))
+        new = dict(z)
+        for i, k in enumerate(names):
+            new[k] = z[k] + step[:, i].reshape(shape)
+        if others:
+            x0, unflat = flat_others(z)
+            gs, _ = flat_others(g)
+            dS = jnp.diag(S)
+            Sd = S + jnp.diag(lam * dS + 1e-6 * jnp.max(dS) + 1e-30)
+            ds = -jnp.linalg.solve(Sd, gs)
+            pred = pred - (gs @ ds + 0.5 * ds @ S @ ds)
+            new.update(unflat(x0 + ds))
+        f_new = loss(new, args)[0]
+        return new, f_new, pred
+
+    def B_prior_diag(t, ms, args):  # the diagonal of the prior's Gauss–Newton matrix
+        a, b = args["pairs"]
+        out = []
+        for i, m in enumerate(ms):
+            flat = m.reshape(-1)
+            dd = flat[a] - flat[b]
+            c = PRIOR_EPS ** 2 / (dd * dd + PRIOR_EPS ** 2) ** 1.5 * smooth / n_pairs
+            h = jnp.zeros_like(flat).at[a].add(c).at[b].add(c)
+            out.append(h * t[:, i] ** 2)
+        return jnp.stack(out, axis=-1)
+
+    z = z0
+    f, g, B, S = linearise(z, args)
+    lam, nu, history = 1e-2, 2.0, []
+    while len(history) < steps:
+        new, f_new, pred = propose(z, g, B, S, jnp.float32(lam), args)
+        f_new, pred, f0 = float(f_new), float(pred), float(f)
+        rho = (f0 - f_new) / pred if pred > 0 else -1.0
+        if _DEBUG:
+            print(f"gn: f {f0:.4e} try {f_new:.4e} predicted {pred:.3e} λ {lam:.2e}")
+        if np.isfinite(f_new) and f_new < f0 and rho > 0:
+            z = new
+            lam *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            nu = 2.0
+            history.append(f_new)
+            if progress is not None:
+                progress(f_new)
+            if pred < GN_RTOL * f_new:
+                break
+            f, g, B, S = linearise(z, args)
+        else:
+            lam *= nu
+            nu *= 2.0
+            history.append(f0)
+            if progress is not None:
+                progress(f0)
+            if lam > 1e8:
+                break
+    return z, history, len(history)
+
+
 def _start_map(config, params, fk: FitKey, unit: float, arrays, mask):
     """A map's start `(H, W)`, in units of `unit`: the scene's own map (its image or
     regions) × its scalar, with off-mesh texels at the mesh's mean."""
     texels = np.asarray(arrays["texels"])
     H, W = mask.shape
-    if fk.key == "skin.melanin_map":
-        own = arrays.get("melanin_cover")
+    if fk.key in SKIN_MAPS:
+        own = arrays.get(render.map_cover(fk.key))
     else:
         names = [layer.name for layer in config.spectral.layers]
         own = arrays["cover"][names.index(fk.key.split(".")[1])]
@@ -490,6 +825,13 @@ def run_command(args, run) -> int:
     with reading(args.scene):
         scene = load_scene(args.scene, args.overrides)
     keys = fit_keys(scene, args.fit)
+    has_maps = any(fk.kind == "map" for fk in keys)
+    solver = getattr(args, "solver", "auto")
+    if solver == "gn" and (not has_maps or any(fk.kind == "lafortune" for fk in keys)):
+        raise InputError("the Gauss-Newton solver is for maps (and not with "
+                         "material.lafortune); use --solver auto", "--solver")
+    if not has_maps:
+        solver = "auto"
     config = scene.config
     height, width = config.image_height or config.image, config.image
     target, target_alpha = maps.read_image(args.target, "image")
@@ -529,7 +871,7 @@ def run_command(args, run) -> int:
             bar.update(1)
 
         result = fit(config, params, target, w, keys, steps=args.steps, smooth=args.smooth,
-                     progress=progress)
+                     progress=progress, solver=solver)
     run.stage = "writing"
     tmask = np.asarray(render.prepare(config).arrays["mask"])
     values = dict(result.values)

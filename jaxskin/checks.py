@@ -30,6 +30,7 @@ def check_scene(sc, count: int) -> list:
     from . import cosmetics, maps, resources
     from .mesh import BUILTIN as MESHES
     from .mesh import load_mesh
+    from .scene import SKIN_MAPS
 
     config = sc.config
     resources.check_memory(resources.render_bytes(config, count),
@@ -63,9 +64,11 @@ def check_scene(sc, count: int) -> list:
                              "reflects no light; expected a fit from jaxskin fit-brdf",
                              config.brdf)
     sp = config.spectral
-    if sp is not None and sp.melanin_image is not None:
-        inputs.append(sp.melanin_image)
-        maps.read_grey(sp.melanin_image, key="skin.melanin_image")
+    for map_key, (_, image_key) in SKIN_MAPS.items():
+        image = sp.image_of(map_key) if sp is not None else None
+        if image is not None:
+            inputs.append(image)
+            maps.read_grey(image, key=image_key)
     for layer in sp.layers if sp is not None else ():
         inputs.append(layer.material)
         with reading(layer.material):

@@ -299,8 +299,10 @@ def _parser() -> argparse.ArgumentParser:
         description="Fit the named values of a scene to TARGET, an image seen from the "
         "scene's camera (same size): scalars (any differentiable key: material.melanin, "
         "light.intensity, layer.NAME.thickness_mm, ...) by Levenberg-Marquardt, and "
-        "texture-space maps (layer.NAME.map, skin.melanin_map) with a smoothness prior by "
-        "Adam. The loss is the mean squared difference of display values over the pixels the "
+        "texture-space maps (layer.NAME.map, skin.melanin_map; biophysical skin: "
+        "skin.melanin_fraction_map, skin.haemoglobin_map) with a smoothness prior by a "
+        "per-texel Gauss-Newton (Levenberg-Marquardt). The loss is the mean squared "
+        "difference of display values over the pixels the "
         "mesh covers fully (and the mask's, if any). Writes DIR/<name>.toml (the scene with "
         "the fitted values; jaxskin render turns it into the fitted image), DIR/<name>_<map "
         "key>.png (each fitted map, 16-bit grey, loaded by that scene) and DIR/<name>_fit.png "
@@ -317,6 +319,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="at most N optimiser steps (100)")
     f.add_argument("--smooth", type=_number(lo=0.0, hi=1e6), default=1e-5, metavar="W",
                    help="weight of the maps' total-variation prior (1e-5)")
+    f.add_argument("--solver", choices=("auto", "gn", "adam"), default="auto",
+                   help="maps: gn, the per-texel Gauss-Newton (auto's choice: fewer steps, "
+                   "fits to the noise), or adam (cheaper steps); scalars alone: "
+                   "Levenberg-Marquardt either way")
     f.add_argument("-D", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene value (the fit's start), as for render")
 

@@ -38,12 +38,13 @@ import numpy as np
 from . import biophysical, cosmetics, formats, maps, shadow, skin, sss, texture
 from .precision import matmul
 from .raster import interpolate
-from .scene import BIOPHYSICAL_KEYS, SceneConfig
+from .scene import BIOPHYSICAL_KEYS, SKIN_MAPS, SceneConfig
 from .shading import blinn, lafortune, layered
 from .view import View, coverage, downsample, make_view, pad_index, sample_padded, transpose_table
 
-__all__ = ["OUTPUTS", "Prepared", "albedo", "decode_srgb", "encode_srgb", "expose", "prepare",
-           "render", "render_prepared", "skin_reflectance", "texel_map"]
+__all__ = ["OUTPUTS", "Prepared", "albedo", "decode_srgb", "encode_srgb", "expose", "map_cover",
+           "prepare", "render", "render_prepared", "skin_reflectance", "texel_map",
+           "texture_colour", "texture_to_view"]
 
 OUTPUTS = ("display", "rgba", "linear_rgba")
 SHADOW_MAX = 2048  # texels across the shadow map, at most
@@ -118,10 +119,12 @@ def _prepare(config: SceneConfig) -> Prepared:
                      for layer in sp.layers]
             arrays["cover"] = jnp.asarray(np.stack(cover).reshape(len(cover), -1)[:, texels],
                                           jnp.float32)
-        if sp.melanin_image is not None:  # skin.melanin × this map, per texel
-            factor = cosmetics.image_map(maps.read_grey(sp.melanin_image), s.tmap.height,
-                                         s.tmap.width, 1.0)
-            arrays["melanin_cover"] = jnp.asarray(factor.reshape(-1)[texels], jnp.float32)
+        for map_key in SKIN_MAPS:  # e.g. skin.melanin × skin.melanin_image, per texel
+            if sp.image_of(map_key) is not None:
+                factor = cosmetics.image_map(maps.read_grey(sp.image_of(map_key)),
+                                             s.tmap.height, s.tmap.width, 1.0)
+                arrays[map_cover(map_key)] = jnp.asarray(factor.reshape(-1)[texels],
+                                                         jnp.float32)
     if config.shadow is not None and config.mode != "height":
         arrays["lit"] = _visibility(config, s, view)
     return Prepared(s, view, arrays, texel_mm)
@@ -226,6 +229,33 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
     return _finish(colour, view_mask, k, output, params["camera.exposure"])
 
 
+def texture_colour(config: SceneConfig, params: dict, arrays: dict, blur_gain=None):
+    """The cosmetics model's linear colour in texture space, `(Ht, Wt, 3)` (0 off the
+    mesh): what `render_prepared` samples into the view. `texture_to_view` of it, exposed
+    and encoded, is the display image (`fitting.image` uses the pair for its per-texel
+    Gauss–Newton blocks). `blur_gain (3,)`: the SSS blur's value unchanged, its derivative
+    replaced by this gain per channel times the identity (a texel's own share, as
+    `fitting.image.blur_gain` sizes it); None: the blur as it is."""
+    p = prepare(config)
+    if config.needs_furrows:
+        frame = {k: arrays[k] for k in ("grad_s", "grad_t") if k in arrays}
+        normals = texture.bumped(arrays["normals"], arrays["mask"], arrays["h0"],
+                                 arrays["noise"], params, frame, p.setup.tmap.wrap_x)["normals"]
+    else:
+        normals = arrays["normals"]
+    return _cosmetics_texture(config, p, params, arrays, normals, blur_gain)
+
+
+def texture_to_view(config: SceneConfig, arrays: dict, texture_image):
+    """A texture-space image `(Ht, Wt, C)` seen from the camera, linear in it: bilinear
+    samples of the padded texture, averaged over each pixel's supersamples, `(H, W, C)`
+    (0 where no sample sees the mesh)."""
+    C = texture_image.shape[-1]
+    padded = texture_image.reshape(-1, C)[arrays["pad"]]
+    samples = sample(padded, arrays["tex"], arrays["view_mask"], prepare(config).view.wrap_x)
+    return downsample(samples, config.supersample)
+
+
 def _light_and_view(view: View, direction, dtype, positions):
     """Unit light and view directions in the object's frame (where the normals are): L and
     V turned by Rᵀ instead of every normal by R, as N·L = n·RᵀL. Orthographic: one V;
@@ -267,7 +297,8 @@ def _finish(samples, view_mask, k: int, output: str, stops):
     return jnp.concatenate([encode_srgb(straight) if linear else straight, alpha], axis=-1)
 
 
-def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: dict, normals):
+def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: dict, normals,
+                       blur_gain=None):
     """The cosmetics model's colour in texture space, `(H, W, 3)` (Huang et al. 2013),
     computed on the list of texels on the mesh, `arrays["texels"]` (flat indices)."""
     sp = config.spectral
@@ -290,9 +321,13 @@ def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: d
     blur = None
     if sp.sss is not None:
         def blur(colour):
-            return to_list(sss.blur(to_image(colour), p.texel_mm, mask, sp.sss,
-                                    norm=arrays.get("sss_norm"),
-                                    kernels=arrays.get("sss_kernels")))
+            out = to_list(sss.blur(to_image(colour), p.texel_mm, mask, sp.sss,
+                                   norm=arrays.get("sss_norm"),
+                                   kernels=arrays.get("sss_kernels")))
+            if blur_gain is None:
+                return out
+            return jax.lax.stop_gradient(out) + blur_gain * (colour - jax.lax.stop_gradient(
+                colour))
     skin_R = skin_reflectance(sp, params, arrays, texels)
     layers = {}
     if sp.layers:
@@ -316,17 +351,35 @@ def skin_reflectance(sp, params: dict, arrays: dict, texels=None):
     by `skin.melanin` (`jaxskin.skin`), or the biophysical model (`jaxskin.biophysical`) of
     the `skin.*` parameters (`scene.BIOPHYSICAL_KEYS`). With `texels` (flat indices of the
     texels on the mesh) and a melanin map (`skin.melanin_map` in the params, or the scene's
-    `skin.melanin_image`), the NIST skin's melanin varies per texel: `(P, n)`."""
+    `skin.melanin_image`), the NIST skin's melanin varies per texel: `(P, n)`; so do the
+    biophysical skin's melanin fraction and haemoglobin with theirs (`scene.SKIN_MAPS`)."""
     if sp.skin == "biophysical":
         c = biophysical.Chromophores(*arrays["chromophores"])
+        values = {name: params[BIOPHYSICAL_KEYS[name]] for name in biophysical.PARAMS}
+        for name in ("melanin", "haemoglobin"):  # per texel with a map: (P,), R (P, n)
+            key = f"{BIOPHYSICAL_KEYS[name]}_map"
+            factor = None if texels is None else texel_map(params, key, texels,
+                                                           arrays.get(map_cover(key)))
+            if factor is not None:
+                values[name] = values[name] * factor
+        if any(jnp.ndim(v) for v in values.values()):
+            shape = jnp.broadcast_shapes(*(jnp.shape(v) for v in values.values()))
+            values = {k: jnp.broadcast_to(v, shape) for k, v in values.items()}
         return biophysical.reflectance(c, biophysical.Skin(
-            *(params[BIOPHYSICAL_KEYS[name]] for name in biophysical.PARAMS)))
+            *(values[name] for name in biophysical.PARAMS)))
     melanin = params["skin.melanin"]
     factor = None if texels is None else texel_map(params, "skin.melanin_map", texels,
-                                                   arrays.get("melanin_cover"))
+                                                   arrays.get(map_cover("skin.melanin_map")))
     if factor is not None:  # a melanin map: the skin's spectrum per texel, (P, n)
         melanin = melanin * factor[:, None]
     return skin.reflectance(arrays["skin"], melanin, sp.grid)
+
+
+def map_cover(map_key: str) -> str:
+    """The name in `Prepared.arrays` of a skin map loaded from the scene's image
+    (`scene.SKIN_MAPS`): per texel on the mesh, `(P,)`."""
+    return {"skin.melanin_map": "melanin_cover"}.get(
+        map_key, map_key.split(".")[1].removesuffix("_map") + "_cover")
 
 
 def texel_map(params: dict, key: str, texels, default=None):
@@ -334,7 +387,8 @@ def texel_map(params: dict, key: str, texels, default=None):
     `params[key]` `(H, W)` when the params carry one (a fit's map, `jaxskin.fitting.image`),
     else `default` (the scene's map, from its image or regions; or `None`: no map). A map
     multiplies its scalar, as a scene's image does: `layer.NAME.map` × thickness_mm,
-    `skin.melanin_map` × skin.melanin."""
+    `skin.melanin_map` × skin.melanin (biophysical: `skin.melanin_fraction_map`,
+    `skin.haemoglobin_map`)."""
     value = params.get(key)
     return default if value is None else value.reshape(-1)[texels]
 

@@ -66,6 +66,9 @@ oxygenation = 0.6                  # biophysical: the blood's oxygen saturation 
 epidermis_mm = 0.035               # biophysical: epidermis thickness 0.01–0.15 mm
 scattering = 2.5                   # biophysical: scattering factor 0.5–6
 melanin_image = "melanin.png"      # optional: a greyscale map, melanin × its value (0–1)
+melanin_fraction_image = "m.png"   # biophysical, optional: melanin_fraction × this greyscale
+                                   #   map (0–1) per texel (as fit-image writes one)
+haemoglobin_image = "h.png"        # biophysical, optional: haemoglobin × this greyscale map
 roughness = 0.3                    # Kelemen m of the skin's own highlight
 specular = 0.18                    # Kelemen rho_s of the skin's own highlight
 [spectral]
@@ -137,6 +140,12 @@ class _Key:
     param: bool = False  # differentiable (in Scene.params) rather than static
 
 
+# The skin's per-texel maps: the map key (a fit's `(H, W)` param) → the scalar it
+# multiplies and the scene key of the greyscale image that loads one.
+SKIN_MAPS = {"skin.melanin_map": ("skin.melanin", "skin.melanin_image"),
+             "skin.melanin_fraction_map": ("skin.melanin_fraction",
+                                           "skin.melanin_fraction_image"),
+             "skin.haemoglobin_map": ("skin.haemoglobin", "skin.haemoglobin_image")}
 # The biophysical skin's parameters (`biophysical.Skin` fields) as scene keys.
 BIOPHYSICAL_KEYS = {"melanin": "skin.melanin_fraction", "eumelanin": "skin.eumelanin",
                     "haemoglobin": "skin.haemoglobin", "oxygenation": "skin.oxygenation",
@@ -179,6 +188,8 @@ SCHEMA: dict[str, _Key] = {
     "skin.roughness": _Key(float, 0.3, 0.01, 1.0, param=True),
     "skin.specular": _Key(float, 0.18, 0.0, 1.0, param=True),
     "skin.melanin_image": _Key(str, None),  # a greyscale map (0–1 × skin.melanin) per texel
+    "skin.melanin_fraction_image": _Key(str, None),  # biophysical: × skin.melanin_fraction
+    "skin.haemoglobin_image": _Key(str, None),  # biophysical: × skin.haemoglobin
     # The biophysical skin (`jaxskin.biophysical`): its parameters, ranges and defaults.
     **{key: _Key(float, float(getattr(biophysical.DEFAULT, name)),
                  *biophysical.RANGES[name], param=True)
@@ -263,6 +274,12 @@ class SpectralConfig:
     layers: tuple[LayerSpec, ...]
     skin: str = "nist"  # the skin under the layers: a NIST subject, or "biophysical"
     melanin_image: str | None = None  # skin.melanin × this greyscale map, per texel
+    melanin_fraction_image: str | None = None  # biophysical: the melanin fraction's map
+    haemoglobin_image: str | None = None  # biophysical: the haemoglobin fraction's map
+
+    def image_of(self, map_key: str) -> str | None:
+        """The greyscale image file of a skin map key (`SKIN_MAPS`), or None."""
+        return getattr(self, SKIN_MAPS[map_key][1].split(".")[1])
 
     @property
     def grid(self) -> Grid:
@@ -331,7 +348,9 @@ class Scene:
                                       v["spectral.illuminant"], v["mesh.unit_mm"],
                                       v["sss.method"] if v["sss.enabled"] else None,
                                       v["sss.texel_mm"], self.layers, self.skin_model,
-                                      v["skin.melanin_image"])
+                                      v["skin.melanin_image"],
+                                      v["skin.melanin_fraction_image"],
+                                      v["skin.haemoglobin_image"])
         return SceneConfig(tex, v["material.model"], v["material.brdf"], v["camera.projection"],
                            v["camera.size"], v["camera.supersample"], v["camera.fov"],
                            tuple(v["camera.rotate"]), v["view.mode"], spectral,
@@ -459,14 +478,16 @@ def parse_scene(doc: dict, path, overrides=()) -> Scene:
                              f"written by jaxskin fit-brdf); no file {brdf_path}", path,
                              key="material.brdf")
         values["material.brdf"] = str(brdf_path)
-    image = values["skin.melanin_image"]
-    if image is not None:
+    for _, image_key in SKIN_MAPS.values():
+        image = values[image_key]
+        if image is None:
+            continue
         image_path = Path(image) if Path(image).is_absolute() else (
-            base("skin.melanin_image") / image).resolve()
+            base(image_key) / image).resolve()
         if not image_path.is_file():
             raise InputError(f"expected a greyscale image file, got {image!r}", path,
-                             key="skin.melanin_image")
-        values["skin.melanin_image"] = str(image_path)
+                             key=image_key)
+        values[image_key] = str(image_path)
     edits = tuple(_edit(i, e, path) for i, e in enumerate(edits_raw))
     return Scene(values["name"], str(path), values, edits, layers)
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .io import data_dir
-from .scene import LAYER_SCHEMA, SCHEMA, Scene
+from .scene import LAYER_SCHEMA, SCHEMA, SKIN_MAPS, Scene
 from .toml_writer import value_text
 
 __all__ = ["scene_toml"]
@@ -35,15 +35,17 @@ def scene_toml(scene: Scene, values: dict | None = None, images: dict | None = N
     - `values`: new values by key (floats, or three floats for a vector); their ranges are
       the caller's to respect (`load_scene` checks them when the file is read).
     - `images`: image files by map key: `layer.NAME.map` (the layer's `image`, replacing
-      its regions) and `skin.melanin_map` (`skin.melanin_image`), written as given.
+      its regions) and the skin maps of `scene.SKIN_MAPS` (`skin.melanin_map` as
+      `skin.melanin_image`, …), written as given.
     - `comment`: lines put at the top as TOML comments.
 
     **Returns:** the text, ending with a newline.
     """
     v = {**scene.values, **(values or {})}
     images = images or {}
-    if "skin.melanin_map" in images:
-        v["skin.melanin_image"] = images["skin.melanin_map"]
+    for map_key, (_, image_key) in SKIN_MAPS.items():
+        if map_key in images:
+            v[image_key] = images[map_key]
     lines = [f"# {line}".rstrip() for line in comment.splitlines()]
     lines.append(f"name = {value_text(v['name'])}")
     section = None
