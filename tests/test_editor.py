@@ -27,7 +27,7 @@ from aiohttp.test_utils import TestClient, TestServer  # noqa: E402
 
 from jaxskin import cli, render  # noqa: E402
 from jaxskin.editor.server import MAX_BODY, make_app  # noqa: E402
-from jaxskin.editor.state import Session  # noqa: E402
+from jaxskin.editor.state import EditorError, Session  # noqa: E402
 from jaxskin.toml_writer import dumps  # noqa: E402
 
 SCENE = """\
@@ -370,6 +370,42 @@ def test_concurrent_requests_latest_render_wins(session):
         assert all(d["superseded"] for d in superseded)
         assert (await c.get("/api/state")).status == 200
     serve(session, body)
+
+
+def test_camera_size_alone_keeps_the_frame_as_render_dash_d_does(tmp_path):
+    """The arm sets camera.height (1024x320): camera.size=64 from the page, a link or
+    `jaxskin edit -D` is what `jaxskin render arm -D camera.size=64` renders (64x20, not a
+    64x320 strip), Save writes that frame, an explicit camera.height wins, a size whose
+    scaled height passes 8192 gets the schema's message and changes nothing."""
+    import tomllib
+
+    from jaxskin.scene import builtin_scenes, parse_scene
+
+    path = builtin_scenes()["arm"]
+    doc = tomllib.loads(path.read_text())
+    cli_frame = parse_scene(doc, path, ["camera.size=64"]).values
+    assert (cli_frame["camera.size"], cli_frame["camera.height"]) == (64, 20)  # 320 * 64/1024
+    s = Session("arm", tmp_path)
+    s.set({"camera.size": 64})
+    assert s.state()["image"] == [64, 20]
+    assert s.query() == [["camera.size", "64"]]  # the link holds the -D, not the height
+    assert s.open("arm", [["camera.size", "64"]]) == [] and s.state()["image"] == [64, 20]
+    s.set({"camera.height": 0})
+    assert s.state()["image"] == [64, 64]  # explicit: a square
+    s.set({"camera.height": None})
+    assert s.state()["image"] == [64, 20]
+    s.save("arm64")
+    saved = tomllib.loads((tmp_path / "arm64.toml").read_text())["camera"]
+    assert (saved["size"], saved["height"]) == (64, 20)
+    (tmp_path / "tall.toml").write_text("[camera]\nsize = 64\nheight = 4096\n")
+    tall = Session(str(tmp_path / "tall.toml"), tmp_path)
+    with pytest.raises(EditorError, match="expected at most 128 for this scene's 64x4096"):
+        tall.set({"camera.size": 256})  # 256 x 16384: over camera.height's 8192
+    assert tall.state()["image"] == [64, 4096] and tall.changes == {}
+    square = Session("hand", tmp_path)
+    square.set({"camera.size": 64})
+    assert square.state()["image"] == [64, 64]
+    assert "height" not in square.document().get("camera", {})
 
 
 def test_toml_writer_round_trips_scene_documents():

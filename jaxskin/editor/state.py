@@ -47,7 +47,7 @@ from ..scene import (
 )
 from ..toml_writer import dumps
 from . import brush
-from .document import EditorError, pair, put, relocate
+from .document import EditorError, keep_aspect, pair, put, relocate
 
 __all__ = ["EditorError", "Session"]
 
@@ -157,10 +157,14 @@ class Session:
                           f"({self._roots_text()})", 403)
 
     def document(self, changes: dict | None = None) -> dict:
-        """The scene's TOML document with `changes` (default: the session's) applied."""
+        """The scene's TOML document with `changes` (default: the session's) applied, as
+        `jaxskin render -D` applies them (a `camera.size` alone keeps the file's aspect)."""
+        changes = self.changes if changes is None else changes
         doc = copy.deepcopy(self.base)
-        for key, value in (self.changes if changes is None else changes).items():
+        for key, value in changes.items():
             put(doc, key, value)
+        if "camera.size" in changes and "camera.height" not in changes:
+            keep_aspect(doc, self.base)  # as -D camera.size: the file's frame kept
         return doc
 
     def _build(self, changes: dict, paint: dict) -> Scene:
