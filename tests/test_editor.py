@@ -224,6 +224,7 @@ def test_paths_stay_inside_the_scene_and_output_folders(session, folder):
             r = await c.post("/api/set", json={"changes": {key: value}})
             data = await r.json()
             assert r.status == 403 and "outside the folders" in data["error"], (key, data)
+            assert data["key"] == key  # the page shows it under that key's field
         for name in ("../evil", "a/b", ".hidden", "", "x" * 300):
             r = await c.post("/api/save", json={"name": name})
             assert r.status == 400, name
@@ -406,6 +407,16 @@ def test_camera_size_alone_keeps_the_frame_as_render_dash_d_does(tmp_path):
     square.set({"camera.size": 64})
     assert square.state()["image"] == [64, 64]
     assert "height" not in square.document().get("camera", {})
+
+
+def test_a_mistyped_mesh_name_says_what_was_expected(tmp_path):
+    """A built-in scene's mesh.file typed as `hnad`: not 'outside the folders' (a path
+    escape's message) but the built-in meshes, under the key's field."""
+    s = Session("hand", tmp_path)
+    with pytest.raises(EditorError, match="no file 'hnad' in .*expected a built-in mesh: "
+                       "hand, ") as e:
+        s.set({"mesh.file": "hnad"})
+    assert e.value.key == "mesh.file" and e.value.status == 400 and s.changes == {}
 
 
 def test_toml_writer_round_trips_scene_documents():
