@@ -297,12 +297,17 @@ def test_undo_redo_and_reopen_from_a_link(session):
         assert "wrinkles.k_bump" not in state["changes"]
         state = await (await c.post("/api/redo")).json()
         assert state["changes"]["wrinkles.k_bump"] == 0.1
-        query = state["query"] + [["camera.rotate", "[0.0, 10.0, 0.0]"], ["bogus", "1"]]
+        query = state["query"] + [["camera.rotate", "[0.0, 10.0, 0.0]"], ["bogus", "1"],
+                                  ["light.ambiant", "0.5"]]
         state = await (await c.post("/api/open", json={"scene": state["source"],
                                                         "changes": query})).json()
         assert state["values"]["wrinkles.k_bump"] == 0.1
         assert state["values"]["camera.rotate"] == [0.0, 10.0, 0.0]
         assert state["refused"][0]["key"] == "bogus"
+        # one short line for the page's footer, not the schema's 46 keys
+        assert state["refused"][0]["error"].startswith("unknown key, and none near it")
+        assert state["refused"][1] == {"key": "light.ambiant",
+                                       "error": "unknown key; did you mean 'light.ambient'?"}
     serve(session, body)
 
 

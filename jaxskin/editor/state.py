@@ -250,7 +250,11 @@ class Session:
             try:
                 check_value(key, value, "editor", layer_names)
             except InputError as e:
-                raise EditorError(e.message, 400, key) from None
+                message = e.message
+                if message.startswith("unknown key; valid keys:"):  # 46 keys: too long a line
+                    message = ("unknown key, and none near it (the panel shows every key; "
+                               "their meaning: python -m pydoc jaxskin.scene)")
+                raise EditorError(message, 400, key) from None
             raise EditorError(f"{key!r} cannot be set here", 400, key)
         value = _scalar(value, key, layer_names)
         if key in PATH_KEYS and not (key == "mesh.file" and value in BUILTIN_MESHES) and not (

@@ -254,24 +254,32 @@ function control(key, spec, value) {
     });
   } else if ((spec.kind === "float" || spec.kind === "int") && spec.lo !== null &&
              (spec.hi - spec.lo) <= 10000 && !/size|height/.test(key)) {
+    // A wide range around a small usual value (a layer's thickness: 0 to 10 mm, usually
+    // 0.01): the slider runs on the cube root, so its first half is the first 1/8th.
+    const span = spec.hi - spec.lo;
+    const wide = spec.kind === "float" && spec.lo >= 0 &&
+      span >= 100 * Math.max(Math.abs(spec.default || 0), span / 1e4);
+    const toPos = (v) => wide ? Math.cbrt((v - spec.lo) / span) : v;
+    const fromPos = (p) => wide ? Number((spec.lo + span * p ** 3).toPrecision(3)) : p;
     const r = document.createElement("input");
-    r.type = "range"; r.min = spec.lo; r.max = spec.hi; r.name = key;
-    r.title = `${key}: ${spec.lo} to ${spec.hi}`;
-    r.step = spec.kind === "int" ? 1 : (spec.hi - spec.lo) / 1000;
-    r.value = value;
+    r.type = "range"; r.min = wide ? 0 : spec.lo; r.max = wide ? 1 : spec.hi; r.name = key;
+    r.title = `${key}: ${spec.lo} to ${spec.hi}${wide ? " (finer near " + spec.lo + ")" : ""}`;
+    r.step = spec.kind === "int" ? 1 : wide ? 0.001 : span / 1000;
+    r.value = toPos(value);
     const n = document.createElement("input");
     n.type = "number"; n.step = "any"; n.value = value; n.min = spec.lo; n.max = spec.hi;
     n.title = r.title;
     const num = (v) => spec.kind === "int" ? parseInt(v) : parseFloat(v);
-    r.oninput = () => { n.value = r.value; change({[key]: num(r.value)}, true); };
-    r.onchange = () => change({[key]: num(r.value)}, false);
+    const at = () => fromPos(num(r.value));
+    r.oninput = () => { n.value = at(); change({[key]: at()}, true); };
+    r.onchange = () => change({[key]: at()}, false);
     n.onchange = () => {
-      if (!isFinite(num(n.value))) { n.value = r.value; return; }  // emptied: nothing to send
-      r.value = n.value; change({[key]: num(n.value)}, false);
+      if (!isFinite(num(n.value))) { n.value = at(); return; }  // emptied: nothing to send
+      r.value = toPos(num(n.value)); change({[key]: num(n.value)}, false);
     };
     ctl.append(r, n);
     div.update = (v) => {
-      if (document.activeElement !== r) r.value = v;
+      if (document.activeElement !== r) r.value = toPos(v);
       if (document.activeElement !== n) n.value = v;
     };
   } else {
@@ -321,7 +329,9 @@ function buildParams() {
     const d = document.createElement("details");
     d.className = "box"; d.dataset.group = g;
     d.open = first ? ["material", "skin", "wrinkles", "light"].includes(g) : open.has(g);
-    d.innerHTML = `<summary>${g}</summary>`;
+    d.innerHTML = "<summary></summary>";
+    d.firstChild.textContent = g.startsWith("layer ") ? `layer “${g.slice(6)}”` : g;
+    if (g.startsWith("layer ")) d.firstChild.className = "layer";
     for (const [key, spec] of groups[g]) d.append(control(key, spec, S.values[key]));
     root.append(d);
   }
@@ -736,6 +746,7 @@ function wire() {
     if (!name) { message("name the new layer first", "error"); return; }
     change({[`layer.${name}.material`]: $("paint-material").value || "blush_rose"}, false);
     $("paint-layer").dataset.want = name;
+    $("new-layer").value = "";
   };
   $("undo-btn").onclick = () => step("undo");
   $("redo-btn").onclick = () => step("redo");
@@ -814,7 +825,8 @@ async function openScene(scene, query) {
       message("not applied: " + state.refused.map((r) => `${r.key}: ${r.error}`).join("; "), "error");
     else message(`opened ${state.source}`);
     requestRender(false);
-  } catch (e) { fail(e); }
+    return true;
+  } catch (e) { fail(e); return false; }
 }
 
 async function start() {
@@ -829,7 +841,12 @@ async function start() {
   const same = !wanted || (wanted === state.source &&
     JSON.stringify(query) === JSON.stringify(state.query));
   if (same) { adopt(state); requestRender(false); loadFiles(); }
-  else await openScene(wanted, query);
+  else if (!await openScene(wanted, query)) {
+    // a link to a scene that cannot be opened: the scene the server has, and the reason
+    const text = $("message").textContent;
+    adopt(state); requestRender(false); loadFiles();
+    message(`not opened: ${text}`, "error");
+  }
   if (tool === "fields") loadArrows();
 }
 
