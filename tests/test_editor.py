@@ -541,9 +541,17 @@ def test_edit_in_the_browser_then_render_the_saved_scene(tmp_path, browser):
     server = Server(Session(str(tmp_path / "tiny.toml"), out))
     try:
         d = browser
-        d.get(f"http://127.0.0.1:{server.port}/")
+        # A link to a scene outside the editor's folders: the page shows the server's scene
+        # and says why (it once stayed blank, with no controls).
+        d.get(f"http://127.0.0.1:{server.port}/?scene=../../etc/passwd")
         v = wait_idle(d)
-        assert "scene=" in d.current_url
+        assert d.execute_script("return document.getElementById('message').textContent") \
+            .startswith("not opened: scene: '../../etc/passwd' is outside the folders")
+        assert d.find_elements(By.CSS_SELECTOR, 'input[name="skin.melanin"]')
+        assert "scene=" in d.current_url and "passwd" not in d.current_url
+        assert [e["message"] for e in d.get_log("browser")] == [  # the 403, and only it
+            f"http://127.0.0.1:{server.port}/api/open - Failed to load resource: the server "
+            "responded with a status of 403 (Forbidden)"]
 
         # A slider: drag the skin's melanin thumb to the right.
         slider = d.find_element(By.CSS_SELECTOR, 'input[type=range][name="skin.melanin"]')
