@@ -27,7 +27,7 @@ from aiohttp.test_utils import TestClient, TestServer  # noqa: E402
 
 from jaxskin import cli, render  # noqa: E402
 from jaxskin.editor.server import MAX_BODY, make_app  # noqa: E402
-from jaxskin.editor.state import Session  # noqa: E402
+from jaxskin.editor.state import EditorError, Session  # noqa: E402
 from jaxskin.toml_writer import dumps  # noqa: E402
 
 SCENE = """\
@@ -224,6 +224,7 @@ def test_paths_stay_inside_the_scene_and_output_folders(session, folder):
             r = await c.post("/api/set", json={"changes": {key: value}})
             data = await r.json()
             assert r.status == 403 and "outside the folders" in data["error"], (key, data)
+            assert data["key"] == key  # the page shows it under that key's field
         for name in ("../evil", "a/b", ".hidden", "", "x" * 300):
             r = await c.post("/api/save", json={"name": name})
             assert r.status == 400, name
@@ -296,12 +297,17 @@ def test_undo_redo_and_reopen_from_a_link(session):
         assert "wrinkles.k_bump" not in state["changes"]
         state = await (await c.post("/api/redo")).json()
         assert state["changes"]["wrinkles.k_bump"] == 0.1
-        query = state["query"] + [["camera.rotate", "[0.0, 10.0, 0.0]"], ["bogus", "1"]]
+        query = state["query"] + [["camera.rotate", "[0.0, 10.0, 0.0]"], ["bogus", "1"],
+                                  ["light.ambiant", "0.5"]]
         state = await (await c.post("/api/open", json={"scene": state["source"],
                                                         "changes": query})).json()
         assert state["values"]["wrinkles.k_bump"] == 0.1
         assert state["values"]["camera.rotate"] == [0.0, 10.0, 0.0]
         assert state["refused"][0]["key"] == "bogus"
+        # one short line for the page's footer, not the schema's 46 keys
+        assert state["refused"][0]["error"].startswith("unknown key, and none near it")
+        assert state["refused"][1] == {"key": "light.ambiant",
+                                       "error": "unknown key; did you mean 'light.ambient'?"}
     serve(session, body)
 
 
@@ -370,6 +376,52 @@ def test_concurrent_requests_latest_render_wins(session):
         assert all(d["superseded"] for d in superseded)
         assert (await c.get("/api/state")).status == 200
     serve(session, body)
+
+
+def test_camera_size_alone_keeps_the_frame_as_render_dash_d_does(tmp_path):
+    """The arm sets camera.height (1024x320): camera.size=64 from the page, a link or
+    `jaxskin edit -D` is what `jaxskin render arm -D camera.size=64` renders (64x20, not a
+    64x320 strip), Save writes that frame, an explicit camera.height wins, a size whose
+    scaled height passes 8192 gets the schema's message and changes nothing."""
+    import tomllib
+
+    from jaxskin.scene import builtin_scenes, parse_scene
+
+    path = builtin_scenes()["arm"]
+    doc = tomllib.loads(path.read_text())
+    cli_frame = parse_scene(doc, path, ["camera.size=64"]).values
+    assert (cli_frame["camera.size"], cli_frame["camera.height"]) == (64, 20)  # 320 * 64/1024
+    s = Session("arm", tmp_path)
+    s.set({"camera.size": 64})
+    assert s.state()["image"] == [64, 20]
+    assert s.query() == [["camera.size", "64"]]  # the link holds the -D, not the height
+    assert s.open("arm", [["camera.size", "64"]]) == [] and s.state()["image"] == [64, 20]
+    s.set({"camera.height": 0})
+    assert s.state()["image"] == [64, 64]  # explicit: a square
+    s.set({"camera.height": None})
+    assert s.state()["image"] == [64, 20]
+    s.save("arm64")
+    saved = tomllib.loads((tmp_path / "arm64.toml").read_text())["camera"]
+    assert (saved["size"], saved["height"]) == (64, 20)
+    (tmp_path / "tall.toml").write_text("[camera]\nsize = 64\nheight = 4096\n")
+    tall = Session(str(tmp_path / "tall.toml"), tmp_path)
+    with pytest.raises(EditorError, match="expected at most 128 for this scene's 64x4096"):
+        tall.set({"camera.size": 256})  # 256 x 16384: over camera.height's 8192
+    assert tall.state()["image"] == [64, 4096] and tall.changes == {}
+    square = Session("hand", tmp_path)
+    square.set({"camera.size": 64})
+    assert square.state()["image"] == [64, 64]
+    assert "height" not in square.document().get("camera", {})
+
+
+def test_a_mistyped_mesh_name_says_what_was_expected(tmp_path):
+    """A built-in scene's mesh.file typed as `hnad`: not 'outside the folders' (a path
+    escape's message) but the built-in meshes, under the key's field."""
+    s = Session("hand", tmp_path)
+    with pytest.raises(EditorError, match="no file 'hnad' in .*expected a built-in mesh: "
+                       "hand, ") as e:
+        s.set({"mesh.file": "hnad"})
+    assert e.value.key == "mesh.file" and e.value.status == 400 and s.changes == {}
 
 
 def test_toml_writer_round_trips_scene_documents():
@@ -489,9 +541,17 @@ def test_edit_in_the_browser_then_render_the_saved_scene(tmp_path, browser):
     server = Server(Session(str(tmp_path / "tiny.toml"), out))
     try:
         d = browser
-        d.get(f"http://127.0.0.1:{server.port}/")
+        # A link to a scene outside the editor's folders: the page shows the server's scene
+        # and says why (it once stayed blank, with no controls).
+        d.get(f"http://127.0.0.1:{server.port}/?scene=../../etc/passwd")
         v = wait_idle(d)
-        assert "scene=" in d.current_url
+        assert d.execute_script("return document.getElementById('message').textContent") \
+            .startswith("not opened: scene: '../../etc/passwd' is outside the folders")
+        assert d.find_elements(By.CSS_SELECTOR, 'input[name="skin.melanin"]')
+        assert "scene=" in d.current_url and "passwd" not in d.current_url
+        assert [e["message"] for e in d.get_log("browser")] == [  # the 403, and only it
+            f"http://127.0.0.1:{server.port}/api/open - Failed to load resource: the server "
+            "responded with a status of 403 (Forbidden)"]
 
         # A slider: drag the skin's melanin thumb to the right.
         slider = d.find_element(By.CSS_SELECTOR, 'input[type=range][name="skin.melanin"]')

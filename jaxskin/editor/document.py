@@ -11,7 +11,7 @@ from pathlib import Path
 from .. import cosmetics
 from ..mesh import BUILTIN as BUILTIN_MESHES
 
-__all__ = ["EditorError", "pair", "put", "relocate"]
+__all__ = ["EditorError", "keep_aspect", "pair", "put", "relocate"]
 
 
 class EditorError(Exception):
@@ -66,6 +66,27 @@ def put(doc: dict, key: str, value) -> None:
     if not isinstance(section, dict):
         raise EditorError(f"the scene's [{parts[0]}] is not a table", 400, key)
     section[parts[1]] = value
+
+
+def keep_aspect(doc: dict, base: dict) -> None:
+    """A `camera.size` changed alone, as `jaxskin render -D camera.size=N` reads it: where
+    the scene file (`base`) sets `camera.height`, the height in `doc` is scaled with the
+    width (the frame keeps its aspect; the arm at size 64 is 64x20, not a 64x320 strip).
+    `EditorError` (key `camera.size`) when that height is over its maximum."""
+    from ..io import InputError
+    from ..scene import SCHEMA, _kept_aspect
+
+    camera = base.get("camera")
+    camera = camera if isinstance(camera, dict) else {}
+    height = camera.get("height", SCHEMA["camera.height"].default)
+    if not height:
+        return  # a square frame stays square
+    new = doc["camera"]
+    try:
+        new["height"] = _kept_aspect({"camera.height": height, "camera.size": new["size"]},
+                                     camera.get("size", SCHEMA["camera.size"].default))
+    except InputError as e:
+        raise EditorError(e.message, 400, "camera.size") from None
 
 
 def relocate(doc: dict, source: Path, output: Path) -> None:

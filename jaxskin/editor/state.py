@@ -47,7 +47,7 @@ from ..scene import (
 )
 from ..toml_writer import dumps
 from . import brush
-from .document import EditorError, pair, put, relocate
+from .document import EditorError, keep_aspect, pair, put, relocate
 
 __all__ = ["EditorError", "Session"]
 
@@ -142,9 +142,9 @@ class Session:
     def confine(self, text: str, what: str, base: Path | None = None) -> Path:
         """`text` as a path inside one of the session's folders (the scene's, the output
         folder): relative to `base` (default: each folder in turn), links resolved; an
-        `EditorError` (403) for anything outside them."""
+        `EditorError` (403, its key `what`) for anything outside them."""
         if not isinstance(text, str) or not text or "\0" in text or len(text) > 1000:
-            raise EditorError(f"{what}: expected a file name, got {text!r}", 400)
+            raise EditorError(f"expected a file name, got {text!r}", 400, what)
         p = Path(text)
         candidates = [p] if p.is_absolute() else [
             (b / p) for b in ([base] if base is not None else self.roots)]
@@ -153,14 +153,18 @@ class Session:
             if any(r.is_relative_to(root) for root in self.roots) and (
                     r.exists() or c is candidates[-1]):
                 return r
-        raise EditorError(f"{what}: {text!r} is outside the folders this editor may read "
-                          f"({self._roots_text()})", 403)
+        raise EditorError(f"{text!r} is outside the folders this editor may read "
+                          f"({self._roots_text()})", 403, what)
 
     def document(self, changes: dict | None = None) -> dict:
-        """The scene's TOML document with `changes` (default: the session's) applied."""
+        """The scene's TOML document with `changes` (default: the session's) applied, as
+        `jaxskin render -D` applies them (a `camera.size` alone keeps the file's aspect)."""
+        changes = self.changes if changes is None else changes
         doc = copy.deepcopy(self.base)
-        for key, value in (self.changes if changes is None else changes).items():
+        for key, value in changes.items():
             put(doc, key, value)
+        if "camera.size" in changes and "camera.height" not in changes:
+            keep_aspect(doc, self.base)  # as -D camera.size: the file's frame kept
         return doc
 
     def _build(self, changes: dict, paint: dict) -> Scene:
@@ -246,12 +250,25 @@ class Session:
             try:
                 check_value(key, value, "editor", layer_names)
             except InputError as e:
-                raise EditorError(e.message, 400, key) from None
+                message = e.message
+                if message.startswith("unknown key; valid keys:"):  # 46 keys: too long a line
+                    message = ("unknown key, and none near it (the panel shows every key; "
+                               "their meaning: python -m pydoc jaxskin.scene)")
+                raise EditorError(message, 400, key) from None
             raise EditorError(f"{key!r} cannot be set here", 400, key)
         value = _scalar(value, key, layer_names)
         if key in PATH_KEYS and not (key == "mesh.file" and value in BUILTIN_MESHES) and not (
                 key == "material.brdf" and value == "skin"):
-            value = str(self.confine(value, key, self.path.parent))
+            try:
+                value = str(self.confine(value, key, self.path.parent))
+            except EditorError as e:
+                builtin = ("a built-in mesh: " + ", ".join(BUILTIN_MESHES)
+                           if key == "mesh.file" else 'the built-in "skin"')
+                if isinstance(value, str) and not {"/", "\\"} & set(value) and not any(
+                        (r / value).exists() for r in [self.path.parent, *self.roots]):
+                    raise EditorError(f"no file {value!r} in {self._roots_text()}; expected "
+                                      f"{builtin}, or a file there", 400, key) from None
+                raise EditorError(f"{e.message}; or {builtin}", e.status, key) from None
         return value
 
     def _material(self, value, key):

@@ -42,6 +42,7 @@ function message(text, kind) {
 
 function fail(e) {
   message(e.key ? `${e.key}: ${e.message}` : e.message, "error");
+  clearParamErrors();  // only the latest refusal stands under its field
   showParamError(e.key, e.message);
 }
 
@@ -253,27 +254,38 @@ function control(key, spec, value) {
     });
   } else if ((spec.kind === "float" || spec.kind === "int") && spec.lo !== null &&
              (spec.hi - spec.lo) <= 10000 && !/size|height/.test(key)) {
+    // A wide range around a small usual value (a layer's thickness: 0 to 10 mm, usually
+    // 0.01): the slider runs on the cube root, so its first half is the first 1/8th.
+    const span = spec.hi - spec.lo;
+    const wide = spec.kind === "float" && spec.lo >= 0 &&
+      span >= 100 * Math.max(Math.abs(spec.default || 0), span / 1e4);
+    const toPos = (v) => wide ? Math.cbrt((v - spec.lo) / span) : v;
+    const fromPos = (p) => wide ? Number((spec.lo + span * p ** 3).toPrecision(3)) : p;
     const r = document.createElement("input");
-    r.type = "range"; r.min = spec.lo; r.max = spec.hi; r.name = key;
-    r.step = spec.kind === "int" ? 1 : (spec.hi - spec.lo) / 1000;
-    r.value = value;
+    r.type = "range"; r.min = wide ? 0 : spec.lo; r.max = wide ? 1 : spec.hi; r.name = key;
+    r.title = `${key}: ${spec.lo} to ${spec.hi}${wide ? " (finer near " + spec.lo + ")" : ""}`;
+    r.step = spec.kind === "int" ? 1 : wide ? 0.001 : span / 1000;
+    r.value = toPos(value);
     const n = document.createElement("input");
     n.type = "number"; n.step = "any"; n.value = value; n.min = spec.lo; n.max = spec.hi;
+    n.title = r.title;
     const num = (v) => spec.kind === "int" ? parseInt(v) : parseFloat(v);
-    r.oninput = () => { n.value = r.value; change({[key]: num(r.value)}, true); };
-    r.onchange = () => change({[key]: num(r.value)}, false);
+    const at = () => fromPos(num(r.value));
+    r.oninput = () => { n.value = at(); change({[key]: at()}, true); };
+    r.onchange = () => change({[key]: at()}, false);
     n.onchange = () => {
-      if (!isFinite(num(n.value))) { n.value = r.value; return; }  // emptied: nothing to send
-      r.value = n.value; change({[key]: num(n.value)}, false);
+      if (!isFinite(num(n.value))) { n.value = at(); return; }  // emptied: nothing to send
+      r.value = toPos(num(n.value)); change({[key]: num(n.value)}, false);
     };
     ctl.append(r, n);
     div.update = (v) => {
-      if (document.activeElement !== r) r.value = v;
+      if (document.activeElement !== r) r.value = toPos(v);
       if (document.activeElement !== n) n.value = v;
     };
   } else {
     const c = document.createElement("input");
     c.type = spec.kind === "str" ? "text" : "number"; c.value = value; c.name = key;
+    if (spec.lo !== null && spec.hi !== null) c.title = `${key}: ${spec.lo} to ${spec.hi}`;
     c.onchange = () => {
       const v = spec.kind === "str" ? c.value : spec.kind === "int" ? parseInt(c.value) : parseFloat(c.value);
       if (spec.kind !== "str" && !isFinite(v)) return;
@@ -317,7 +329,9 @@ function buildParams() {
     const d = document.createElement("details");
     d.className = "box"; d.dataset.group = g;
     d.open = first ? ["material", "skin", "wrinkles", "light"].includes(g) : open.has(g);
-    d.innerHTML = `<summary>${g}</summary>`;
+    d.innerHTML = "<summary></summary>";
+    d.firstChild.textContent = g.startsWith("layer ") ? `layer “${g.slice(6)}”` : g;
+    if (g.startsWith("layer ")) d.firstChild.className = "layer";
     for (const [key, spec] of groups[g]) d.append(control(key, spec, S.values[key]));
     root.append(d);
   }
@@ -349,12 +363,23 @@ function buildEdits() {
   S.edits.forEach((e, i) => {
     const li = document.createElement("li");
     const len = (d) => Math.hypot(...d).toFixed(2);
-    li.textContent = `${e.vertex !== null ? "vertex " + e.vertex : "at (" + e.at.map((v) => v.toFixed(2)).join(", ") + ")"}` +
-      ` · |d1| ${len(e.d1)} · |d2| ${len(e.d2)} · λ ${e.weight}`;
-    li.title = `d1 = [${e.d1.map(fmt)}], d2 = [${e.d2.map(fmt)}]`;
+    const num = document.createElement("span");
+    num.className = "num";
+    num.textContent = `${i + 1}.`;
+    const where = document.createElement("span");
+    where.className = "where";
+    where.textContent = e.vertex !== null ? `vertex ${e.vertex}` :
+      `at (${e.at.map((v) => v.toFixed(2)).join(",")})`;
+    const mags = document.createElement("span");
+    mags.className = "mags";
+    mags.textContent = `|d1| ${len(e.d1)} |d2| ${len(e.d2)} λ ${e.weight}`;
+    li.append(num, where, mags);
+    li.title = `${where.textContent}: d1 = [${e.d1.map(fmt)}], d2 = [${e.d2.map(fmt)}], ` +
+      `λ ${e.weight}`;
     if (i === selected) li.className = "sel";
     li.onclick = () => { selected = i; buildEdits(); draw(); };
     ol.append(li);
+    if (i === selected) requestAnimationFrame(() => li.scrollIntoView({block: "nearest"}));
   });
   const has = selected >= 0;
   $("edit-weight").disabled = $("edit-delete").disabled = !has;
@@ -370,7 +395,10 @@ function setEdits(list) {
 
 async function loadArrows() {
   try {
-    arrows = await api("GET", "/api/fields?step=22");
+    // an arrow every ~28 screen pixels, whatever the image's size (a 64-pixel arm shown
+    // 1000 pixels wide had 3 arrows, each longer than a finger)
+    const step = Math.round(Math.min(256, Math.max(4, 28 / screenScale())));
+    arrows = await api("GET", `/api/fields?step=${step}`);
   } catch (e) { arrows = null; }
   draw();
 }
@@ -490,6 +518,11 @@ function toImage(ev) {
   return [(ev.clientX - r.left) / r.width * S.image[0], (ev.clientY - r.top) / r.height * S.image[1]];
 }
 
+function screenScale() {
+  // screen pixels per image pixel, the viewer's magnification aside
+  return $("view").getBoundingClientRect().width / magnify / S.image[0] || 1;
+}
+
 function draw() {
   const c = $("overlay");
   const g = c.getContext("2d");
@@ -500,7 +533,7 @@ function draw() {
   g.setTransform(k, 0, 0, k, 0, 0);
   const lw = 1.2 / k * (window.devicePixelRatio || 1);
   if (tool === "fields" && $("show-arrows").checked && arrows) {
-    const len = 8;
+    const len = 16 / screenScale();  // |d| = 1: 16 screen pixels
     for (const [x, y, ax, ay, bx, by] of arrows.arrows) {
       arrow(g, x, y, ax * len, ay * len, "rgba(255,90,80,.85)", lw);
       arrow(g, x, y, bx * len, by * len, "rgba(90,230,120,.85)", lw);
@@ -539,7 +572,7 @@ function arrow(g, x, y, dx, dy, colour, lw) {
   if (L < 0.5) return;
   g.strokeStyle = colour; g.lineWidth = lw;
   g.beginPath(); g.moveTo(x, y); g.lineTo(x + dx, y + dy);
-  const ux = dx / L, uy = dy / L, h = Math.min(4, L * 0.4);
+  const ux = dx / L, uy = dy / L, h = Math.min(4 * lw, L * 0.4);  // the head: screen-sized
   g.moveTo(x + dx, y + dy); g.lineTo(x + dx - h * (ux - uy * 0.5), y + dy - h * (uy + ux * 0.5));
   g.moveTo(x + dx, y + dy); g.lineTo(x + dx - h * (ux + uy * 0.5), y + dy - h * (uy - ux * 0.5));
   g.stroke();
@@ -627,7 +660,8 @@ async function pointerUp(ev) {
     let e;
     if (d.index >= 0) e = list[d.index];
     else {
-      e = {vertex: d.pick.vertex, d1: d.pick.d1, d2: d.pick.d2, weight: 1.0};
+      const r3 = (v) => v.map((x) => Math.round(x * 1000) / 1000);
+      e = {vertex: d.pick.vertex, d1: r3(d.pick.d1), d2: r3(d.pick.d2), weight: 1.0};
       list.push(e);
       selected = list.length - 1;
     }
@@ -712,6 +746,7 @@ function wire() {
     if (!name) { message("name the new layer first", "error"); return; }
     change({[`layer.${name}.material`]: $("paint-material").value || "blush_rose"}, false);
     $("paint-layer").dataset.want = name;
+    $("new-layer").value = "";
   };
   $("undo-btn").onclick = () => step("undo");
   $("redo-btn").onclick = () => step("redo");
@@ -790,7 +825,8 @@ async function openScene(scene, query) {
       message("not applied: " + state.refused.map((r) => `${r.key}: ${r.error}`).join("; "), "error");
     else message(`opened ${state.source}`);
     requestRender(false);
-  } catch (e) { fail(e); }
+    return true;
+  } catch (e) { fail(e); return false; }
 }
 
 async function start() {
@@ -805,7 +841,12 @@ async function start() {
   const same = !wanted || (wanted === state.source &&
     JSON.stringify(query) === JSON.stringify(state.query));
   if (same) { adopt(state); requestRender(false); loadFiles(); }
-  else await openScene(wanted, query);
+  else if (!await openScene(wanted, query)) {
+    // a link to a scene that cannot be opened: the scene the server has, and the reason
+    const text = $("message").textContent;
+    adopt(state); requestRender(false); loadFiles();
+    message(`not opened: ${text}`, "error");
+  }
   if (tool === "fields") loadArrows();
 }
 
