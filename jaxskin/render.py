@@ -250,9 +250,10 @@ def texture_to_view(config: SceneConfig, arrays: dict, texture_image):
     """A texture-space image `(Ht, Wt, C)` seen from the camera, linear in it: bilinear
     samples of the padded texture, averaged over each pixel's supersamples, `(H, W, C)`
     (0 where no sample sees the mesh)."""
-    C = texture_image.shape[-1]
-    padded = texture_image.reshape(-1, C)[arrays["pad"]]
-    samples = sample(padded, arrays["tex"], arrays["view_mask"], prepare(config).view.wrap_x)
+    table = ([arrays[k] for k in VIEW_TABLE] if all(k in arrays for k in VIEW_TABLE)
+             else None)
+    samples = sample_padded(texture_image, arrays["pad"], arrays["tex"], arrays["view_mask"],
+                            prepare(config).view.wrap_x, table)
     return downsample(samples, config.supersample)
 
 
