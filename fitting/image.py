@@ -332,7 +332,7 @@ def _solve(solver, fn, z0, args, steps: int, progress: Callable | None,
 
 
 def fit(config, params: dict, target, w, keys: tuple[FitKey, ...], steps: int = 100,
-        smooth: float = 1e-5, progress: Callable | None = None, solver: str = "auto",
+        smooth: float = 1e-6, progress: Callable | None = None, solver: str = "auto",
         rate: float = ADAM_RATE) -> ImageFit:
     """Fit `keys` of a scene (`config`, `params`: the start) to `target`.
 
