@@ -182,20 +182,25 @@ def _colours_jvp(grid, blurred, primals, tangents):
     return out, linear_call(*_rules(grid, blurred), tuple(primals), tuple(tangents))
 
 
+def _per_texel(a, axis: int, P: int, chunk: int):
+    """`a (..., P, ...)`, texels along `axis`, as `(chunks, ..., chunk, ...)`: the last chunk
+    padded with zeros."""
+    chunks = -(-P // chunk)
+    widths = [(0, 0)] * a.ndim
+    widths[axis] = (0, chunks * chunk - P)
+    a = jnp.pad(a, widths)
+    a = a.reshape(*a.shape[:axis], chunks, chunk, *a.shape[axis + 1:])
+    return jnp.moveaxis(a, axis, 0)
+
+
 def _chunked_tangent(grid, blurred, primals, tangents):
     """Forward mode: the tangent of the colours, a loop over chunks of `CHUNK` texels,
     each chunk's tangent recomputed from its inputs (checkpointed)."""
     X = primals[0]
     P = X.shape[1]
-    chunks = -(-P // CHUNK)
-    pad = chunks * CHUNK - P
 
-    def per_texel(a, axis):  # (..., P, ...) → (chunks, ..., CHUNK, ...)
-        widths = [(0, 0)] * a.ndim
-        widths[axis] = (0, pad)
-        a = jnp.pad(a, widths)
-        a = a.reshape(*a.shape[:axis], chunks, CHUNK, *a.shape[axis + 1:])
-        return jnp.moveaxis(a, axis, 0)
+    def per_texel(a, axis):
+        return _per_texel(a, axis, P, CHUNK)
 
     # X, E, h, h_l per texel; S, K per band; skin_R per band (n,) or per texel (P, n).
     texel_axes = (1, 0, 0, 1, None, None, 0 if primals[6].ndim == 2 else None)
@@ -382,19 +387,13 @@ def _cotangents_chunked(grid, blurred, X, E, h, h_l, S, K, skin_R, g, chunk=CHUN
     each chunk's pass stays in the cache; the per-band cotangents (S, K and a skin spectrum
     shared by all texels) summed over the chunks."""
     P = X.shape[1]
-    chunks = -(-P // chunk)
-    pad = chunks * chunk - P
 
-    def per_texel(a, axis):  # (..., P, ...) → (chunks, ..., chunk, ...)
-        widths = [(0, 0)] * a.ndim
-        widths[axis] = (0, pad)
-        a = jnp.pad(a, widths)
-        a = a.reshape(*a.shape[:axis], chunks, chunk, *a.shape[axis + 1:])
-        return jnp.moveaxis(a, axis, 0)
+    def per_texel(a, axis):
+        return _per_texel(a, axis, P, chunk)
 
     def unchunk(a, axis):  # the inverse of per_texel, the padding dropped
         a = jnp.moveaxis(a, 0, axis)
-        a = a.reshape(*a.shape[:axis], chunks * chunk, *a.shape[axis + 2:])
+        a = a.reshape(*a.shape[:axis], -1, *a.shape[axis + 2:])
         return jax.lax.slice_in_dim(a, 0, P, axis=axis)
 
     per = skin_R.ndim == 2
