@@ -53,7 +53,7 @@ import numpy as np
 import optax
 import optimistix as optx
 
-from jaxskin import render
+from jaxskin import cluster, render
 from jaxskin.io import InputError, atomic_write
 from jaxskin.scene import LAYER_SCHEMA, SCHEMA, SKIN_MAPS, Scene
 
@@ -865,13 +865,19 @@ def run_command(args, run) -> int:
     run.stage = "fitting"
     print(f"fitting {', '.join(k.key for k in keys)} to {args.target} "
           f"({width}x{height}, {int((w > 0).sum())} pixels)", flush=True)
-    with tqdm(total=args.steps, desc="fit-image", unit="step", disable=None) as bar:
-        def progress(loss):
-            bar.set_postfix(loss=f"{loss:.3e}", refresh=False)
-            bar.update(1)
+    with cluster.pool(args.cluster) as pool:
+        if pool.client is None:  # here: a progress bar over the steps, with the loss
+            with tqdm(total=args.steps, desc="fit-image", unit="step", disable=None) as bar:
+                def progress(loss):
+                    bar.set_postfix(loss=f"{loss:.3e}", refresh=False)
+                    bar.update(1)
 
-        result = fit(config, params, target, w, keys, steps=args.steps, smooth=args.smooth,
-                     progress=progress, solver=solver)
+                result = fit(config, params, target, w, keys, steps=args.steps,
+                             smooth=args.smooth, progress=progress, solver=solver)
+        else:  # the fit is one unit of work: one task on a worker (a GPU one, say)
+            unit = functools.partial(fit, config, params, target, w, keys, steps=args.steps,
+                                     smooth=args.smooth, solver=solver)
+            (result, _), = pool.map(lambda _: unit(), [None], desc="fit-image", unit="fit")
     run.stage = "writing"
     tmask = np.asarray(render.prepare(config).arrays["mask"])
     values = dict(result.values)

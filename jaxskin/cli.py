@@ -320,6 +320,7 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--smooth", type=_number(lo=0.0, hi=1e6), default=1e-6, metavar="W",
                    help="weight of the maps' total-variation prior (1e-6; 1e-5 pulled the "
                    "makeup maps flat at noise 0.01)")
+    cluster.add_option(f, "fit (the whole fit: one task, no per-step progress)")
     f.add_argument("--solver", choices=("auto", "gn", "adam"), default="auto",
                    help="maps: gn, the per-texel Gauss-Newton (auto's choice: fewer steps, "
                    "fits to the noise), or adam (cheaper steps); scalars alone: "

@@ -1,6 +1,6 @@
-"""`--cluster`: render, calibrate and fit-brdf on a Dask cluster write the same bytes as a
-local run; a worker killed mid-run is survived; a bad address is one line, exit 2; a sweep
-sharded over two local devices gives the same bytes as one device.
+"""`--cluster`: render, calibrate, fit-brdf, fit-skin and fit-image on a Dask cluster write
+the same bytes as a local run; a worker killed mid-run is survived; a bad address is one
+line, exit 2; a sweep sharded over two local devices gives the same bytes as one device.
 
 One `LocalCluster` (2 worker processes, 1 thread each) serves the module: starting it and
 the workers' first JAX import take seconds.
@@ -267,3 +267,27 @@ def test_a_sweep_sharded_over_two_devices_matches_one_device(tmp_path, capsys):
     one = digests(tmp_path / "one")
     assert len(one) == 5 and digests(tmp_path / "two") == one
     capsys.readouterr()
+
+
+@pytest.mark.slow  # a compile of the fit on a worker
+def test_fit_image_on_the_cluster_matches_the_local_bytes(tmp_path, capsys, dask_cluster):
+    """The whole fit as one task on a worker: the same fitted scene TOML as here (the
+    report's title holds the time, so it is compared by its size only)."""
+    import imageio.v3 as iio
+
+    lc, _ = dask_cluster
+    small = ["-D", "texture.size=32", "-D", "camera.size=32"]
+    assert main(["render", "hand", *small, "-D", "material.melanin=0.45",
+                 "-o", str(tmp_path / "target")]) == 0
+    target, = (tmp_path / "target").glob("*.png")
+    outs = []
+    for where, extra in (("local", []), ("cluster", ["--cluster", lc.scheduler_address])):
+        assert main(["fit-image", "hand", str(target), "--fit", "material.melanin",
+                     "--steps", "6", *small, "-o", str(tmp_path / where), *extra]) == 0
+        outs.append(digests(tmp_path / where))
+    capsys.readouterr()
+    assert sorted(outs[0]) == ["hand.toml", "hand_fit.png"]
+    assert outs[0]["hand.toml"] == outs[1]["hand.toml"]
+    assert (iio.imread(tmp_path / "local" / "hand_fit.png").shape
+            == iio.imread(tmp_path / "cluster" / "hand_fit.png").shape)
+    assert "material.melanin" in (tmp_path / "cluster" / "hand.toml").read_text()
