@@ -35,9 +35,7 @@ import warnings
 from pathlib import Path
 
 from . import __version__, cluster
-from .checks import check_scene as _check_scene
-from .checks import reading as _reading
-from .checks import unused_overrides
+from .checks import check_scene, reading, unused_overrides
 from .io import FitError, InputError
 from .outputs import Outputs, check_name, slug
 
@@ -572,13 +570,13 @@ def _render(args, run: _Run) -> int:
     # the output names (distinct, safe, not an input).
     scenes = []
     for name in args.scenes:
-        with _reading(name):
+        with reading(name):
             scenes.append(load_scene(name, args.overrides))
     plans = []
     for sc in scenes:
         sweep = [_parse_sweep(text, sc) for text in args.sweep]
         count = cluster.SWEEP_BATCH if sweep else 1  # per batch: every batch is padded
-        outputs.inputs += [Path(p) for p in _check_scene(sc, count)]
+        outputs.inputs += [Path(p) for p in check_scene(sc, count)]
         plans.append((sc, sweep, _base_name(sc, args.overrides)))
     files = []
     for sc, sweep, base in plans:

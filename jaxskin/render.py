@@ -179,6 +179,11 @@ def _shadow_config(config: SceneConfig, params: dict) -> SceneConfig:
     return dataclasses.replace(config, shadow=tuple(float(c) for c in d))
 
 
+def _view_table(arrays: dict):
+    """The view sampling's transpose table (`VIEW_TABLE`'s arrays), or None without one."""
+    return [arrays[k] for k in VIEW_TABLE] if all(k in arrays for k in VIEW_TABLE) else None
+
+
 @functools.partial(jax.jit, static_argnums=(0, 3))
 def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "display"):
     if output not in OUTPUTS:
@@ -186,8 +191,7 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
     p = prepare(config)  # host-side, cached: only static facts (rotation, eye) are used
     mask, view_mask, k = arrays["mask"], arrays["view_mask"], config.supersample
 
-    table = ([arrays[k] for k in VIEW_TABLE] if all(k in arrays for k in VIEW_TABLE)
-             else None)
+    table = _view_table(arrays)
 
     def to_view(texture_image):  # bilinear samples at every (super)sample, padded texture
         return sample_padded(texture_image, arrays["pad"], arrays["tex"], view_mask,
@@ -250,8 +254,7 @@ def texture_to_view(config: SceneConfig, arrays: dict, texture_image):
     """A texture-space image `(Ht, Wt, C)` seen from the camera, linear in it: bilinear
     samples of the padded texture, averaged over each pixel's supersamples, `(H, W, C)`
     (0 where no sample sees the mesh)."""
-    table = ([arrays[k] for k in VIEW_TABLE] if all(k in arrays for k in VIEW_TABLE)
-             else None)
+    table = _view_table(arrays)
     samples = sample_padded(texture_image, arrays["pad"], arrays["tex"], arrays["view_mask"],
                             prepare(config).view.wrap_x, table)
     return downsample(samples, config.supersample)
