@@ -9,6 +9,7 @@ import os
 import struct
 import tempfile
 import zlib
+from pathlib import Path
 
 import numpy as np
 
@@ -126,11 +127,16 @@ def read_image(path, what: str = "image", key=None):
     that gave the file (the editor marks that field)."""
     import imageio.v3 as iio
 
+    if not Path(path).exists():
+        raise InputError(f"no such file (expected {_a(what)})", path, key=key)
+    if Path(path).is_dir():
+        raise InputError(f"is a folder (expected {_a(what)} file)", path, key=key)
     try:
         img = np.asarray(iio.imread(path))
     except Exception as e:  # noqa: BLE001  (imageio raises many kinds; all mean unreadable)
-        raise InputError(f"cannot read as {_a(what)} ({e.__class__.__name__})", path,
-                         key=key) from None
+        why = (e.strerror if isinstance(e, OSError) and e.strerror else
+               "not a file format imageio decodes, or a truncated or damaged one")
+        raise InputError(f"cannot read as {_a(what)}: {why}", path, key=key) from None
     if img.dtype.kind not in "uifb" or img.size == 0 or not (
             img.ndim == 2 or (img.ndim == 3 and img.shape[-1] in (1, 2, 3, 4))):
         raise InputError(f"expected {_a(what)} (H, W) or (H, W, 1-4 channels), got an array of "

@@ -218,7 +218,12 @@ BAD = {
     "map-and-scalar": (["makeup", "f.png", "--fit", "layer.blush.map,"
                         "layer.blush.thickness_mm", "-D", "camera.size=16"], "not both"),
     "mask": (["hand", "t.png", "--fit", "light.ambient", "--mask", "T"], "the mask is"),
-    "unreadable": (["hand", "bad.png", "--fit", "light.ambient"], "cannot read"),
+    "unreadable": (["hand", "bad.png", "--fit", "light.ambient"],
+                   "bad.png: cannot read as an image: not a file format"),
+    "target-missing": (["hand", "none.png", "--fit", "light.ambient"],
+                       "none.png: no such file (expected an image)"),
+    "target-a-folder": (["hand", "out", "--fit", "light.ambient"],
+                        "out: is a folder (expected an image file)"),
     "empty": (["hand", "t.png", "--fit", ","], "expected KEY"),
     "melanin-image": (["makeup", "f.png", "--fit", "skin.melanin", "-D",
                        "skin.melanin_image=bad.png"], "cannot read"),
