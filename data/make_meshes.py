@@ -12,6 +12,8 @@ box (each box holds one limb and nothing else), and turn it to suit the paper's 
   the open leg is not seen as a dark cavity (issue 14);
 - arm: the right arm from below the shoulder to the wrist (0.30 m < x < 0.70 m), turned so
   that its axis is the y axis through the origin: cylindrical projection, like fig. 6.3.
+  Its two ends are cut square across the axis (`square_ends`), so that the side view shows
+  a clean outline at the wrist and the shoulder, not the zigzag of the box's whole faces.
 """
 
 from __future__ import annotations
@@ -92,6 +94,25 @@ def arm(body):
     if np.linalg.det(R) < 0:
         R[0] = -R[0]
     m.vertices = v @ R.T
+    return square_ends(m)
+
+
+def square_ends(m: trimesh.Trimesh) -> trimesh.Trimesh:
+    """Cut a limb's ragged ends (the box keeps whole faces, so each end is a zigzag of
+    triangles) with planes across its axis (y), just inside the zigzag: a side view then
+    sees each open end edge-on, as a straight line, not as a notch into the cavity."""
+    faces = np.asarray(m.faces)
+    directed = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    _, inverse, counts = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True,
+                                   return_counts=True)
+    y = m.vertices[np.unique(directed[counts[inverse.ravel()] == 1]), 1]
+    low, high = y[y < 0].max(), y[y > 0].min()  # the inner ends of the two zigzags
+    for origin, normal in ((low, 1.0), (high, -1.0)):
+        v, f = trimesh.intersections.slice_faces_plane(m.vertices, m.faces, [0.0, normal, 0.0],
+                                                       [0.0, origin, 0.0])[:2]
+        m = trimesh.Trimesh(v, f, process=False)
+    m.merge_vertices()  # the slice gives each cut triangle its own new vertices
+    m.remove_unreferenced_vertices()
     return m
 
 

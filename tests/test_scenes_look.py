@@ -37,6 +37,24 @@ def test_the_foot_mesh_is_closed_at_the_ankle():
     assert np.all(counts == 2)
 
 
+def test_the_arm_is_cut_square_at_the_wrist_and_the_shoulder():
+    """Its open ends are two planar rings across the axis (y), so a side view sees each
+    edge-on: a straight outline, not the zigzag notch of the box's whole faces (the old
+    arm.obj's boundary spanned 21 mm at the wrist and 18 mm at the shoulder)."""
+    from jaxskin.mesh import load_mesh
+
+    mesh = load_mesh("arm")
+    directed = mesh.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    _, inverse, counts = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True,
+                                   return_counts=True)
+    assert counts.max() == 2  # manifold: no seam of duplicated vertices along the cuts
+    rim = np.unique(directed[counts[inverse.ravel()] == 1])
+    y = mesh.vertices[rim, 1]
+    ends = mesh.vertices[:, 1].min(), mesh.vertices[:, 1].max()
+    at_an_end = np.isclose(y, ends[0], atol=1e-6) | np.isclose(y, ends[1], atol=1e-6)
+    assert at_an_end.all(), np.ptp(y[y < 0])
+
+
 def test_hand_cells_are_diamonds():
     """On the back of the hand the two fields cross at 50–70° (fig. 6.1's diamonds), not at
     90° (bricks). Measured: median 62° within 0.1 of the texture round the two edits (81°
