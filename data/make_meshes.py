@@ -119,7 +119,8 @@ def square_ends(m: trimesh.Trimesh) -> trimesh.Trimesh:
 def main():
     body = trimesh.load(HERE / "human_man.obj", process=False)
     header = ("# Cut from human_man.obj (SMPL, Max Planck Society e.V., CC BY 4.0) by "
-              "data/make_meshes.py; modified: cut and rotated.\n")
+              "data/make_meshes.py; modified: cut and rotated (the foot capped, the arm's "
+              "ends squared).\n")
     for name, make in (("foot", foot), ("arm", arm)):
         mesh = make(body)
         text = header + trimesh.exchange.obj.export_obj(mesh, include_normals=False,
