@@ -560,6 +560,15 @@ def test_edit_in_the_browser_then_render_the_saved_scene(tmp_path, browser):
         melanin = d.execute_script("return S.values['skin.melanin']")
         assert melanin > 0 and "skin.melanin=" in d.current_url
 
+        # Letters in its number box: the browser drops them; the field says what it takes
+        # (they once vanished without a word) and keeps the value.
+        box = d.find_element(By.CSS_SELECTOR, '.param[data-key="skin.melanin"] input[type=number]')
+        box.send_keys("x")
+        err = '.param[data-key="skin.melanin"] .err'
+        assert d.find_element(By.CSS_SELECTOR, err).text == \
+            "expected a number from 0 to 3; kept the value before"
+        assert d.execute_script("return S.values['skin.melanin']") == melanin
+
         # A field edit: click the mesh and drag (the field-edit tool), an edit more.
         d.find_element(By.CSS_SELECTOR, "button[data-tool=fields]").click()
         n = d.execute_script("return S.edits.length")

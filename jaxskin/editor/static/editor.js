@@ -237,12 +237,13 @@ function control(key, spec, value) {
       r.name = `${key}.${axis}`;
       const n = document.createElement("input");
       n.type = "number"; n.step = "any"; n.value = value[i];
+      guardNumber(n, key, spec);
       const lab = document.createElement("span"); lab.textContent = axis;
       const read = () => inputs.map((p) => parseFloat(p[0].value));
       r.oninput = () => { n.value = r.value; change({[key]: read()}, true); };
       r.onchange = () => change({[key]: read()}, false);
       n.onchange = () => {
-        if (!isFinite(parseFloat(n.value))) { n.value = r.value; return; }
+        if (!isFinite(parseFloat(n.value))) { n.value = r.value; notANumber(key, spec); return; }
         r.value = n.value; change({[key]: read()}, false);
       };
       inputs.push([r, n]);
@@ -268,13 +269,14 @@ function control(key, spec, value) {
     r.value = toPos(value);
     const n = document.createElement("input");
     n.type = "number"; n.step = "any"; n.value = value; n.min = spec.lo; n.max = spec.hi;
+    guardNumber(n, key, spec);
     n.title = r.title;
     const num = (v) => spec.kind === "int" ? parseInt(v) : parseFloat(v);
     const at = () => fromPos(num(r.value));
     r.oninput = () => { n.value = at(); change({[key]: at()}, true); };
     r.onchange = () => change({[key]: at()}, false);
     n.onchange = () => {
-      if (!isFinite(num(n.value))) { n.value = at(); return; }  // emptied: nothing to send
+      if (!isFinite(num(n.value))) { n.value = at(); notANumber(key, spec); return; }
       r.value = toPos(num(n.value)); change({[key]: num(n.value)}, false);
     };
     ctl.append(r, n);
@@ -285,10 +287,11 @@ function control(key, spec, value) {
   } else {
     const c = document.createElement("input");
     c.type = spec.kind === "str" ? "text" : "number"; c.value = value; c.name = key;
+    if (spec.kind !== "str") guardNumber(c, key, spec);
     if (spec.lo !== null && spec.hi !== null) c.title = `${key}: ${spec.lo} to ${spec.hi}`;
     c.onchange = () => {
       const v = spec.kind === "str" ? c.value : spec.kind === "int" ? parseInt(c.value) : parseFloat(c.value);
-      if (spec.kind !== "str" && !isFinite(v)) return;
+      if (spec.kind !== "str" && !isFinite(v)) { c.value = S.values[key]; notANumber(key, spec); return; }
       change({[key]: v}, false);
     };
     ctl.append(c);
@@ -341,6 +344,22 @@ function showParamError(key, text) {
   if (!key) return;
   const el = document.querySelector(`.param[data-key="${CSS.escape(key)}"] .err`);
   if (el) el.textContent = text;
+}
+
+// A number box left empty or holding letters (the browser then reports ""): say what it
+// takes under the field, and show the value it keeps.
+function notANumber(key, spec) {
+  const range = spec.lo != null && spec.hi != null ? ` from ${spec.lo} to ${spec.hi}` : "";
+  showParamError(key, `expected ${spec.kind === "int" ? "a whole number" : "a number"}${range}; ` +
+    "kept the value before");
+}
+
+// The browser drops a letter typed into a number box without a word: say it.
+function guardNumber(input, key, spec) {
+  input.addEventListener("keydown", (ev) => {
+    if (ev.key.length === 1 && !ev.ctrlKey && !ev.metaKey && !ev.altKey &&
+        !/[0-9eE+\-.]/.test(ev.key)) notANumber(key, spec);
+  });
 }
 
 function clearParamErrors() {
