@@ -3,7 +3,7 @@ comparison for maps (the per-texel Gauss–Newton, Adam, L-BFGS, nonlinear CG), 
 at 512², the ambiguity and maps figures.
 
     python benchmarks/bench_fit_image.py maps [--size 48] [--steps 30] [--solvers gn,adam]
-        [--noise 0.01] [--smooth 1e-6]
+        [--noise 0.01] [--smooth 1e-6] [--image 192] [-D layer.lipstick.thickness_mm=0.003]
     python benchmarks/bench_fit_image.py speed --size 512 --steps 25 --solvers gn
     python benchmarks/bench_fit_image.py ambiguity      # writes fit_image_ambiguity.png
     python benchmarks/bench_fit_image.py figure         # writes fit_image_maps.png
@@ -13,7 +13,8 @@ start from each layer everywhere at 1/20 of its thickness. Printed: time, steps,
 loss and data RMS, and per map the RMS relative error over the texels whose Cramér–Rao
 bound (`fitting.image.map_bounds`, at the truth, the layers together) is under 2.5 % and
 under 10 %, and over all the texels the layer covers; and the fraction of each layer's
-texels under those bounds.
+texels under those bounds; the face pixels per texel seen, and the share of each layer's
+texels under 2.5 % at σ 0.002, 0.001 and 0.0005 (the bound scales with σ).
 """
 
 from __future__ import annotations
@@ -75,8 +76,28 @@ def true_maps(scene: Scene):
     return out
 
 
-def maps(size, steps, solvers, smooth, rate=fi.ADAM_RATE, noise=0.01, seed=0, names=MAPS):
-    ov = [f"texture.size={size}", f"camera.size={2 * size}"]
+def pixels_per_texel(config, w) -> float:
+    """Image pixels on the face (the fit's weights `w`) per texel they see: Σ w over the
+    number of texels that gather at least 0.1 of a weighted pixel through the view's
+    sampling map (`fitting.image.view_matrix`; its rows sum to 1 per pixel). An area
+    ratio: a camera at k× the texture's resolution gives about k² × (the share of the
+    texture the face's view uses)."""
+    rows, cols, vals = fi.view_matrix(config)
+    Ht, Wt = np.asarray(render.prepare(config).arrays["mask"]).shape
+    wf = np.asarray(w, np.float64).reshape(-1)
+    gathered = np.bincount(cols, weights=vals * wf[rows], minlength=Ht * Wt)
+    return float(wf.sum() / max(1, (gathered >= 0.1).sum()))
+
+
+def maps(size, steps, solvers, smooth, rate=fi.ADAM_RATE, noise=0.01, seed=0, names=MAPS,
+         image=None, extra=(), sigmas=(0.002, 0.001, 0.0005)):
+    """The makeup maps fitted from a `size`² texture seen by an `image`² camera (default
+    2 × size) with noise `noise`; `extra`: more scene overrides (e.g. a thinner layer,
+    `layer.lipstick.thickness_mm=0.003`, or `camera.supersample=1`). Also printed: the
+    pixels per texel and the share of each layer's texels whose bound is < 2.5 % at each
+    of `sigmas` (the bound is proportional to σ: one computation serves them all)."""
+    image = image or 2 * size
+    ov = [f"texture.size={size}", f"camera.size={image}", *extra]
     truth = load_scene("makeup", ov)
     target = np.asarray(render.render(truth.config, truth.params))
     target = np.clip(target + np.random.default_rng(seed).normal(0, noise, target.shape), 0, 1)
@@ -90,6 +111,7 @@ def maps(size, steps, solvers, smooth, rate=fi.ADAM_RATE, noise=0.01, seed=0, na
     keys = fi.fit_keys(start, ",".join(f"layer.{n}.map" for n in names))
     truth_mm = true_maps(truth)
     seen, bounds = recoverable(truth, w, noise, names)
+    ppt = pixels_per_texel(truth.config, w)
     rows = []
     for solver in solvers:
         t0 = time.perf_counter()
@@ -108,7 +130,11 @@ def maps(size, steps, solvers, smooth, rate=fi.ADAM_RATE, noise=0.01, seed=0, na
                                 / max(1, (truth_mm[n] > 0).sum())) for b in (0.025, 0.1)]
                       for n in names}))
         print(solver, "loss by step:", " ".join(f"{h:.3e}" for h in r.history[:40]))
-    print(f"makeup face, texture {size}², image {2 * size}², noise σ {noise}, smooth {smooth}")
+    print(f"makeup face, texture {size}², image {image}² ({ppt:.1f} face pixels per texel), "
+          f"noise σ {noise}, smooth {smooth}" + (f", {' '.join(extra)}" if extra else ""))
+    print("texels per layer: " + ", ".join(f"{n} {(truth_mm[n] > 0).sum()}" for n in names)
+          + "; median bound at σ: " + ", ".join(
+              f"{n} {100 * np.median(bounds[n][truth_mm[n] > 0]):.3g} %" for n in names))
     print(f"{'solver':<7} {'time s':>7} {'steps':>5} {'loss':>10} {'rms':>7}  "
           + "  ".join(f"{n:>10}" for n in names))
     for solver, dt, n, loss, rms, errs, _ in rows:
@@ -118,6 +144,9 @@ def maps(size, steps, solvers, smooth, rate=fi.ADAM_RATE, noise=0.01, seed=0, na
           "over all the layer covers)")
     print("fraction of each layer's texels with CRB < 2.5 % / < 10 %: "
           + ", ".join(f"{n} {100 * f[0]:.0f}/{100 * f[1]:.0f}%" for n, f in rows[0][6].items()))
+    print("fraction with CRB < 2.5 % at σ " + ", ".join(
+        f"{s}: " + "/".join(f"{100 * np.mean(bounds[n][truth_mm[n] > 0] * s / noise < 0.025):.0f}"
+                            for n in names) + "%" for s in sigmas) + f" ({'/'.join(names)})")
     return rows
 
 
@@ -267,6 +296,11 @@ def main():
     p.add_argument("--rate", type=float, default=fi.ADAM_RATE)
     p.add_argument("--maps", default=",".join(MAPS))
     p.add_argument("--noise", type=float, default=0.01)
+    p.add_argument("--image", type=int, default=0,
+                   help="maps: the camera's size in pixels (default 2 × --size)")
+    p.add_argument("-D", dest="extra", action="append", default=[],
+                   help="maps: a scene override KEY=VALUE (repeatable), e.g. "
+                        "-D layer.lipstick.thickness_mm=0.003")
     a = p.parse_args()
     if a.what == "ambiguity":
         ambiguity()
@@ -276,7 +310,8 @@ def main():
         speed(a.size, a.steps, a.solvers.split(","))
     if a.what == "maps":
         maps(a.size, a.steps, a.solvers.split(","), a.smooth, a.rate,
-             noise=a.noise, names=tuple(a.maps.split(",")))
+             noise=a.noise, names=tuple(a.maps.split(",")), image=a.image or None,
+             extra=tuple(a.extra))
 
 
 if __name__ == "__main__":

@@ -449,6 +449,51 @@ def test_gauss_newton_fits_three_makeup_maps_to_the_noise():
     assert r.rms ** 2 < sigma ** 2, (r.rms, r.history)
 
 
+@pytest.mark.slow
+def test_makeup_maps_recovered_where_the_image_pins_them():
+    """Foundation, blush and lipstick maps fitted together (Gauss–Newton, no prior, from
+    each layer everywhere at 1/20 of its thickness) from a target that carries the
+    thickness: a 64² camera on a 16² texture (about 14 face pixels per texel) and σ = 0.001
+    noise (an averaged 16-bit target). The truth is the scene's own maps, given to the
+    render as known arrays (the layers' coverage × thickness). Over the texels whose
+    Cramér–Rao bound is under 2.5 % (measured: 58 % of the foundation's, 89 % of the
+    blush's), each within 5 % RMS relative (measured: 2.5 % and 1.1 %); the 30 µm
+    lipstick is opaque (median bound > 100 %: its thickness is not in the image)."""
+    ov = ["texture.size=16", "camera.size=64"]  # over FACE's (supersample 1, no wrinkles, ...)
+    names = ("foundation", "blush", "lipstick")
+    sc = load_scene("makeup", [*FACE, *ov])
+    arrays = render.prepare(sc.config).arrays
+    mask, texels = np.asarray(arrays["mask"]), np.asarray(arrays["texels"])
+    truth = {}  # the layer's factor map: its coverage of each texel
+    for i, layer in enumerate(sc.layers):
+        if layer.name in names:
+            m = np.zeros(mask.size, np.float32)
+            m[texels] = np.asarray(arrays["cover"][i])
+            truth[layer.name] = m.reshape(mask.shape)
+    bare = _face_without(set(names), ov)  # the layers everywhere, their maps given
+    params = {**bare.params, **{f"layer.{n}.map": jnp.asarray(truth[n]) for n in names}}
+    image = np.asarray(render.render(bare.config, params))
+    sigma = 0.001
+    target = np.clip(image + np.random.default_rng(0).normal(0, sigma, image.shape), 0, 1)
+    w = fi.weights(bare.config, bare.params)
+    keys = [f"layer.{n}.map" for n in names]
+    bounds = fi.map_bounds(bare.config, params, keys, w, sigma)
+    start = {**bare.params, **{f"layer.{n}.thickness_mm":
+                               bare.params[f"layer.{n}.thickness_mm"] / 20 for n in names}}
+    r = fi.fit(bare.config, start, target, w, fi.fit_keys(bare, ",".join(keys)), steps=20,
+               smooth=0.0)
+    assert r.solver == "gn" and r.rms < 1.1 * sigma, (r.rms, r.history)
+    for n, share, tol in (("foundation", 0.4, 0.035), ("blush", 0.7, 0.02)):
+        fitted = np.asarray(r.params[f"layer.{n}.map"]) * float(
+            r.params[f"layer.{n}.thickness_mm"]) / float(bare.params[f"layer.{n}.thickness_mm"])
+        covered = truth[n] > 0
+        seen = covered & (bounds[f"layer.{n}.map"] < 0.025)
+        err = np.sqrt(np.mean((fitted[seen] / truth[n][seen] - 1) ** 2))
+        print(f"{n}: {err:.4f} over {seen.sum()}/{covered.sum()} texels")
+        assert seen.sum() > share * covered.sum() and err < tol, (n, seen.sum(), err)
+    assert np.median(bounds["layer.lipstick.map"][truth["lipstick"] > 0]) > 1.0
+
+
 def test_biophysical_maps_recovered_where_the_image_pins_them():
     """Melanin-fraction and haemoglobin maps of the biophysical skin (ramps across and down
     the face, 0.5-1.5 × 0.06 and × 0.02) fitted together from a render with σ = 0.0005
