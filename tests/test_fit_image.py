@@ -428,27 +428,6 @@ def test_map_bounds_match_the_noise_of_repeated_one_texel_estimates():
     assert bound[y, x] == pytest.approx(direct, rel=0.03), (bound[y, x], direct)
 
 
-def test_gauss_newton_fits_three_makeup_maps_to_the_noise():
-    """Foundation, blush and lipstick maps fitted together (16² texture, 32² image, σ = 0.003,
-    no prior), from each layer everywhere at 1/20 of its thickness: the per-texel
-    Gauss–Newton reaches the noise floor (data loss ≤ σ², the clip at 0 takes a little
-    off) in at most 16 tries (measured at 24²: 14)."""
-    ov = ["texture.size=16", "camera.size=32", "camera.supersample=1",
-          "wrinkles.enabled=false", "light.shadows=false"]
-    names = ("foundation", "blush", "lipstick")
-    truth = load_scene("makeup", ov)
-    sigma = 0.003
-    target = _noisy(truth, sigma, seed=3)
-    start = _face_without(set(names), ov + [f"layer.{n}.thickness_mm="
-                                            f"{truth.values[f'layer.{n}.thickness_mm'] / 20}"
-                                            for n in names])
-    w = fi.weights(start.config, start.params)
-    keys = fi.fit_keys(start, ",".join(f"layer.{n}.map" for n in names))
-    r = fi.fit(start.config, start.params, target, w, keys, steps=16, smooth=0.0)
-    assert r.solver == "gn"
-    assert r.rms ** 2 < sigma ** 2, (r.rms, r.history)
-
-
 @pytest.mark.slow
 def test_makeup_maps_recovered_where_the_image_pins_them():
     """Foundation, blush and lipstick maps fitted together (Gauss–Newton, no prior, from
@@ -458,7 +437,9 @@ def test_makeup_maps_recovered_where_the_image_pins_them():
     render as known arrays (the layers' coverage × thickness). Over the texels whose
     Cramér–Rao bound is under 2.5 % (measured: 58 % of the foundation's, 89 % of the
     blush's), each within 5 % RMS relative (measured: 2.5 % and 1.1 %); the 30 µm
-    lipstick is opaque (median bound > 100 %: its thickness is not in the image)."""
+    lipstick is opaque (median bound > 100 %: its thickness is not in the image). It also
+    shows the per-texel Gauss–Newton reaching the noise floor on three maps from that start
+    (what a 32²-image test without the bounds checked before, in as much time)."""
     ov = ["texture.size=16", "camera.size=64"]  # over FACE's (supersample 1, no wrinkles, ...)
     names = ("foundation", "blush", "lipstick")
     sc = load_scene("makeup", [*FACE, *ov])
