@@ -83,10 +83,12 @@ DEGENERATE = {
 MAP_SOLVER_NOTE = (
     "Maps: Levenberg–Marquardt on a block-diagonal Gauss–Newton matrix. A texel's colour "
     "depends on its own values (the SSS blur aside), so JᵀJ is nearly block-diagonal: per "
-    "texel an L × L block for L maps, from L forward-mode JVPs of the texture-space colour "
-    "and the exact diagonal of the view map's AᵀDA (`view_matrix`); the SSS blur's share "
+    "texel an L × L block for L maps, from three reverse-mode passes of the texture-space "
+    "colour (one per channel: `texel_jacobian`) and the exact diagonal of the view map's "
+    "AᵀDA (`view_matrix`); the SSS blur's share "
     "counted by its own-texel gain (`blur_gain`). The prior's Hessian enters exactly, the "
-    "coupled system solved by block-preconditioned CG in texture space (cheap: no render). "
+    "coupled system solved by block-preconditioned CG in texture space (cheap: no render; "
+    "inexact, to 0.1 of the residual, as usual in Gauss–Newton). "
     "optimistix.LevenbergMarquardt / GaussNewton take their curvature from the residual's "
     "Jacobian operator, which does not expose the per-texel structure: materialising JᵀJ is "
     "out of reach (a column per texel), and CG through J costs a JVP and a VJP of the whole "
@@ -96,7 +98,10 @@ MAP_SOLVER_NOTE = (
     "150 steps on the makeup face (their line searches rejected every step).")
 STEP_MAX = 1.0  # the Gauss–Newton step's largest change of a coordinate (e ≈ 2.7× a texel)
 GN_RTOL = 1e-5  # stop when the Gauss–Newton model predicts less than this share of the loss
-CG_RTOL = 1e-3  # the inner conjugate-gradient solve of each Gauss–Newton step: its tolerance
+# The inner conjugate-gradient solve of each Gauss–Newton step: an inexact Newton step, to
+# 0.1 of the right-hand side (at 512² on the makeup face: 1-2 iterations and the same
+# predicted decrease to 0.3 %, where 1e-3 ran the 100 iterations, 1.9 s a step).
+CG_RTOL = 0.1
 CG_STEPS = 100  # … and its most iterations (each one texture-space prior HVP: cheap)
 _DEBUG = bool(__import__("os").environ.get("JAXSKIN_FIT_DEBUG"))
 ADAM_RATE = 0.3  # per step, in the transformed (log-like) coordinates: ~35 % at most
@@ -464,11 +469,14 @@ def view_matrix(config) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             summed[keep].astype(np.float32))
 
 
-def view_diagonal(config, d):
+def view_diagonal(config, d, view=None):
     """diag(Aᵀ diag(d) A) `(Ht, Wt, 3)`: per texel and channel, Σ_p A_pt² d_p, A the linear
     map from a texture-space colour to the image (`view_matrix`) and `d (H, W, 3)`
-    per-pixel weights. Exact."""
-    rows, cols, vals = (jnp.asarray(v) for v in view_matrix(config))
+    per-pixel weights. Exact. `view`: `view_matrix(config)` as arrays, passed in by a jitted
+    caller (else the matrix is a constant of the program: XLA spends tens of seconds at
+    512² folding it)."""
+    rows, cols, vals = (jnp.asarray(v) for v in (view_matrix(config) if view is None
+                                                 else view))
     Ht, Wt = render.prepare(config).setup.mask.shape
     contrib = (vals * vals)[:, None] * d.reshape(-1, 3)[rows]
     return jax.ops.segment_sum(contrib, cols, num_segments=Ht * Wt).reshape(Ht, Wt, 3)
@@ -496,33 +504,48 @@ def blur_gain(config, arrays):
     return jnp.sqrt(jnp.sum(out * out, axis=(0, 1)))
 
 
-def texel_blocks(config, params: dict, arrays, names, tangents, d, gain=None):
-    """Per texel, the L × L block of JᵀJ for L maps (`names`, keys into `params`), as
-    `(Ht·Wt, L, L)`: Σ_channels D_tc a_l,tc a_m,tc with a_l = the texture-space colour's
-    derivative along map l's `tangents[l] (Ht, Wt)` (one JVP each, `render.texture_colour`)
-    and D = `view_diagonal` of the per-pixel `d (H, W, 3)` = (∂ pixel / ∂ linear pixel)² ×
-    weight. The colour of a texel depends on its own thicknesses except through the SSS
-    blur, which spreads the part of its response that enters the skin over its
-    neighbours: in the JVP the blur's derivative is `gain` × identity (`blur_gain`, its
-    own-texel root sum of squares; None: the blur's own derivative, which along a whole
-    map sums the neighbours' shares — right for a blur under a texel, and wrong for a wide
-    one when the surface and the blurred parts of a response have opposite signs and
-    cancel). Exact without SSS (tests/test_fit_image.py); with it, the cross term between
-    a texel's local and blurred parts uses sqrt(κ) for the kernel's centre weight.
-    Also returns the texture colour `(Ht, Wt, 3)`."""
+def texel_jacobian(config, params: dict, arrays, names, gain=None):
+    """The texture-space colour `c (Ht, Wt, 3)` (`render.texture_colour`) and, per texel,
+    its derivative with respect to that texel's value of each of the L maps `names` (keys
+    into `params`): `(L, Ht, Wt, 3)`. A texel's colour depends on its own map values only
+    (the SSS blur aside, below), so the Jacobian is diagonal over texels and one reverse-mode
+    pass per colour channel (cotangent: that channel at every texel) gives every texel's
+    derivatives for all L maps at once: 3 VJPs whatever L, sharing one forward pass. (Forward
+    mode, one JVP per map along the whole map, gives the same numbers; measured at 512² on
+    the makeup face: a JVP of the cosmetics colour costs ~4× the forward pass, a VJP ~2×, so
+    three JVPs 10-13 s and the three VJPs 1.8 s.) The SSS blur spreads the part of a texel's
+    response that enters the skin over its neighbours: its derivative is taken as `gain` ×
+    identity (`blur_gain`, its own-texel root sum of squares); None: the blur's own
+    transpose, which sums the shares the texel receives from its neighbours (right for a
+    blur under a texel, wrong for a wide one when the surface and the blurred parts of a
+    response have opposite signs and cancel)."""
     def colour(ms):
         return render.texture_colour(config, {**params, **dict(zip(names, ms, strict=True))},
                                      arrays, gain)
 
-    base = tuple(params[k] for k in names)
-    c0, lin = jax.linearize(colour, base)
-    L = len(names)
-    eye = jnp.eye(L, dtype=c0.dtype)
-    stacked = tuple(eye[:, j, None, None] * tangents[j][None] for j in range(L))
-    dc = jax.vmap(lin)(stacked)  # (L, Ht, Wt, 3)
-    D = view_diagonal(config, d)
-    B = jnp.einsum("thc,lthc,mthc->thlm", D, dc, dc)
-    return B.reshape(-1, L, L), c0
+    c0, back = jax.vjp(colour, tuple(params[k] for k in names))
+    per_channel = [jnp.stack(back(jnp.zeros_like(c0).at[..., c].set(1.0))[0]) for c in range(3)]
+    return c0, jnp.stack(per_channel, axis=-1)
+
+
+def texel_blocks(config, params: dict, arrays, names, tangents, d, gain=None, view=None):
+    """Per texel, the L × L block of JᵀJ for L maps (`names`, keys into `params`), as
+    `(Ht·Wt, L, L)`: Σ_channels D_tc a_l,tc a_m,tc with a_l = the texture-space colour's
+    derivative along map l's `tangents[l] (Ht, Wt)` (`texel_jacobian` × the tangent) and
+    D = `view_diagonal` of the per-pixel `d (H, W, 3)` = (∂ pixel / ∂ linear pixel)² ×
+    weight (`view`: its argument). `gain`: the SSS blur's derivative (`texel_jacobian`).
+    Exact without SSS (tests/test_fit_image.py); with it, the cross term between a texel's
+    local and blurred parts uses sqrt(κ) for the kernel's centre weight. Also returns the
+    texture colour `(Ht, Wt, 3)`."""
+    c0, dc = texel_jacobian(config, params, arrays, names, gain)
+    return _blocks(dc, tangents, view_diagonal(config, d, view)), c0
+
+
+def _blocks(dc, tangents, D):
+    """Σ_c D_tc a_l,tc a_m,tc, a_l = dc[l] × tangents[l]: `(Ht·Wt, L, L)`."""
+    a = dc * jnp.stack(tangents)[..., None]
+    B = jnp.einsum("thc,lthc,mthc->thlm", D, a, a)
+    return B.reshape(-1, a.shape[0], a.shape[0])
 
 
 def map_bounds(config, params: dict, names, w, sigma: float) -> dict:
@@ -541,7 +564,8 @@ def map_bounds(config, params: dict, names, w, sigma: float) -> dict:
     d = slope ** 2 * jnp.asarray(w, jnp.float32)[..., None] / sigma ** 2
     tangents = [jnp.asarray(p[k], jnp.float32) for k in names]
     B, _ = jax.jit(texel_blocks, static_argnums=(0, 3))(
-        config, p, arrays, tuple(names), tangents, d, blur_gain(config, arrays))
+        config, p, arrays, tuple(names), tangents, d, blur_gain(config, arrays),
+        tuple(jnp.asarray(v) for v in view_matrix(config)))
     B = np.asarray(B, np.float64)
     L = len(names)
     diag = np.diagonal(B, axis1=1, axis2=2)
@@ -609,32 +633,34 @@ def _gauss_newton(config, keys, units, unpack, residual, loss, z0, args, smooth,
     """Levenberg–Marquardt with a block-diagonal Gauss–Newton matrix (`MAP_SOLVER_NOTE`):
     per texel the L × L block of the maps (`texel_blocks`), the TV prior's curvature on
     its diagonal, one dense block for the scalars (forward-mode Jacobian through the whole
-    render); no cross terms between blocks. The gradient is the exact one. Nielsen's
+    render); no cross terms between blocks. The gradient is the exact one, from the reverse
+    pass of the try that was accepted (its forward render is not repeated). Nielsen's
     damping update; a try whose loss does not fall is rejected (one forward render) and
     retried with more damping. Stops when the model's predicted decrease is below 1e-5
-    of the loss, or after `steps` tries. Returns z, the loss history, the number of tries."""
+    of the loss, or after `steps` tries. `linearise` and `propose` are each compiled once
+    (tests/test_fit_image.py). Returns z, the loss history, the number of tries."""
     maps = [fk for fk in keys if fk.kind == "map"]
     names = [fk.key for fk in maps]
     others = [fk.key for fk in keys if fk.kind != "map"]
     gain = blur_gain(config, args["arrays"])
     n_pairs = int(args["pairs"].shape[1])
+    args = {**args, "view": tuple(jnp.asarray(v) for v in view_matrix(config))}
 
     def flat_others(z):
         return jax.flatten_util.ravel_pytree({k: z[k] for k in others})
 
     @jax.jit
-    def linearise(z, args):
-        (f, _), g = jax.value_and_grad(loss, has_aux=True)(z, args)
+    def linearise(z, f, back, args):
+        g, = back(jnp.ones((), jnp.float32))
         p = unpack(z)
         tangents = []
         for fk in maps:  # dm/dz of the sigmoid: m (1 − m / top)
             m = p[fk.key]
             tangents.append(m * (1.0 - m / (fk.hi / units[fk.key])))
-        c0 = render.texture_colour(config, p, args["arrays"])
+        c0, dc = texel_jacobian(config, p, args["arrays"], names, gain)
         _, slope = _display_slope(config, p, args["arrays"], c0)
         d = (slope * args["sqrt_w"]) ** 2
-        B, _ = texel_blocks(config, p, args["arrays"], names, tangents, d, gain)
-        B = 2.0 * B
+        B = 2.0 * _blocks(dc, tangents, view_diagonal(config, d, args["view"]))
         if others:
             x0, unflat = flat_others(z)
 
@@ -689,8 +715,10 @@ def _gauss_newton(config, keys, units, unpack, residual, loss, z0, args, smooth,
             ds = -jnp.linalg.solve(Sd, gs)
             pred = pred - (gs @ ds + 0.5 * ds @ S @ ds)
             new.update(unflat(x0 + ds))
-        f_new = loss(new, args)[0]
-        return new, f_new, pred
+        # The loss at the try, with its reverse pass kept (`back`, a pytree): if the try is
+        # accepted, the next `linearise` takes the gradient from it (no second forward).
+        f_new, back = jax.vjp(lambda z: loss(z, args)[0], new)
+        return new, f_new, pred, back
 
     def B_prior_diag(t, ms, args):  # the diagonal of the prior's Gauss–Newton matrix
         a, b = args["pairs"]
@@ -703,15 +731,28 @@ def _gauss_newton(config, keys, units, unpack, residual, loss, z0, args, smooth,
             out.append(h * t[:, i] ** 2)
         return jnp.stack(out, axis=-1)
 
-    z = z0
-    f, g, B, S = linearise(z, args)
-    lam, nu, history = 1e-2, 2.0, []
+    z, lam = z0, 1e-2
+    clock = time.perf_counter()
+    # The start's loss and reverse pass: `propose` with a zero gradient (a zero step), so
+    # that `back` has the structure of every try's and `linearise` compiles once.
+    n_others = flat_others(z)[0].size if others else 0
+    _, f, _, back = propose(z, jax.tree.map(jnp.zeros_like, z),
+                            jnp.zeros((z[names[0]].size, len(names), len(names)), jnp.float32),
+                            jnp.zeros((n_others, n_others), jnp.float32), jnp.float32(lam),
+                            args)
+    f, g, B, S = linearise(z, f, back, args)
+    nu, history = 2.0, []
     while len(history) < steps:
-        new, f_new, pred = propose(z, g, B, S, jnp.float32(lam), args)
-        f_new, pred, f0 = float(f_new), float(pred), float(f)
+        if _DEBUG:
+            jax.block_until_ready(B)
+            t_lin, clock = time.perf_counter() - clock, time.perf_counter()
+        new, f_try, pred, back = propose(z, g, B, S, jnp.float32(lam), args)
+        f_new, pred, f0 = float(f_try), float(pred), float(f)
         rho = (f0 - f_new) / pred if pred > 0 else -1.0
         if _DEBUG:
-            print(f"gn: f {f0:.4e} try {f_new:.4e} predicted {pred:.3e} λ {lam:.2e}")
+            t_try, clock = time.perf_counter() - clock, time.perf_counter()
+            print(f"gn: f {f0:.4e} try {f_new:.4e} predicted {pred:.3e} λ {lam:.2e} "
+                  f"(linearise {t_lin:.2f} s, try {t_try:.2f} s)", flush=True)
         if np.isfinite(f_new) and f_new < f0 and rho > 0:
             z = new
             lam *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
@@ -721,7 +762,7 @@ def _gauss_newton(config, keys, units, unpack, residual, loss, z0, args, smooth,
                 progress(f_new)
             if pred < GN_RTOL * f_new:
                 break
-            f, g, B, S = linearise(z, args)
+            f, g, B, S = linearise(z, f_try, back, args)
         else:
             lam *= nu
             nu *= 2.0

@@ -475,12 +475,13 @@ def test_makeup_maps_recovered_where_the_image_pins_them():
     assert np.median(bounds["layer.lipstick.map"][truth["lipstick"] > 0]) > 1.0
 
 
-def test_biophysical_maps_recovered_where_the_image_pins_them():
+def test_biophysical_maps_recovered_where_the_image_pins_them(caplog):
     """Melanin-fraction and haemoglobin maps of the biophysical skin (ramps across and down
     the face, 0.5-1.5 × 0.06 and × 0.02) fitted together from a render with σ = 0.0005
     noise (light TV prior, 1e-7), from uniform maps: over the texels whose Cramér–Rao
     bound is under 2.5 % (measured: 86 % and 81 % of the face), each map within 5 % RMS
-    relative (measured: 0.9 % and 1.5 % in 25 tries); the image at the noise floor."""
+    relative (measured: 0.9 % and 1.5 % in 25 tries); the image at the noise floor. The
+    Gauss–Newton's programs, `linearise` and `propose`, compile once each over the tries."""
     ov = ["texture.size=16", "camera.size=32", "camera.supersample=1",
           "wrinkles.enabled=false", "light.shadows=false", "material.model=biophysical"]
     sc = load_scene("face", ov)
@@ -495,9 +496,16 @@ def test_biophysical_maps_recovered_where_the_image_pins_them():
     target = np.clip(image + np.random.default_rng(0).normal(0, sigma, image.shape), 0, 1)
     w = fi.weights(sc.config, sc.params)
     bounds = fi.map_bounds(sc.config, params, names, w, sigma)
-    r = fi.fit(sc.config, sc.params, target, w, fi.fit_keys(sc, ",".join(names)), steps=25,
-               smooth=1e-7)
+    with caplog.at_level("WARNING"), jax.log_compiles():
+        r = fi.fit(sc.config, sc.params, target, w, fi.fit_keys(sc, ",".join(names)),
+                   steps=25, smooth=1e-7)
     assert r.solver == "gn" and r.rms < 1.1 * sigma
+    # The Gauss–Newton's two programs are compiled once each over the tries (a retrace
+    # costs 10-25 s at 512²).
+    compiled = [m for m in caplog.messages if m.startswith("Compiling jit(")]
+    assert len(r.history) > 3
+    for name in ("linearise", "propose"):
+        assert sum(m.startswith(f"Compiling jit({name})") for m in compiled) == 1, compiled
     for k in names:
         scalar = k.removesuffix("_map")
         fitted = np.asarray(r.params[k]) * float(r.params[scalar]) / float(sc.params[scalar])
