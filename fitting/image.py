@@ -58,8 +58,8 @@ from jaxskin.io import InputError, atomic_write
 from jaxskin.scene import LAYER_SCHEMA, SCHEMA, SKIN_MAPS, Scene
 
 __all__ = ["DEGENERATE", "FitKey", "ImageFit", "MAP_SCALARS", "blur_gain", "fit", "fit_keys",
-           "map_bounds", "pcg", "texel_blocks", "view_diagonal", "view_matrix", "weights",
-           "write_report"]
+           "map_bounds", "pcg", "texel_blocks", "texel_jacobian", "view_diagonal", "view_matrix",
+           "weights", "write_report"]
 
 # A map key → the scalar it multiplies (the biophysical model's maps go here too). Layer
 # maps, `layer.NAME.map`, multiply `layer.NAME.thickness_mm`.
