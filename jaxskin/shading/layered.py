@@ -167,9 +167,11 @@ def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
     rule before) took 6.32× and 6.51× (after main's faster SSS blur, on a quieter
     machine: 2.25× and 3.15×; the render without the spectral pass is at 2× on its own,
     this pass at about 2.3×: the primal's three products and the transpose's one pass,
-    1.3–1.6× their cost). Earlier: plain reverse mode through this forward (the
-    `switch` inside a `map` keeps every branch's residuals) 162× and 21 GB; reverse mode
-    over checkpointed chunks of `_joint` 5.8–14×.
+    1.3–1.6× their cost). Later, with the S and K cotangents through q (`_layer_SK`), on a
+    2-core AVX2 machine: scalars 2.8–3.1×, maps 2.3–2.4× (benchmarks/RESULTS.md, issue 19).
+    Earlier: plain reverse mode through this forward (the `switch` inside a `map` keeps
+    every branch's residuals) 162× and 21 GB; reverse mode over checkpointed chunks of
+    `_joint` 5.8–14×.
     """
     if not blurred:
         return _joint(grid, False, X, E, h, h_l, S, K, skin_R)
