@@ -65,6 +65,13 @@ def layer(
     **Returns:** `(R0, T)`, broadcast to a common shape.
     """
     S, K, X = _promote(S, K, X)
+    return _layer_parts(S, K, X)[:2]
+
+
+def _layer_parts(S, K, X):
+    """`layer`'s R0 and T with the intermediates a hand-written derivative reuses
+    (`shading.layered._cotangents`): `(R0, T, τ, sech z, 1/D, small, z² where small,
+    1/β)`, D = (S + K)τ + 1, `small` where the series branch is taken. S, K, X promoted."""
     # What depends on S and K only stays on their (small) shapes: in a render S, K are per
     # (layer, wavelength) and X per texel, so this is hoisted out of the per-texel work.
     q = K * (K + 2.0 * S)  # β²
@@ -83,7 +90,7 @@ def layer(
     tau = jnp.where(small, tau_s, (1.0 - e2) * inv * inv_beta)
     sech = jnp.where(small, inv_cosh, 2.0 * e * inv)
     inv_den = 1.0 / (SK * tau + 1.0)
-    return S * tau * inv_den, sech * inv_den
+    return S * tau * inv_den, sech * inv_den, tau, sech, inv_den, small, qs, inv_beta
 
 
 def r_inf(S: Float[ArrayLike, "*shape"], K: Float[ArrayLike, "*shape"]) -> Float[Array, "*shape"]:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from conftest import check_grads_scaled
 
-from jaxskin import formats, render, spectral, view
+from jaxskin import formats, km, render, spectral, view
 from jaxskin.linear import linear_call
 from jaxskin.scene import load_scene
 from jaxskin.shading import layered
@@ -153,3 +153,29 @@ def test_view_transpose_table_equals_autodiff(x64, scene):
     check_grads_scaled(lambda im: view.sample_padded(im, a["pad"], a["tex"], a["view_mask"],
                                                      p.view.wrap_x, table),
                        [image], [0.1], order=1)
+
+
+def test_layer_S_K_cotangents_equal_autodiff_of_km_layer(x64):
+    """`layered._layer_SK` (the S and K cotangents of one KM layer through q = K(K + 2S),
+    from `km._layer_parts`, no second evaluation of the layer) against `jax.vjp` of
+    `km.layer`, float64, per band summed over texels, at thicknesses on both sides of the
+    series/exp switch (z² = 0.25) and the stiff points: X = 0, 1e-7, 10 mm, S = 0, K = 0,
+    K = 1e-9."""
+    rng = np.random.default_rng(7)
+    n = 9
+    S = rng.uniform(5, 60, n)
+    K = rng.uniform(0.5, 30, n)
+    S[0], K[1], K[2], S[3], K[3] = 0.0, 0.0, 1e-9, 0.0, 1e-9
+    q = K * (K + 2 * S)
+    # thicknesses per texel: the switch z = 0.5 just below and above for band 4, stiff ones
+    z_half = 0.5 / np.sqrt(q[4])
+    X = np.concatenate([[0.0, 1e-7, 10.0, z_half * (1 - 1e-6), z_half * (1 + 1e-6)],
+                        rng.uniform(0, 0.05, 11)])[:, None]
+    S, K, X = (jnp.asarray(a, jnp.float64) for a in (S, K, X))
+    aR, aT = (jnp.asarray(rng.normal(size=(X.shape[0], n))) for _ in range(2))
+    _, vjp = jax.vjp(lambda s, k: km.layer(s, k, X), S, K)
+    dS, dK = vjp((aR, aT))
+    parts = km._layer_parts(S, K, X)
+    for got, want in zip(layered._layer_SK(S, K, X, parts, aR, aT), (dS, dK), strict=True):
+        assert bool(jnp.all(jnp.isfinite(got)))
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-11 * float(jnp.abs(want).max()))

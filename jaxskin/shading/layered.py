@@ -139,7 +139,13 @@ def _joint(grid, blurred, *args):
                            axis=-1)
 
 
-CHUNK = 1024  # texels per step of the derivative's loop
+# Texels per step of the derivative's loops. Not 1024: with 41 bands a (1024, 41) float32
+# array is 41 × 4 KiB, so every intermediate of a chunk starts at the same offset in a
+# page; measured on the 2-core AVX2 machine (the transpose alone, the makeup face's
+# 170,324 texels, one process), 1024 took 1.3–1.6× as long as 500–3000 (likely cache-set
+# aliasing among the ~30 arrays a fusion reads). Inside the whole render's gradient the
+# difference was within the load's noise.
+CHUNK = 1000
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
@@ -161,9 +167,11 @@ def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
     rule before) took 6.32× and 6.51× (after main's faster SSS blur, on a quieter
     machine: 2.25× and 3.15×; the render without the spectral pass is at 2× on its own,
     this pass at about 2.3×: the primal's three products and the transpose's one pass,
-    1.3–1.6× their cost). Earlier: plain reverse mode through this forward (the
-    `switch` inside a `map` keeps every branch's residuals) 162× and 21 GB; reverse mode
-    over checkpointed chunks of `_joint` 5.8–14×.
+    1.3–1.6× their cost). Later, with the S and K cotangents through q (`_layer_SK`), on a
+    2-core AVX2 machine: scalars 2.8–3.1×, maps 2.3–2.4× (benchmarks/RESULTS.md, issue 19).
+    Earlier: plain reverse mode through this forward (the `switch` inside a `map` keeps
+    every branch's residuals) 162× and 21 GB; reverse mode over checkpointed chunks of
+    `_joint` 5.8–14×.
     """
     if not blurred:
         return _joint(grid, False, X, E, h, h_l, S, K, skin_R)
@@ -253,43 +261,31 @@ def _band(g, M):
     return g[:, 0:1] * M[:, 0] + g[:, 1:2] * M[:, 1] + g[:, 2:3] * M[:, 2]
 
 
-def _layer_dS_dK(S, K, X, R, T):
-    """The partial derivatives of one KM layer's R0 and T (`km.layer`) with respect to S
-    and K, elementwise: `(dR/dS, dR/dK, dT/dS, dT/dK)`. With q = β² = K(K + 2S), z = βX,
-    τ = tanh(z)/β and D = (S + K)τ + 1 (R0 = Sτ/D, T = sech z/D):
-    ∂τ/∂β = β w, w = (X sech² z − τ)/β², ∂sech z/∂β = −X β τ sech z, ∂β/∂S = K/β,
-    ∂β/∂K = (S + K)/β. w = −X³ F(z²) sech² z with F(y) = Σ_k≥1 4^k y^(k−1)/(2k+1)! (a series
-    for small z: no branch point at K = 0), directly for z² ≥ `km._Q_SMALL`."""
-    q = K * (K + 2.0 * S)
-    z2 = q * (X * X)
-    small = z2 < km._Q_SMALL
-    qs = jnp.where(small, z2, 0.0)
-    inv_cosh = 1.0 / km._horner(km._COSH, qs)
-    tau_s = X * km._horner(km._SINHC, qs) * inv_cosh
-    w_s = -(X * X * X) * km._horner(_F_SERIES, qs) * (inv_cosh * inv_cosh)
-    inv_beta = jax.lax.rsqrt(jnp.where(q > 0, q, 1.0))
-    e = jnp.exp(-X / inv_beta)
-    e2 = e * e
-    inv = 1.0 / (1.0 + e2)
-    tau_l = (1.0 - e2) * inv * inv_beta
-    sech_l = 2.0 * e * inv
-    w_l = (X * sech_l * sech_l - tau_l) * (inv_beta * inv_beta)
-    tau = jnp.where(small, tau_s, tau_l)
-    sech = jnp.where(small, inv_cosh, sech_l)
-    w = jnp.where(small, w_s, w_l)
+def _layer_SK(S, K, X, parts, aR, aT):
+    """The cotangents of one KM layer's S and K `(n,)`, summed over texels, from the
+    cotangents `aR, aT (P, n)` of its R0 and T and the intermediates of `km._layer_parts`.
+    With q = β² = K(K + 2S), R0 = Sτ/D and T = sech z/D, D = (S + K)τ + 1, where τ and
+    sech z depend on S and K through q only: the cotangent of q per texel and band is
+    a_q = a_τ ∂τ/∂q + a_sech ∂sech/∂q with ∂τ/∂q = w/2, ∂sech z/∂q = −X τ sech z/2,
+    w = (X sech² z − τ)/β² (= −X³ F(z²) sech² z for small z, F(y) = Σ_k≥1 4^k y^(k−1)/(2k+1)!,
+    a series with no branch point at K = 0), and ∂q/∂S = 2K, ∂q/∂K = 2(K + S) are per band:
+    so S and K are each one sum over texels of a short expression of the layer's own
+    intermediates (the rule before evaluated the layer again for its partials, with exp and
+    three divisions, in each of the two sums)."""
+    R, T, tau, sech, inv_den, small, qs, inv_beta = parts
     SK = S + K
-    inv_den = 1.0 / (SK * tau + 1.0)
-    tau_S, tau_K = K * w, SK * w  # ∂τ/∂S, ∂τ/∂K
-    sech_S, sech_K = -X * K * sech * tau, -X * SK * sech * tau
-    den_S, den_K = tau + SK * tau_S, tau + SK * tau_K
-    dR_dS = (tau + S * tau_S - R * den_S) * inv_den
-    dR_dK = (S * tau_K - R * den_K) * inv_den
-    dT_dS = (sech_S - T * den_S) * inv_den
-    dT_dK = (sech_K - T * den_K) * inv_den
-    return dR_dS, dR_dK, dT_dS, dT_dK
+    sech2 = sech * sech
+    w = jnp.where(small, -(X * X * X) * km._horner(_F_SERIES, qs) * sech2,
+                  (X * sech2 - tau) * (inv_beta * inv_beta))
+    aR_d, aT_d = aR * inv_den, aT * inv_den
+    a_q = 0.5 * ((aR_d * (S - R * SK) - aT_d * T * SK) * w - aT_d * X * sech * tau)
+    a_S = tau * (aR_d * (1.0 - R) - aT_d * T)  # through S and S + K, τ held
+    a_K = -tau * (aR_d * R + aT_d * T)
+    return (jnp.sum(a_S + (2.0 * K) * a_q, axis=0),
+            jnp.sum(a_K + (2.0 * SK) * a_q, axis=0))
 
 
-# F(y) = Σ_k≥1 4^k y^(k−1)/(2k+1)!, highest power first (Horner), for `_layer_dS_dK`: at
+# F(y) = Σ_k≥1 4^k y^(k−1)/(2k+1)!, highest power first (Horner), for `_layer_SK`: at
 # y = 0.25 the first dropped term is below 1e-16 relative.
 _F_SERIES = [4.0 ** k / float(np.prod(np.arange(1, 2 * k + 2, dtype=np.float64)))
              for k in range(8, 0, -1)]
@@ -319,7 +315,8 @@ def _cotangents(grid, blurred, X, E, h, h_l, S, K, skin_R, g):
         ga = gt = E * gs
     s = skin_R
     x = [X[i][:, None] for i in range(n_layers)]  # (P, 1) each
-    R, T = zip(*(km.layer(S[i], K[i], x[i]) for i in range(n_layers)), strict=True)
+    parts = [km._layer_parts(S[i], K[i], x[i]) for i in range(n_layers)]
+    R, T = [p[0] for p in parts], [p[1] for p in parts]
     # The stack from the bottom up (km.stack's order), every partial stack kept.
     accs = [(R[0], T[0], R[0])]
     for i in range(1, n_layers):
@@ -372,9 +369,7 @@ def _cotangents(grid, blurred, X, E, h, h_l, S, K, skin_R, g):
         # ∂R0/∂X = S T², ∂T/∂X = −T (S + K − S R0) (Kubelka–Munk's equations).
         dX[i] = (_rowsum(aR_l[i] * S[i] * T2 - aT_l[i] * T[i] * (S[i] + K[i] - S[i] * R[i]))
                  + h_l[i] * sum_D * (1.0 - cover) / COVER_MM)[:, 0]
-        dR_dS, dR_dK, dT_dS, dT_dK = _layer_dS_dK(S[i], K[i], x[i], R[i], T[i])
-        dS[i] = jnp.sum(aR_l[i] * dR_dS + aT_l[i] * dT_dS, axis=0)
-        dK[i] = jnp.sum(aR_l[i] * dR_dK + aT_l[i] * dT_dK, axis=0)
+        dS[i], dK[i] = _layer_SK(S[i], K[i], x[i], parts[i], aR_l[i], aT_l[i])
         a_D = a_D * T2
     dh = _rowsum(dh)
     d_skin = a_s if skin_R.ndim == 2 else jnp.sum(a_s, axis=0)
@@ -382,11 +377,12 @@ def _cotangents(grid, blurred, X, E, h, h_l, S, K, skin_R, g):
             d_skin.astype(dtype))
 
 
-def _cotangents_chunked(grid, blurred, X, E, h, h_l, S, K, skin_R, g, chunk=CHUNK):
+def _cotangents_chunked(grid, blurred, X, E, h, h_l, S, K, skin_R, g, chunk=None):
     """`_cotangents` in a loop over chunks of `chunk` texels (the last one padded), so that
     each chunk's pass stays in the cache; the per-band cotangents (S, K and a skin spectrum
     shared by all texels) summed over the chunks."""
     P = X.shape[1]
+    chunk = chunk or CHUNK
 
     def per_texel(a, axis):
         return _per_texel(a, axis, P, chunk)
