@@ -263,13 +263,15 @@ def test_banded_solver_matches_the_dense_reference(name, smooth):
     """The per-band / block-tridiagonal fit against optimistix's dense Levenberg–Marquardt
     over all bands (the solver before issue 13): measured max relative difference in S and K
     5.5e-9 over the three examples with and without the prior (lipstick_red with it), so
-    5e-8. Four of those six run here (compiling the dense solver costs seconds each)."""
+    5e-8; the fits' RMS errors to 1.6e-8 (lipstick_red with the prior, on an AVX2 CPU; below
+    1e-8 on the AVX-512 one), so 5e-8 too. Four of those six run here (compiling the dense
+    solver costs seconds each)."""
     m = _shipped(name)
     dense, banded = fkm.fit(m, smooth=smooth, solver="dense"), fkm.fit(m, smooth=smooth)
     assert dense.converged and banded.converged
     for a, b in ((dense.S_per_mm, banded.S_per_mm), (dense.K_per_mm, banded.K_per_mm)):
         np.testing.assert_allclose(b, a, rtol=5e-8)
-    assert banded.rmse == pytest.approx(dense.rmse, rel=1e-8)
+    assert banded.rmse == pytest.approx(dense.rmse, rel=5e-8)
 
 
 def test_without_the_prior_each_band_is_its_own_problem():
