@@ -33,17 +33,21 @@ def cut(body: trimesh.Trimesh, keep_vertex) -> trimesh.Trimesh:
     return body.submesh([faces], append=True)
 
 
+def boundary_edges(m: trimesh.Trimesh) -> np.ndarray:
+    """The edges `(a, b)` that only one face has, as that face runs (the open rims)."""
+    directed = np.asarray(m.faces)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    _, inverse, counts = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True,
+                                   return_counts=True)
+    return directed[counts[inverse.ravel()] == 1]
+
+
 def cap_holes(m: trimesh.Trimesh, rings: int = 3, bulge: float = 0.35) -> trimesh.Trimesh:
     """Close every boundary loop with a low dome: `rings` rings shrinking towards the loop's
     centroid, raised along the loop's plane normal (away from the part) by `bulge` × the
     loop's mean radius × (1 − r²), then a fan; wound like the faces beside it (a boundary
     edge a → b of a face gives the cap's b → a → …). A flat fan would read as a cut."""
     faces = np.asarray(m.faces)
-    directed = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    key = np.sort(directed, axis=1)
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    boundary = directed[counts[inverse.ravel()] == 1]  # (a, b) as the faces run
-    following = {int(a): int(b) for a, b in boundary}
+    following = {int(a): int(b) for a, b in boundary_edges(m)}
     vertices, new_faces = [np.asarray(m.vertices)], [faces]
     count = len(m.vertices)
     while following:
@@ -101,11 +105,7 @@ def square_ends(m: trimesh.Trimesh) -> trimesh.Trimesh:
     """Cut a limb's ragged ends (the box keeps whole faces, so each end is a zigzag of
     triangles) with planes across its axis (y), just inside the zigzag: a side view then
     sees each open end edge-on, as a straight line, not as a notch into the cavity."""
-    faces = np.asarray(m.faces)
-    directed = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    _, inverse, counts = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True,
-                                   return_counts=True)
-    y = m.vertices[np.unique(directed[counts[inverse.ravel()] == 1]), 1]
+    y = m.vertices[np.unique(boundary_edges(m)), 1]
     low, high = y[y < 0].max(), y[y > 0].min()  # the inner ends of the two zigzags
     for origin, normal in ((low, 1.0), (high, -1.0)):
         v, f = trimesh.intersections.slice_faces_plane(m.vertices, m.faces, [0.0, normal, 0.0],
