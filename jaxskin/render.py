@@ -75,7 +75,7 @@ def prepare(config: SceneConfig) -> Prepared:
 def _prepare(config: SceneConfig) -> Prepared:
     s = texture.setup(config.texture)
     view = make_view(s.tmap, config.image, config.camera, config.supersample, config.fov,
-                     config.rotate, config.image_height)
+                     config.rotate, config.image_height, config.zoom, config.center)
     arrays = {"normals": s.normals, "mask": s.mask, "tex": jnp.asarray(view.tex),
               "view_mask": jnp.asarray(view.mask),
               "pad": jnp.asarray(pad_index(s.tmap.raster.mask, s.tmap.wrap_x), jnp.int32)}

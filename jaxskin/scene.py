@@ -39,6 +39,10 @@ height = 0                         # image pixels high; 0: square. A -D camera.s
 supersample = 2                    # 1–4 samples per pixel per axis (2: antialiased)
 fov = 30.0                         # perspective only, degrees
 rotate = [0.0, 0.0, 0.0]           # degrees about x, y, z: turns the mesh
+zoom = 1.0                         # 1–64: magnifies the frame about `center` (a close-up;
+                                   #   raise texture.size with it to keep texels small)
+center = [0.0, 0.0]                # the point zoomed into, in fractions of the whole
+                                   #   frame from its middle, x right and y up (-0.5–0.5)
 [view]
 mode = "wrinkles"                  # wrinkles | overview (no wrinkles) | height
 [[fields.edit]]                    # any number; none: the initial fields
@@ -181,6 +185,8 @@ SCHEMA: dict[str, _Key] = {
     "camera.fov": _Key(float, 30.0, 1.0, 120.0),
     "camera.exposure": _Key(float, 0.0, -20.0, 20.0, param=True),
     "camera.rotate": _Key("vec3", (0.0, 0.0, 0.0)),
+    "camera.zoom": _Key(float, 1.0, 1.0, 64.0),
+    "camera.center": _Key("vec2", (0.0, 0.0), -0.5, 0.5),
     "view.mode": _Key(str, "wrinkles", choices=("wrinkles", "overview", "height")),
     "skin.model": _Key(str, "nist", choices=("nist", "biophysical")),
     "skin.subject": _Key(int, 1, 1, 100),
@@ -304,6 +310,8 @@ class SceneConfig:
     image_height: int = 0  # 0: square
     # The light direction (camera space) the shadow map is made for; None: no shadows.
     shadow: tuple[float, float, float] | None = None
+    zoom: float = 1.0  # camera.zoom: the frame magnified about `center`
+    center: tuple[float, float] = (0.0, 0.0)  # camera.center, fractions of the frame, y up
 
     @property
     def needs_furrows(self) -> bool:
@@ -355,7 +363,8 @@ class Scene:
                            v["camera.size"], v["camera.supersample"], v["camera.fov"],
                            tuple(v["camera.rotate"]), v["view.mode"], spectral,
                            v["camera.height"],
-                           tuple(v["light.direction"]) if v["light.shadows"] else None)
+                           tuple(v["light.direction"]) if v["light.shadows"] else None,
+                           v["camera.zoom"], tuple(v["camera.center"]))
 
     @property
     def skin_model(self) -> str:
@@ -540,6 +549,12 @@ def _check(key: str, value, where, layers=()):
         hint = f"; did you mean '{near[0]}'?" if near else f"; valid keys: {', '.join(SCHEMA)}"
         raise InputError(f"unknown key{hint}", where, key=key)
     kind = spec.kind
+    if kind == "vec2":
+        value = _vector(value, key, where, n=2)
+        if not all(spec.lo <= c <= spec.hi for c in value):
+            raise InputError(f"each number must be in [{spec.lo:g}, {spec.hi:g}], got "
+                             f"{list(value)!r}", where, key=key)
+        return value
     if kind == "vec3":
         value = _vector(value, key, where)
         if spec.param and key == "light.direction" and not any(value):
@@ -578,9 +593,10 @@ def _finite_list(value, n: int, positive: bool = False) -> bool:
         and (c > 0 or not positive) for c in value)
 
 
-def _vector(value, key, path, limit=None):
-    if not _finite_list(value, 3):
-        raise InputError(f"expected three finite numbers, got {value!r}", path, key=key)
+def _vector(value, key, path, limit=None, n=3):
+    if not _finite_list(value, n):
+        raise InputError(f"expected {('two', 'three')[n - 2]} finite numbers, got {value!r}",
+                         path, key=key)
     if limit is not None and math.hypot(*value) > limit + 1e-9:
         raise InputError(f"magnitude must be in [0, {limit:g}] (the paper's range), got "
                          f"{math.hypot(*value):.3g}", path, key=key)

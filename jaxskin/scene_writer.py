@@ -55,7 +55,7 @@ def scene_toml(scene: Scene, values: dict | None = None, images: dict | None = N
             continue
         value = v[key]
         default = spec.default
-        if spec.kind == "vec3":
+        if spec.kind in ("vec2", "vec3"):
             value = [float(c) for c in value]
             default = list(default)
         elif spec.kind is float:

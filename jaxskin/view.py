@@ -65,9 +65,13 @@ class View:
 
 def make_view(tmap: TextureMap, size: int, projection: str = "orthographic",
               supersample: int = 1, fov: float = 30.0, rotate=(0.0, 0.0, 0.0),
-              height: int = 0) -> View:
+              height: int = 0, zoom: float = 1.0, center=(0.0, 0.0)) -> View:
     """The view of `tmap`'s mesh in an image `size` pixels wide and `height` high (0:
-    square); the mesh's bounding box fills the image's shorter side, less a margin."""
+    square); the mesh's bounding box fills the image's shorter side, less a margin.
+
+    `zoom` magnifies that frame about `center` (fractions of the frame from its middle, x
+    right, y up): a crop of the image plane, so the view at `zoom` 2 is exactly the middle
+    of the view at twice the size, for either projection (the pinhole stays put)."""
     mesh = tmap.mesh
     n = size * supersample
     m = (height or size) * supersample
@@ -96,6 +100,9 @@ def make_view(tmap: TextureMap, size: int, projection: str = "orthographic",
     else:
         raise ValueError(f"camera projection must be orthographic or perspective, got "
                          f"{projection!r}")
+    if zoom != 1.0 or any(center):
+        focus = np.array([n * (0.5 + center[0]), m * (0.5 - center[1])])
+        xy = (xy - focus) * zoom + np.array([n / 2, m / 2])
     r = rasterize(xy, mesh.faces, m, n, depth=depth)
     bary = r.bary.astype(np.float64)
     safe = np.where(r.tri >= 0, r.tri, 0)

@@ -587,6 +587,18 @@ def test_edit_in_the_browser_then_render_the_saved_scene(tmp_path, browser):
         assert d.execute_script("return S.painted") == ["blush"], (d.execute_script(
             "return document.getElementById('message').textContent"), d.get_log("browser"))
 
+        # The wheel zooms about the pointer (camera.zoom, camera.center: a new render, not
+        # a magnified image): right of and above the middle, the centre moves there.
+        from selenium.webdriver.common.actions.wheel_input import ScrollOrigin
+
+        ActionChains(d).scroll_from_origin(ScrollOrigin.from_element(overlay, 40, -30), 0,
+                                           -300).perform()
+        v = wait_idle(d, v)
+        zoom, centre = d.execute_script("return [S.values['camera.zoom'], "
+                                        "S.values['camera.center']]")
+        assert zoom > 1.2 and centre[0] > 0 and centre[1] > 0, (zoom, centre)
+        assert "camera.zoom=" in d.current_url
+
         # Save, then the CLI renders the saved scene: the page's last image, byte for byte.
         name = d.find_element(By.ID, "save-name")
         name.clear()

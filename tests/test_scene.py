@@ -48,6 +48,12 @@ BAD = [
     ("supersample", GOOD + "[camera]\nsupersample = 8\n", "camera.supersample", "[1, 4]"),
     ("view mode", GOOD + "[view]\nmode = \"wire\"\n", "view.mode", "wrinkles, overview, height"),
     ("camera typo", GOOD + "[camera]\nsise = 8\n", "camera.sise", "did you mean 'camera.size'"),
+    ("zoom below 1", GOOD + "[camera]\nzoom = 0.5\n", "camera.zoom", "[1, 64]"),
+    ("zoom nan", GOOD + "[camera]\nzoom = nan\n", "camera.zoom", "finite number"),
+    ("center outside", GOOD + "[camera]\ncenter = [0.6, 0.0]\n", "camera.center", "[-0.5, 0.5]"),
+    ("center three", GOOD + "[camera]\ncenter = [0, 0, 0]\n", "camera.center", "two finite numbers"),
+    ("center text", GOOD + "[camera]\ncenter = \"lips\"\n", "camera.center", "two finite numbers"),
+    ("center inf", GOOD + "[camera]\ncenter = [inf, 0]\n", "camera.center", "two finite numbers"),
 ]
 
 

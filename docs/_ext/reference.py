@@ -157,8 +157,8 @@ def fmt(value) -> str:
 
 
 def key_type(kind) -> str:
-    return "3 numbers" if kind == "vec3" else {bool: "boolean", int: "integer", float: "number",
-                                                str: "string"}[kind]
+    return {"vec2": "2 numbers", "vec3": "3 numbers", bool: "boolean", int: "integer",
+            float: "number", str: "string"}[kind]
 
 
 def key_range(spec) -> str:
@@ -176,6 +176,8 @@ def number(x) -> str:
 def values(spec) -> str:
     """The key's type, and its range or choices."""
     span = key_range(spec)
+    if spec.kind == "vec2" and span:
+        span = f"each {span}"
     return f"{key_type(spec.kind)}, {span}" if span and spec.choices is None else (
         span or key_type(spec.kind))
 

@@ -12,8 +12,6 @@ let tool = localStorage.getItem("jaxskin.tool") || "fields";
 let selected = -1;       // the selected field edit
 let arrows = null;       // {arrows, edits} from /api/fields
 let drag = null;         // the pointer gesture in progress
-let magnify = 1;         // the viewer's zoom of an orthographic view (the image is unchanged)
-let pan = [0, 0];        // and its offset, screen pixels
 
 // --- the server --------------------------------------------------------------------------
 
@@ -226,12 +224,13 @@ function control(key, spec, value) {
     c.onchange = () => change({[key]: spec.kind === "int" ? parseInt(c.value) : c.value}, false);
     ctl.append(c);
     div.update = (v) => { c.value = v; };
-  } else if (spec.kind === "vec3") {
-    const lim = key === "camera.rotate" ? 180 : key.startsWith("light") ? 1 : 2;
+  } else if (spec.kind === "vec3" || spec.kind === "vec2") {
+    const lim = key === "camera.rotate" ? 180 : key.startsWith("light") ? 1 :
+      spec.hi !== null ? spec.hi : 2;
     const vec = document.createElement("div");
     vec.className = "vec";
     const inputs = [];
-    ["x", "y", "z"].forEach((axis, i) => {
+    ["x", "y", "z"].slice(0, spec.kind === "vec2" ? 2 : 3).forEach((axis, i) => {
       const r = document.createElement("input");
       r.type = "range"; r.min = -lim; r.max = lim; r.step = lim / 200; r.value = value[i];
       r.name = `${key}.${axis}`;
@@ -508,26 +507,42 @@ function fitStage() {
 }
 
 function placeStage() {
-  $("stage").style.transform = `translate(${pan[0]}px, ${pan[1]}px) scale(${magnify})`;
+  $("stage").style.transform = "";
+}
+
+function camera() {
+  // camera.zoom and camera.center as they will be once the pending changes land
+  const v = Object.assign({}, S.values, C.pending || {});
+  return [v["camera.zoom"], v["camera.center"]];
 }
 
 function zoomAt(ev, factor) {
-  // magnify about the pointer: the point under it stays put
-  const vp = $("viewport").getBoundingClientRect(), st = $("stage");
-  const cx = ev.clientX - vp.left - st.offsetLeft, cy = ev.clientY - vp.top - st.offsetTop;
-  const m = Math.min(8, Math.max(1, magnify * factor));
-  pan = m === 1 ? [0, 0] : [cx - (cx - pan[0]) * m / magnify, cy - (cy - pan[1]) * m / magnify];
-  magnify = m;
-  placeStage();
-  sizeOverlay();
+  // camera.zoom about the pointer (a new render, sharp at any zoom): the point of the
+  // mesh under the pointer stays put; camera.center is in fractions of the whole frame
+  const [z, c] = camera();
+  const r = $("view").getBoundingClientRect();
+  const px = (ev.clientX - r.left) / r.width - 0.5, py = 0.5 - (ev.clientY - r.top) / r.height;
+  const zn = Math.min(64, Math.max(1, z * factor));
+  const clamp = (x) => Math.round(Math.min(0.5, Math.max(-0.5, x)) * 1e4) / 1e4;
+  const cn = zn === 1 ? [0, 0] : [clamp(c[0] + px / z - px / zn), clamp(c[1] + py / z - py / zn)];
+  change({"camera.zoom": Math.round(zn * 1e3) / 1e3, "camera.center": cn}, false);
+}
+
+function panBy(dx, dy) {
+  // a drag of (dx, dy) screen pixels moves the zoomed frame with the pointer
+  const [z, c] = camera();
+  const r = $("view").getBoundingClientRect();
+  const clamp = (x) => Math.round(Math.min(0.5, Math.max(-0.5, x)) * 1e4) / 1e4;
+  change({"camera.center": [clamp(c[0] - dx / r.width / z), clamp(c[1] + dy / r.height / z)]},
+         false);
 }
 
 function sizeOverlay() {
   const img = $("view"), c = $("overlay");
   const r = img.getBoundingClientRect();
   const dpr = window.devicePixelRatio || 1;
-  c.width = Math.round(r.width / magnify * dpr);
-  c.height = Math.round(r.height / magnify * dpr);
+  c.width = Math.round(r.width * dpr);
+  c.height = Math.round(r.height * dpr);
   draw();
 }
 
@@ -539,7 +554,7 @@ function toImage(ev) {
 
 function screenScale() {
   // screen pixels per image pixel, the viewer's magnification aside
-  return $("view").getBoundingClientRect().width / magnify / S.image[0] || 1;
+  return $("view").getBoundingClientRect().width / S.image[0] || 1;
 }
 
 function draw() {
@@ -704,7 +719,7 @@ function setTool(t) {
   $("fields-panel").classList.toggle("hidden", t !== "fields");
   $("paint-panel").classList.toggle("hidden", t !== "paint");
   $("hint").textContent = {
-    orbit: "drag: turn the mesh · wheel: zoom (the field of view; an orthographic view is magnified) · middle drag or Space+drag: pan · double-click: fit",
+    orbit: "drag: turn the mesh · wheel: zoom about the pointer (camera.zoom) · middle drag or Space+drag: pan (camera.center) · double-click: the whole mesh",
     fields: "click the mesh: add an edit at the nearest vertex · drag: its direction and magnitude · Shift: d2",
     paint: "drag: paint the layer's thickness · Alt: erase · [ ]: brush size",
   }[t];
@@ -721,28 +736,32 @@ function wire() {
   $("viewport").addEventListener("wheel", (ev) => {
     ev.preventDefault();
     if (!S) return;
-    if (S.values["camera.projection"] === "perspective") {
-      const fov = Math.min(120, Math.max(1, S.values["camera.fov"] * Math.exp(ev.deltaY * 0.001)));
-      change({"camera.fov": Math.round(fov * 10) / 10}, false);
-    } else {
-      zoomAt(ev, Math.exp(-ev.deltaY * 0.0015));
-    }
+    zoomAt(ev, Math.exp(-ev.deltaY * 0.0015));
   }, {passive: false});
-  $("viewport").addEventListener("dblclick", () => { magnify = 1; pan = [0, 0]; fitStage(); });
+  $("viewport").addEventListener("dblclick", () => {
+    if (S) change({"camera.zoom": 1, "camera.center": [0, 0]}, false);
+  });
   // the middle button (or any button with Space held) pans a magnified view
   let panning = null, space = false;
   window.addEventListener("keydown", (ev) => { if (ev.code === "Space" && ev.target === document.body) { space = true; ev.preventDefault(); } });
   window.addEventListener("keyup", (ev) => { if (ev.code === "Space") space = false; });
   $("viewport").addEventListener("pointerdown", (ev) => {
     if (ev.button === 1 || space) {
-      panning = [ev.clientX - pan[0], ev.clientY - pan[1]];
+      panning = [ev.clientX, ev.clientY];
       ev.preventDefault(); ev.stopPropagation();
     }
   }, true);
   window.addEventListener("pointermove", (ev) => {
-    if (panning) { pan = [ev.clientX - panning[0], ev.clientY - panning[1]]; placeStage(); }
+    if (panning) $("stage").style.transform =
+      `translate(${ev.clientX - panning[0]}px, ${ev.clientY - panning[1]}px)`;
   });
-  window.addEventListener("pointerup", () => { panning = null; });
+  window.addEventListener("pointerup", (ev) => {
+    if (!panning) return;
+    const [x0, y0] = panning;
+    panning = null;
+    placeStage();
+    if (S && (ev.clientX !== x0 || ev.clientY !== y0)) panBy(ev.clientX - x0, ev.clientY - y0);
+  });
   $("show-arrows").onchange = () => (S && $("show-arrows").checked ? loadArrows() : draw());
   $("edit-weight").oninput = () => { $("edit-weight-out").textContent = $("edit-weight").value; };
   $("edit-weight").onchange = () => {
