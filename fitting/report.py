@@ -43,7 +43,8 @@ def write_report(m: Measurement, r: KMFit, path) -> None:
     ax.plot(wl, m.R_g, "--", color="k", lw=1, label="R_g (background)")
     ax.set(xlabel="wavelength (nm)", ylabel="reflectance", ylim=(0, None),
            title=f"{m.name}: data and fit (rmse {r.rmse:.2e})")
-    ax.legend(fontsize=7, ncol=2)
+    # below the axes: inside, ten entries covered the data (the lipstick around 600 nm)
+    ax.legend(fontsize=7, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.16))
 
     ax = axes[1]
     _shade(ax, wl, r.identifiable)

@@ -79,8 +79,8 @@ def test_readme_shell_examples_run(tmp_path):
     """Each line runs in an empty folder with the environment's `jaxskin`; renders get tiny
     sizes appended (-D wins in order). Files the examples name are made first: the README's
     scene file as my_scene.toml, a Lafortune file at out/skin_fit.json (the fit-brdf example
-    comes later), the example measurements as foundation.csv and lipstick.csv, the BRDF
-    samples at data/brdf/, the skin spectra at data/spectra/. The benchmark scripts take
+    comes later), the example measurements at data/measurements/, the BRDF samples at
+    data/brdf/, the skin spectra at data/spectra/ (the paths as in a checkout). The benchmark scripts take
     minutes: for those lines the script is imported and must have `main` (tests/test_benchmarks_smoke.py runs their parts)."""
     from jaxskin.formats import write_lafortune
     from jaxskin.shading import lafortune
@@ -88,9 +88,8 @@ def test_readme_shell_examples_run(tmp_path):
     if fenced("toml"):
         (tmp_path / "my_scene.toml").write_text(fenced("toml")[0])
     write_lafortune(lafortune.skin(), tmp_path / "out" / "skin_fit.json")
-    for src, dst in (("foundation_beige", "foundation"), ("lipstick_red", "lipstick")):
-        shutil.copy(ROOT / "data" / "measurements" / f"{src}.csv", tmp_path / f"{dst}.csv")
     (tmp_path / "data").mkdir()
+    shutil.copytree(ROOT / "data" / "measurements", tmp_path / "data" / "measurements")
     shutil.copytree(ROOT / "data" / "brdf", tmp_path / "data" / "brdf")
     shutil.copytree(ROOT / "data" / "spectra", tmp_path / "data" / "spectra")
     ran = 0
