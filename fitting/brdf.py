@@ -29,7 +29,7 @@ from jaxskin.formats import read_table
 from jaxskin.io import FitError, InputError, atomic_write
 from jaxskin.shading import lafortune
 
-__all__ = ["BRDFFit", "BRDFSamples", "fit", "read_samples", "write_report"]
+__all__ = ["BRDFFit", "BRDFSamples", "check_samples", "fit", "read_samples", "write_report"]
 
 ANGLES = ("theta_in_deg", "phi_in_deg", "theta_out_deg", "phi_out_deg")
 VECTORS = ("wi_x", "wi_y", "wi_z", "wo_x", "wo_y", "wo_z")
@@ -224,6 +224,16 @@ def _starts(rng, starts, lobes, f_c):
     return out
 
 
+def check_samples(samples, lobes: int) -> None:
+    """`InputError` when `samples` has fewer weighted samples than the `1 + 3 lobes`
+    parameters of a channel: checked before any work."""
+    params_per_channel = 1 + 3 * lobes
+    if np.count_nonzero(samples.weight) < params_per_channel:
+        raise InputError(f"{np.count_nonzero(samples.weight)} weighted samples cannot determine "
+                         f"{params_per_channel} parameters per channel ({lobes} lobes); give "
+                         "more samples or ask for fewer --lobes", samples.path)
+
+
 def fit(samples: BRDFSamples, lobes: int = 3, starts: int = 8, seed: int = 0,
         initial: lafortune.Lafortune | None = None, map_units=None) -> BRDFFit:
     """Fit ρd and `lobes` Lafortune lobes per channel.
@@ -240,11 +250,7 @@ def fit(samples: BRDFSamples, lobes: int = 3, starts: int = 8, seed: int = 0,
 
     **Returns:** a `BRDFFit`.
     """
-    params_per_channel = 1 + 3 * lobes
-    if np.count_nonzero(samples.weight) < params_per_channel:
-        raise InputError(f"{np.count_nonzero(samples.weight)} weighted samples cannot determine "
-                         f"{params_per_channel} parameters per channel ({lobes} lobes); give "
-                         "more samples or ask for fewer --lobes", samples.path)
+    check_samples(samples, lobes)
     rng = np.random.default_rng(seed)
     theta0 = np.stack([_starts(rng, starts, lobes, samples.f[:, c]) for c in range(3)])
     if initial is not None:

@@ -24,6 +24,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -238,6 +239,10 @@ def _reflectances(data, header, columns, path, numbers, percent, notes):
             raise InputError(f"the white standard must be > 0, got {white[bad[0]]:g}",
                              path, numbers[bad[0]], "E_white")
     plain = [index[n] for n in columns if not _is_radiance(n)]
+    if plain and percent and np.max(data[:, plain]) <= 1.0:
+        warnings.warn(f"{path}: --percent, but every reflectance is at most 1 (median "
+                      f"{np.median(data[:, plain]):.3g}): if they are fractions (0-1), leave "
+                      "--percent out", stacklevel=2)
     if plain and not percent:
         values = data[:, plain]
         if np.median(values) > PERCENT_MEDIAN:  # then [0, 100] is checked below

@@ -684,6 +684,7 @@ def _fit_brdf(args, run: _Run) -> int:
     report = None if args.no_report else outputs.plan(out.with_suffix(".png").name,
                                                       "the report")
     samples = brdf.read_samples(args.file)
+    brdf.check_samples(samples, args.lobes)
     from . import resources
 
     resources.check_memory(resources.fit_brdf_bytes(len(samples.f), args.lobes, args.starts),

@@ -28,6 +28,7 @@ import functools
 import json
 import math
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -415,6 +416,10 @@ def read_spectra(path, percent: bool = False) -> tuple[list[str], np.ndarray, np
         raise InputError("wavelengths must increase", path,
                          None if line_of is None else line_of[row], "wavelength")
     if percent:
+        if R.size and np.max(R) <= 1.0:
+            warnings.warn(f"{path}: --percent, but every reflectance is at most 1 (median "
+                          f"{np.median(R):.3g}): if they are fractions (0-1), leave --percent "
+                          "out", stacklevel=2)
         R = R / 100.0
     top = 100.0 if percent else 1.0
     for k, name in enumerate(names):

@@ -58,6 +58,9 @@ def slug(text: str) -> str:
 def check_folder(path, option: str = "-o") -> Path:
     """An output folder that exists (a writable folder) or can be created; nothing is
     created (a probe file in an existing folder is removed at once)."""
+    if not str(path).strip():
+        raise InputError(f"{option}: expected an output folder, got an empty name "
+                         "(use . for the current folder)")
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise InputError(f"{option}: expected a folder, but this is a file", path)
@@ -113,7 +116,7 @@ class Outputs:
         assert Path(os.path.abspath(path)).parent == Path(os.path.abspath(self.folder))
         if path in self.planned:
             raise InputError(f"two outputs are both named {filename!r} ({self.planned[path]} "
-                             f"and {what}); give the scenes distinct names")
+                             f"and {what}); give the inputs distinct names")
         for inp in self.inputs:
             if path.resolve() == inp.resolve() or (path.exists() and _same(path, inp)):
                 raise InputError(f"the output {path} would overwrite this input of the run; "

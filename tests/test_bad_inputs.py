@@ -98,6 +98,11 @@ def brdf_csv(tmp):
     return write(tmp, "samples.csv", (ROOT / "data" / "brdf" / "skin_samples.csv").read_text())
 
 
+def few_brdf_samples(tmp):
+    lines = (ROOT / "data" / "brdf" / "skin_samples.csv").read_text().splitlines()
+    return write(tmp, "few.csv", "\n".join(lines[:4]) + "\n")
+
+
 def measurement(tmp):
     return write(tmp, "blush.csv",
                  (ROOT / "data" / "measurements" / "blush_rose.csv").read_text())
@@ -236,6 +241,9 @@ CASES = {
     "out-unwritable": lambda t: ["render", "hand", "-o", "/proc/jaxskin-test-out", *SMALL],
     "out-read-only": read_only_folder,
     "out-is-input": output_is_input,
+    "out-empty": lambda t: ["render", "hand", "-o", "", *SMALL],
+    "fit-brdf-too-few-samples": lambda t: ["fit-brdf", few_brdf_samples(t), "-o",
+                                           str(t / "f.json")],
     "out-link-to-input": symlinked_output,
     "fit-brdf-memory": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "f.json"), "--lobes",
                                   "16", "--starts", "1024"],
@@ -285,13 +293,14 @@ def run(argv, tmp, capsys, subprocess_run: bool):
     if subprocess_run:
         proc = subprocess.run([sys.executable, "-m", "jaxskin", *argv], capture_output=True,
                               text=True, cwd=tmp, timeout=120)
-        return proc.returncode, proc.stderr
+        return proc.returncode, proc.stderr, proc.stdout
     capsys.readouterr()
     try:
         code = main(argv)
     except SystemExit as e:  # argparse
         code = e.code
-    return code, capsys.readouterr().err
+    out = capsys.readouterr()
+    return code, out.err, out.out
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
@@ -301,9 +310,10 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(case, tmp_path, capsys,
     monkeypatch.chdir(work)
     argv = CASES[case](work)
     before = snapshot(tmp_path)
-    code, err = run(argv, work, capsys, case in SUBPROCESS)
+    code, err, out = run(argv, work, capsys, case in SUBPROCESS)
     lines = err.splitlines()
     assert code == 2, (code, err)
+    assert out == "", out  # checked before any work: no progress line before the error
     assert len(lines) == 1 and lines[0].startswith("jaxskin: error: "), err
     assert "Traceback" not in err
     assert snapshot(tmp_path) == before  # nothing written, nothing changed, inputs intact

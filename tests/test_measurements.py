@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from jaxskin.fitting.measurements import read_measurement
-from jaxskin.io import InputError
+from jaxskin.io import InputError, data_dir
 
 GOOD = """# name: test_foundation
 wavelength_nm,R_0.05mm,R_0.15mm,R_inf,R_g
@@ -201,3 +201,24 @@ def test_dark_percent_data_is_not_guessed(tmp_path):
         read_measurement(write(tmp_path, text))
     m = read_measurement(write(tmp_path, text), percent=True)
     np.testing.assert_allclose(m.R_inf, [0.012, 0.013, 0.012])
+
+
+def test_percent_on_fractions_warns(tmp_path):
+    """`--percent` given to data already in 0-1 (a newcomer's slip: the fit then ran on
+    reflectances 100x too dark and said nothing): calibrate's and fit-skin's readers warn,
+    naming the file; percent data with the flag does not warn."""
+    import warnings
+
+    from jaxskin.formats import read_spectra
+
+    src = data_dir() / "measurements" / "lipstick_red.csv"
+    (tmp_path / "m.csv").write_text(src.read_text())
+    with pytest.warns(UserWarning, match=r"m\.csv: --percent, but every reflectance is at most 1"):
+        read_measurement(tmp_path / "m.csv", percent=True)
+    (tmp_path / "s.csv").write_text("wavelength_nm,a\n400,0.2\n500,0.3\n600,0.4\n")
+    with pytest.warns(UserWarning, match=r"s\.csv: --percent, but every reflectance"):
+        read_spectra(tmp_path / "s.csv", percent=True)
+    (tmp_path / "p.csv").write_text("wavelength_nm,a\n400,20\n500,30\n600,40\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_spectra(tmp_path / "p.csv", percent=True)
