@@ -637,7 +637,8 @@ def _layer(i, e, path, values) -> LayerSpec:
     _known(e, LAYER_KEYS, path, where)
     name = e.get("name")
     if not isinstance(name, str) or not name.isidentifier():
-        raise InputError(f"expected a name (letters, digits, _), got {name!r}", path,
+        got = "none (add name = \"...\")" if name is None else repr(name)
+        raise InputError(f"expected a name (letters, digits, _), got {got}", path,
                          key=f"{where}.name")
     where = f"layer.{name}"
     for k, spec in LAYER_SCHEMA.items():
