@@ -273,3 +273,14 @@ def test_a_sweep_key_typo_gets_a_suggestion():
         _parse_sweep("layer.lipstik.thickness_mm=0:0.03:3", makeup)
     with pytest.raises(InputError, match="parameters: wrinkles.k_noise"):
         _parse_sweep("camera.size=16:32:2", makeup)
+
+
+def test_list_shows_each_scene_description_whole(capsys):
+    """`jaxskin list` gives each built-in scene's first sentence; none is cut off with '…'
+    (the face's and the makeup's once were, with no way to read the rest)."""
+    from jaxskin.scene import BUILTIN_SCENES
+
+    assert main(["list"]) == 0
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("scene")]
+    assert [r.split()[1] for r in rows] == list(BUILTIN_SCENES)
+    assert all(not r.endswith("…") and r.endswith(".") for r in rows), rows
