@@ -36,6 +36,7 @@ CASES = [
     ("mixed delimiters", GOOD.replace("0.31,0.41,0.46,0.04", "0.31;0.41;0.46;0.04"), 4, None,
      "semicolons"),
     ("ragged row, short", GOOD.replace("0.41,0.46", "0.41"), 4, None, "4 cells where"),
+    ("empty last cell", GOOD.replace("0.46,0.04", "0.46,"), 4, "R_g", "empty cell"),
     ("ragged row, long", GOOD.replace("0.41,0.46", "0.41,0.46,0.5"), 4, None, "6 cells where"),
     ("NaN cell", GOOD.replace("0.41", "NaN"), 4, "R_0.15mm", "finite"),
     ("inf cell", GOOD.replace("0.46", "-inf"), 4, "R_inf", "finite"),
