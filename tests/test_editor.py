@@ -654,3 +654,32 @@ def test_a_faint_16_bit_map_reads_at_its_full_scale(tmp_path):
     assert got[1, 2] == 200 / 65535 and got.sum() == got[1, 2]
     (tmp_path / "eight.png").write_bytes(maps.png_bytes(q.astype(np.uint8)))
     assert maps.read_grey(tmp_path / "eight.png")[1, 2] == 200 / 255
+
+
+def test_a_save_keeps_the_scene_files_comments(tmp_path):
+    """Saving over a scene keeps its comments and layout where its keys stay (the saved TOML
+    once lost every comment): a changed value is replaced in place, a new key added, a
+    removed one dropped, and the file reads back equal to the plain writer's."""
+    import tomllib
+
+    from jaxskin.editor.state import keep_comments
+
+    source = ('# my notes on this scene\nname = "mine"\n[mesh]\nfile = "hand"  # the low-res one\n'
+              '[material]\n# tuned by eye\nmelanin = 0.3\nblood = 0.4  # a bit pale\n'
+              '[camera]\nsize = 64\n')
+    (tmp_path / "mine.toml").write_text(source)
+    s = Session(str(tmp_path / "mine.toml"), tmp_path / "out")
+    s.set({"material.melanin": 0.45, "light.ambient": 0.2})
+    s.save("mine")
+    text = (tmp_path / "out" / "mine.toml").read_text()
+    for comment in ("# my notes on this scene", "# the low-res one", "# tuned by eye"):
+        assert comment in text, text
+    doc = tomllib.loads(text)
+    assert doc["material"] == {"melanin": 0.45, "blood": 0.4} and doc["light"]["ambient"] == 0.2
+    assert doc == tomllib.loads(dumps(s.document()))
+    # a key removed takes its comment with it
+    del doc["material"]["blood"]
+    assert "# a bit pale" not in keep_comments(source, doc)
+    assert tomllib.loads(keep_comments(source, doc)) == doc
+    # a document the styled route cannot reproduce falls back to the plain text
+    assert keep_comments("not [ toml", {"a": 1}) == dumps({"a": 1})

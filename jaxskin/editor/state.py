@@ -108,6 +108,7 @@ class Session:
         self._check(scene_obj)
         self.source = scene if scene in BUILTIN_SCENES else str(path)
         self.path, self.base = path, base
+        self.text = path.read_text(encoding="utf-8")  # its comments, kept by a save
         self.changes: dict = {}
         self.paint: dict[str, np.ndarray] = {}
         self.scene = scene_obj
@@ -554,7 +555,7 @@ class Session:
                 for k in ("image", "ellipse", "polygon"):
                     table.pop(k, None)
                 table["image"] = pngs[table["name"]].name
-        text = dumps(doc)
+        text = keep_comments(self.text, doc)
         self.output.mkdir(parents=True, exist_ok=True)
         for layer, p in pngs.items():
             with atomic_write(p, "wb") as fh:
@@ -680,3 +681,41 @@ def _jsonable(v):
     return v
 
 
+
+
+def keep_comments(source: str, doc: dict) -> str:
+    """`doc` as TOML text, written over the `source` text it was edited from so that the
+    source's comments and layout stay where its keys stay (tomlkit, the `edit` extra):
+    changed values are replaced, new keys added at the end of their table, removed ones
+    dropped. The result must read back equal to `doc`, as `dumps(doc)` does; when it does
+    not (or tomlkit is missing) it is `dumps(doc)`, with no comments."""
+    plain = dumps(doc)
+    try:
+        import tomlkit
+
+        styled = tomlkit.parse(source)
+        _sync(styled, doc)
+        text = tomlkit.dumps(styled)
+        if tomllib.loads(text) == tomllib.loads(plain):
+            return text
+    except Exception:  # any surprise in the styled route: the plain text is always right
+        pass
+    return plain
+
+
+def _sync(table, want: dict) -> None:
+    """Make the tomlkit `table` equal to `want` in place, touching only what differs."""
+    for key in [k for k in table if k not in want]:
+        del table[key]
+    for key, value in want.items():
+        have = table.get(key)
+        if isinstance(value, dict) and isinstance(have, dict):
+            _sync(have, value)
+        elif (isinstance(value, list) and value and all(isinstance(v, dict) for v in value)
+              and isinstance(have, list) and len(have) == len(value)
+              and all(isinstance(h, dict) for h in have)):
+            for h, v in zip(have, value, strict=True):
+                _sync(h, v)
+        elif have is None or have != value or type(have.unwrap() if hasattr(have, "unwrap")
+                                                 else have) is not type(value):
+            table[key] = value
