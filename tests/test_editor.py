@@ -220,7 +220,11 @@ def test_paths_stay_inside_the_scene_and_output_folders(session, folder):
         for key, value in (("mesh.file", "/etc/passwd"), ("mesh.file", "../../x.obj"),
                            ("material.brdf", "../secret.toml"),
                            ("layer.blush.material", "../secret.json"),
-                           ("layer.blush.material", "/etc/passwd")):
+                           ("layer.blush.material", "/etc/passwd"),
+                           # the skin's map images: once opened and decoded wherever they were
+                           ("skin.melanin_image", "/etc/passwd"),
+                           ("skin.haemoglobin_image", "../../../../tmp/outside.png"),
+                           ("skin.melanin_fraction_image", str(folder / "secret.toml"))):
             r = await c.post("/api/set", json={"changes": {key: value}})
             data = await r.json()
             assert r.status == 403 and "outside the folders" in data["error"], (key, data)
@@ -683,3 +687,18 @@ def test_a_save_keeps_the_scene_files_comments(tmp_path):
     assert tomllib.loads(keep_comments(source, doc)) == doc
     # a document the styled route cannot reproduce falls back to the plain text
     assert keep_comments("not [ toml", {"a": 1}) == dumps({"a": 1})
+
+
+def test_a_save_elsewhere_rewrites_the_skin_map_images_paths(tmp_path):
+    """Saved into another folder, a scene's relative paths are rewritten to still name the
+    same files: the skin's map images too (they were left as they were, so the saved
+    scene named files that are not there)."""
+    from jaxskin.editor.document import relocate
+
+    doc = {"skin": {"melanin_image": "maps/m.png", "haemoglobin_image": "h.png"},
+           "layer": [{"name": "blush", "material": "blush_rose", "image": "b.png"}]}
+    relocate(doc, tmp_path / "src", tmp_path / "out")
+    assert doc["skin"] == {"melanin_image": "../src/maps/m.png",
+                           "haemoglobin_image": "../src/h.png"}
+    assert doc["layer"][0]["image"] == "../src/b.png"
+    assert doc["layer"][0]["material"] == "blush_rose"  # a shipped name stays a name

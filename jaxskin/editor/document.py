@@ -10,6 +10,7 @@ from pathlib import Path
 
 from .. import cosmetics
 from ..mesh import BUILTIN as BUILTIN_MESHES
+from ..scene import SKIN_MAPS
 
 __all__ = ["EditorError", "keep_aspect", "pair", "put", "relocate"]
 
@@ -105,6 +106,11 @@ def relocate(doc: dict, source: Path, output: Path) -> None:
     material = doc.get("material", {})
     if isinstance(material.get("brdf"), str) and material["brdf"] != "skin":
         material["brdf"] = moved(material["brdf"])
+    skin = doc.get("skin", {})
+    for key in [image for _, image in SKIN_MAPS.values()]:  # skin.melanin_image, ...
+        name = key.split(".", 1)[1]
+        if isinstance(skin.get(name), str):
+            skin[name] = moved(skin[name])
     for table in doc.get("layer", []):
         m = table.get("material")
         if isinstance(m, str) and m not in cosmetics.shipped_materials():

@@ -38,6 +38,7 @@ from ..scene import (
     BUILTIN_SCENES,
     LAYER_SCHEMA,
     SCHEMA,
+    SKIN_MAPS,
     LayerSpec,
     Scene,
     SceneConfig,
@@ -52,7 +53,9 @@ from .document import EditorError, keep_aspect, pair, put, relocate
 __all__ = ["EditorError", "Session"]
 
 HISTORY = 50  # undo steps kept
-PATH_KEYS = ("mesh.file", "material.brdf")
+# Every scene key that names a file: confined to the session's folders (the skin's map
+# images once were not: the page could have the server open any file).
+PATH_KEYS = ("mesh.file", "material.brdf", *(image for _, image in SKIN_MAPS.values()))
 LAYER_SET = ("material", *LAYER_SCHEMA)  # what the page may set on a layer
 
 
@@ -263,6 +266,8 @@ class Session:
             try:
                 value = str(self.confine(value, key, self.path.parent))
             except EditorError as e:
+                if key not in ("mesh.file", "material.brdf"):  # an image: no built-in ones
+                    raise
                 builtin = ("a built-in mesh: " + ", ".join(BUILTIN_MESHES)
                            if key == "mesh.file" else 'the built-in "skin"')
                 if isinstance(value, str) and not {"/", "\\"} & set(value) and not any(
