@@ -685,6 +685,16 @@ def test_a_save_keeps_the_scene_files_comments(tmp_path):
     del doc["material"]["blood"]
     assert "# a bit pale" not in keep_comments(source, doc)
     assert tomllib.loads(keep_comments(source, doc)) == doc
+    # an array of tables grown or shrunk (field edits): the tables kept keep their comments
+    src = ('[[fields.edit]]  # forehead\nvertex = 1\nd1 = [1.0, 0.0, 0.0]\nd2 = [0.0, 1.0, 0.0]\n'
+           '[[fields.edit]]  # cheek\nvertex = 2\nd1 = [1.0, 1.0, 0.0]\nd2 = [-1.0, 1.0, 0.0]\n')
+    edits = tomllib.loads(src)
+    edits["fields"]["edit"].append({"vertex": 3, "d1": [0.5, 0, 0], "d2": [0, 0.5, 0]})
+    grown = keep_comments(src, edits)
+    assert "# forehead" in grown and "# cheek" in grown and tomllib.loads(grown) == edits
+    edits["fields"]["edit"] = edits["fields"]["edit"][:1]
+    shrunk = keep_comments(src, edits)
+    assert "# forehead" in shrunk and "# cheek" not in shrunk and tomllib.loads(shrunk) == edits
     # a document the styled route cannot reproduce falls back to the plain text
     assert keep_comments("not [ toml", {"a": 1}) == dumps({"a": 1})
 

@@ -717,10 +717,15 @@ def _sync(table, want: dict) -> None:
         if isinstance(value, dict) and isinstance(have, dict):
             _sync(have, value)
         elif (isinstance(value, list) and value and all(isinstance(v, dict) for v in value)
-              and isinstance(have, list) and len(have) == len(value)
-              and all(isinstance(h, dict) for h in have)):
-            for h, v in zip(have, value, strict=True):
+              and isinstance(have, list) and have and all(isinstance(h, dict) for h in have)):
+            # an array of tables (field edits, layers): the common part kept table by
+            # table with its comments, the rest appended or dropped at the end
+            for h, v in zip(have, value, strict=False):
                 _sync(h, v)
+            while len(have) > len(value):
+                del have[-1]
+            for v in value[len(have):]:
+                have.append(v)
         elif have is None or have != value or type(have.unwrap() if hasattr(have, "unwrap")
                                                  else have) is not type(value):
             table[key] = value
