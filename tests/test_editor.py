@@ -595,13 +595,30 @@ def test_edit_in_the_browser_then_render_the_saved_scene(tmp_path, browser):
         # a magnified image): right of and above the middle, the centre moves there.
         from selenium.webdriver.common.actions.wheel_input import ScrollOrigin
 
-        ActionChains(d).scroll_from_origin(ScrollOrigin.from_element(overlay, 40, -30), 0,
-                                           -300).perform()
+        # Two notches in quick succession compound (the second once reused the zoom from
+        # before the first, still in flight): exp(0.45) each, 2.46 together.
+        origin = ScrollOrigin.from_element(overlay, 40, -30)
+        ActionChains(d).scroll_from_origin(origin, 0, -300).scroll_from_origin(
+            origin, 0, -300).perform()
         v = wait_idle(d, v)
+        time.sleep(0.5)  # the second notch, if it went on its own
+        v = wait_idle(d)
         zoom, centre = d.execute_script("return [S.values['camera.zoom'], "
                                         "S.values['camera.center']]")
-        assert zoom > 1.2 and centre[0] > 0 and centre[1] > 0, (zoom, centre)
+        assert zoom == pytest.approx(np.exp(0.9), abs=0.01) and centre[0] > 0 and centre[1] > 0, (
+            zoom, centre)
         assert "camera.zoom=" in d.current_url
+
+        # A vector's number box sends what was typed (the slider beside it once clamped
+        # 270 to 180 without a word): camera.rotate y = 270 is a valid turn.
+        box = d.find_element(By.CSS_SELECTOR, 'input[type=number][name="camera.rotate.y"]') \
+            if d.find_elements(By.CSS_SELECTOR, 'input[type=number][name="camera.rotate.y"]') \
+            else d.find_elements(By.CSS_SELECTOR, '.param[data-key="camera.rotate"] '
+                                                   'input[type=number]')[1]
+        d.execute_script("arguments[0].value = '270'; arguments[0].dispatchEvent("
+                         "new Event('change'))", box)
+        v = wait_idle(d, v)
+        assert d.execute_script("return S.values['camera.rotate']")[1] == 270
 
         # Save, then the CLI renders the saved scene: the page's last image, byte for byte.
         name = d.find_element(By.ID, "save-name")

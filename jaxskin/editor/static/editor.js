@@ -155,6 +155,7 @@ async function sendChanges() {
   const values = C.pending, preview = C.render;
   C.pending = null; C.render = null;
   C.inFlight = true;
+  C.sent = values;  // what the server will hold once it answers (the wheel builds on it)
   try {
     const state = await api("POST", "/api/set", {changes: values});
     clearParamErrors();
@@ -168,6 +169,7 @@ async function sendChanges() {
     document.body.dataset.idle = "1";
   } finally {
     C.inFlight = false;
+    C.sent = null;  // the answer (or the state fetched after a refusal) is in S now
     sendChanges();
   }
 }
@@ -238,12 +240,12 @@ function control(key, spec, value) {
       n.type = "number"; n.step = "any"; n.value = value[i];
       guardNumber(n, key, spec);
       const lab = document.createElement("span"); lab.textContent = axis;
-      const read = () => inputs.map((p) => parseFloat(p[0].value));
+      const read = () => inputs.map((p) => parseFloat(p[1].value));
       r.oninput = () => { n.value = r.value; change({[key]: read()}, true); };
-      r.onchange = () => change({[key]: read()}, false);
+      r.onchange = () => { n.value = r.value; change({[key]: read()}, false); };
       n.onchange = () => {
         if (!isFinite(parseFloat(n.value))) { n.value = r.value; notANumber(key, spec); return; }
-        r.value = n.value; change({[key]: read()}, false);
+        r.value = n.value; change({[key]: read()}, false);  // the box's value, unclamped
       };
       inputs.push([r, n]);
       vec.append(lab, r, n);
@@ -512,7 +514,7 @@ function placeStage() {
 
 function camera() {
   // camera.zoom and camera.center as they will be once the pending changes land
-  const v = Object.assign({}, S.values, C.pending || {});
+  const v = Object.assign({}, S.values, C.sent || {}, C.pending || {});
   return [v["camera.zoom"], v["camera.center"]];
 }
 
@@ -650,7 +652,7 @@ function pointerDown(ev) {
     const near = nearestEdit(p);
     const at = near >= 0 ? arrows.edits.find((e) => e.index === near).screen : p;
     if (near >= 0) { selected = near; buildEdits(); }
-    const d = {kind: "edit", index: near, from: at, to: p, which, pick: null};
+    const d = {kind: "edit", index: near, from: at, down: p, to: p, which, pick: null};
     d.picked = api("POST", "/api/pick", {x: at[0], y: at[1]}).then((hit) => {
       if (!hit.hit) { message("no mesh there", ""); return null; }
       if (near < 0) d.from = hit.screen;
@@ -689,11 +691,19 @@ async function pointerUp(ev) {
     paintPoints([], true);
   } else if (d.kind === "edit" && d.pick) {
     const list = editsJson();
-    const dx = d.to[0] - d.from[0], dy = d.to[1] - d.from[1];
+    // the drag as the hand made it, from where the pointer went down (not from the vertex
+    // it snapped to: a plain click 16 px off a vertex once set a short, arbitrary d1)
+    const dx = d.to[0] - d.down[0], dy = d.to[1] - d.down[1];
     const moved = Math.hypot(dx, dy) > 3;
+    const same = d.index >= 0 ? -1 :
+      (arrows ? arrows.edits.findIndex((x) => x.vertex === d.pick.vertex) : -1);
     let e;
     if (d.index >= 0) e = list[d.index];
-    else {
+    else if (same >= 0) {  // that vertex has an edit already: take it, add no twin
+      e = list[arrows.edits[same].index];
+      selected = arrows.edits[same].index;
+      buildEdits();
+    } else {
       const r3 = (v) => v.map((x) => Math.round(x * 1000) / 1000);
       e = {vertex: d.pick.vertex, d1: r3(d.pick.d1), d2: r3(d.pick.d2), weight: 1.0};
       list.push(e);
@@ -704,7 +714,7 @@ async function pointerUp(ev) {
       const v = [0, 1, 2].map((i) => (d.pick.right[i] * dx + d.pick.down[i] * dy) * s);
       e[d.which] = v.map((x) => Math.round(x * 1000) / 1000);
     }
-    if (moved || d.index < 0) setEdits(list);
+    if (moved || (d.index < 0 && same < 0)) setEdits(list);
   }
   draw();
 }
@@ -739,11 +749,15 @@ function wire() {
     zoomAt(ev, Math.exp(-ev.deltaY * 0.0015));
   }, {passive: false});
   $("viewport").addEventListener("dblclick", () => {
-    if (S) change({"camera.zoom": 1, "camera.center": [0, 0]}, false);
+    if (S && tool === "orbit") change({"camera.zoom": 1, "camera.center": [0, 0]}, false);
   });
   // the middle button (or any button with Space held) pans a magnified view
   let panning = null, space = false;
-  window.addEventListener("keydown", (ev) => { if (ev.code === "Space" && ev.target === document.body) { space = true; ev.preventDefault(); } });
+  const typing = (t) => t && (t.tagName === "TEXTAREA" || t.tagName === "SELECT" ||
+    (t.tagName === "INPUT" && !["range", "checkbox", "radio", "button"].includes(t.type)));
+  window.addEventListener("keydown", (ev) => {
+    if (ev.code === "Space" && !typing(ev.target)) { space = true; ev.preventDefault(); }
+  });
   window.addEventListener("keyup", (ev) => { if (ev.code === "Space") space = false; });
   $("viewport").addEventListener("pointerdown", (ev) => {
     if (ev.button === 1 || space) {
