@@ -38,7 +38,7 @@ import numpy as np
 from . import biophysical, cosmetics, formats, maps, shadow, skin, sss, texture
 from .precision import matmul
 from .raster import interpolate
-from .scene import BIOPHYSICAL_KEYS, SKIN_MAPS, SceneConfig
+from .scene import BIOPHYSICAL_KEYS, LAYER_SCHEMA, SCHEMA, SKIN_MAPS, SceneConfig
 from .shading import blinn, lafortune, layered
 from .view import View, coverage, downsample, make_view, pad_index, sample_padded, transpose_table
 
@@ -147,7 +147,13 @@ def _visibility(config: SceneConfig, s: texture.TextureSetup, view: View):
 
 
 def render(config: SceneConfig, params: dict, output: str = "display"):
-    """The image of a scene, float32. `output`: `"display"` `(H, W, 3)` display values
+    """The image of a scene, in the params' float dtype (float32 from `load_scene`; float64
+    for float64 params under `jax.enable_x64`). `config`, `params`: a scene's
+    `Scene.config` and `Scene.params` (keys: `jaxskin.scene`'s differentiable ones, e.g.
+    `light.direction (3,)`, `layer.NAME.thickness_mm ()`; per-texel maps such as
+    `layer.NAME.map` are `(H, W)` in texture space, the texture's size). A misspelt key, a
+    key of a layer the scene has not, or a map of another shape is a `ValueError`; a key the
+    scene's model does not use is ignored. `output`: `"display"` `(H, W, 3)` display values
     (clip to [0, 1]) over a black background: the linear image of any material model ×
     2^`camera.exposure`, sRGB-encoded (the height mode: the height itself); `"rgba"`
     `(H, W, 4)` display colour with straight alpha = the mesh's coverage of each pixel
@@ -156,16 +162,55 @@ def render(config: SceneConfig, params: dict, output: str = "display"):
 
     With shadows, a concrete `light.direction` in `params` that differs from the static
     configuration's gets its own shadow map (made here, outside any trace); a traced one
-    uses the configuration's (see `jaxskin.shadow`)."""
+    uses the configuration's (see `jaxskin.shadow`). Calling it inside your own `jit` folds
+    the prepared arrays in as constants: use `render_prepared` there."""
+    _check_call(config, params)
     config = _shadow_config(config, params)
-    return _render(config, params, prepare(config).arrays, output)
+    arrays = prepare(config).arrays
+    _check_maps(params, arrays)
+    return _render(config, params, arrays, output)
 
 
 def render_prepared(config: SceneConfig, params: dict, arrays: dict,
                     output: str = "display"):
     """`render` with the prepared arrays (`prepare(config).arrays`) passed in: inside your
     own jit, grad or vmap, pass them as arguments, or XLA folds them in as constants."""
+    _check_call(config, params)
+    _check_maps(params, arrays)
     return _render(config, params, arrays, output)
+
+
+def _check_call(config, params) -> None:
+    """What `render` takes, checked where a mistake would otherwise render silently wrong
+    (a misspelt key is ignored, its gradient 0) or fail deep inside with another name."""
+    if not isinstance(config, SceneConfig):
+        hint = " (pass scene.config)" if hasattr(config, "config") else ""
+        raise TypeError(f"expected a SceneConfig{hint}, got {type(config).__name__}")
+    if not isinstance(params, dict):
+        raise TypeError(f"expected the params dict (scene.params), got {type(params).__name__}")
+    layers = [] if config.spectral is None else [layer.name for layer in config.spectral.layers]
+    known = {k for k, spec in SCHEMA.items() if spec.param} | set(SKIN_MAPS) | {
+        "material.lafortune"} | {f"layer.{n}.{a}" for n in layers for a in (*LAYER_SCHEMA, "map")}
+    unknown = sorted(k for k in params if k not in known)
+    if unknown:
+        import difflib
+
+        near = difflib.get_close_matches(unknown[0], known, n=1, cutoff=0.6)
+        raise ValueError(f"params: unknown key {unknown[0]!r}"
+                         + (f" (did you mean {near[0]!r}?)" if near else "")
+                         + (f" and {len(unknown) - 1} more" if len(unknown) > 1 else "")
+                         + f"; this scene's layers: {', '.join(layers) or 'none'}")
+
+
+def _check_maps(params, arrays) -> None:
+    """Per-texel maps in `params` must have the texture's shape: a map of another size was
+    read at clamped indices, the makeup on the wrong texels."""
+    shape = tuple(arrays["mask"].shape)
+    for key, value in params.items():
+        if key.endswith("_map") or key.endswith(".map"):
+            if tuple(jnp.shape(value)) != shape:
+                raise ValueError(f"params[{key!r}]: expected a texture-space map of shape "
+                                 f"{shape} (texture.size), got {tuple(jnp.shape(value))}")
 
 
 def _shadow_config(config: SceneConfig, params: dict) -> SceneConfig:

@@ -268,3 +268,27 @@ def test_a_sweep_frame_does_not_depend_on_the_sweep_around_it():
     np.testing.assert_array_equal(alone, among)
     single = np.asarray(render.render(scene.config, {**scene.params, "skin.melanin": 2.0}))
     assert np.abs(single - among).max() < 5e-4
+
+
+def test_render_refuses_what_it_would_otherwise_render_wrong():
+    """A map of another size was read at clamped indices (the blush on the wrong texels, no
+    error); a misspelt key was ignored (its gradient exactly 0); a Scene for its config
+    failed with "'Scene' object has no attribute 'shadow'" (a newcomer's trial)."""
+    import jax.numpy as jnp
+
+    s = load_scene("makeup", ["texture.size=32", "camera.size=16"])
+    arrays = render.prepare(s.config).arrays
+    with pytest.raises(ValueError, match=r"'layer.blush.map'\]: expected a texture-space map "
+                                         r"of shape \(32, 32\).*got \(64, 64\)"):
+        render.render_prepared(s.config, s.params | {"layer.blush.map": jnp.ones((64, 64))},
+                               arrays)
+    with pytest.raises(ValueError, match=r"unknown key 'layer.blsh.map' \(did you mean "
+                                         r"'layer.blush.map'\?\)"):
+        render.render(s.config, s.params | {"layer.blsh.map": jnp.ones((32, 32))})
+    with pytest.raises(ValueError, match="unknown key 'material.melannin'"):
+        render.render(s.config, s.params | {"material.melannin": 0.3})
+    with pytest.raises(TypeError, match=r"expected a SceneConfig \(pass scene.config\), got "
+                                        "Scene"):
+        render.render(s, s.params)
+    # a key that is known but unused by this model is no error (one dict, several scenes)
+    render.render(s.config, s.params | {"material.melanin": 0.3})
