@@ -3,6 +3,10 @@
 - `fitting.measurements`: spectroradiometer CSVs (thin layer, opaque layer, background).
 - `fitting.km`: S(λ), K(λ) of a cosmetic (Huang et al. 2013 §4).
 - `fitting.report`: the PNG report of a fit.
+- `fitting.brdf`: Lafortune lobes from BRDF samples (`jaxskin fit-brdf`).
+- `fitting.skin`: the biophysical skin from reflectance spectra (`jaxskin fit-skin`).
+- `fitting.image`: scene values and texture-space maps from a target image
+  (`jaxskin fit-image`, inverse rendering).
 
 Fits run in float64 inside `jax.enable_x64(True)`; nothing here changes JAX's global settings.
 """

@@ -77,7 +77,10 @@ def _layer_parts(S, K, X):
     q = K * (K + 2.0 * S)  # β²
     inv_beta = jax.lax.rsqrt(jnp.where(q > 0, q, 1.0))  # safe: only read where z² >= 0.25
     SK = S + K
-    z2 = q * (X * X)
+    # X clamped where only the branch test and the series see it: X² overflowed float32 at
+    # X ~ 2e19 mm, and inf·0 in its derivative made the gradient NaN there (values held)
+    Xc = jnp.minimum(X, 1e15)
+    z2 = q * (Xc * Xc)
     small = z2 < _Q_SMALL
     # Series branch (double-`where`: the unused branch sees harmless values).
     qs = jnp.where(small, z2, 0.0)
@@ -154,7 +157,8 @@ def over(R, T, Rg, R_back=None):
 
     R + T² Rg / (1 − R_back Rg): `compose` with a bottom that transmits nothing. `R_back`
     (reflectance from below) defaults to `R`, exact for one homogeneous layer; for a stack
-    pass `stack(...).R_back`.
+    pass `stack(...).R_back`. Needs R_back Rg < 1: a thick layer that absorbs nothing
+    (R → 1) over a white background (Rg = 1) divides by zero, where the physical limit is 1.
     """
     top = (R, T) if R_back is None else (R, T, R_back)
     return compose(top, (Rg, jnp.zeros_like(jnp.asarray(Rg))))[0]

@@ -233,3 +233,18 @@ def test_stack_gradients_through_layers(x64, ratio, SX):
         return jnp.stack([*s, km.over(s.R, s.T, 0.45, s.R_back)])
 
     check_grads_scaled(f, base, scales)
+
+
+@pytest.mark.parametrize("dtype, X", [(jnp.float32, 2e19), (jnp.float32, 1e30),
+                                      (jnp.float64, 1e160)])
+def test_layer_gradient_is_r_infs_at_a_thickness_whose_square_overflows(x64, dtype, X):
+    """Past X ~ 2e19 mm (float32; 1e155 in float64) X² overflowed in the branch test, and
+    its derivative made ∂R0/∂S, ∂R0/∂K NaN while the values were right (a researcher's
+    trial). There the layer is R∞'s: its gradient, by autodiff of the closed form
+    S / (S + K + sqrt(K² + 2KS)); T and its gradient 0. Measured: equal to 1e-7."""
+    S, K = jnp.asarray(30.0, dtype), jnp.asarray(2.0, dtype)
+    gR = jax.grad(lambda s, k: km.layer(s, k, jnp.asarray(X, dtype))[0], (0, 1))(S, K)
+    gT = jax.grad(lambda s, k: km.layer(s, k, jnp.asarray(X, dtype))[1], (0, 1))(S, K)
+    want = jax.grad(lambda s, k: s / (s + k + jnp.sqrt(k * k + 2 * k * s)), (0, 1))(S, K)
+    np.testing.assert_allclose(np.array(gR), np.array(want), rtol=1e-5)
+    assert np.all(np.array(gT) == 0)
