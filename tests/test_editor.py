@@ -25,7 +25,12 @@ import pytest
 aiohttp = pytest.importorskip("aiohttp", reason="the editor needs aiohttp (the edit extra)")
 from aiohttp.test_utils import TestClient, TestServer  # noqa: E402
 
-from jaxskin import cli, render  # noqa: E402
+from jaxskin import (  # noqa: E402
+    cli,
+    render,
+    texture,  # noqa: E402
+)
+from jaxskin.editor import state as state_module  # noqa: E402
 from jaxskin.editor.server import MAX_BODY, make_app  # noqa: E402
 from jaxskin.editor.state import EditorError, Session  # noqa: E402
 from jaxskin.toml_writer import dumps  # noqa: E402
@@ -729,3 +734,22 @@ def test_a_save_elsewhere_rewrites_the_skin_map_images_paths(tmp_path):
                            "haemoglobin_image": "../src/h.png"}
     assert doc["layer"][0]["image"] == "../src/b.png"
     assert doc["layer"][0]["material"] == "blush_rose"  # a shipped name stays a name
+
+
+def test_a_link_with_paint_says_on_another_editor_that_the_paint_stayed_behind(tmp_path):
+    """The paint lives on the editor that made it; a link opened on another one restored
+    the rest and dropped the paint without a word. The link now names the painted layers
+    and the other editor says why they are bare."""
+    (tmp_path / "tiny.toml").write_text(SCENE)
+    s = Session(str(tmp_path / "tiny.toml"), tmp_path / "out")
+    s.set({"light.ambient": 0.2})
+    t = texture.mapped(*state_module._texture_key(s.scene.config))[1]
+    s.paint = {"blush": np.ones((t.height, t.width), np.uint16)}
+    link = s.query()
+    assert link == [["light.ambient", "0.2"], ["painted", "blush"]]
+    other = Session(str(tmp_path / "tiny.toml"), tmp_path / "out2")
+    refused = other.open(str(tmp_path / "tiny.toml"), link)
+    assert other.changes == {"light.ambient": 0.2} and other.paint == {}
+    assert refused == [{"key": "painted", "error": "the paint on blush stays on the editor that "
+                        "made this link; save the scene there to keep it (its maps are written "
+                        "beside it)"}]

@@ -55,6 +55,7 @@ __all__ = ["EditorError", "Session"]
 HISTORY = 50  # undo steps kept
 # Every scene key that names a file: confined to the session's folders (the skin's map
 # images once were not: the page could have the server open any file).
+PAINTED = "painted"  # in a link: the layers painted where it was made (the maps stay there)
 PATH_KEYS = ("mesh.file", "material.brdf", *(image for _, image in SKIN_MAPS.values()))
 LAYER_SET = ("material", *LAYER_SCHEMA)  # what the page may set on a layer
 
@@ -125,6 +126,11 @@ class Session:
         for item in items:
             try:
                 key, value = pair(item)
+                if key == PAINTED:  # a link made where paint was: it cannot bring it here
+                    refused.append({"key": PAINTED, "error": (
+                        f"the paint on {value} stays on the editor that made this link; save "
+                        "the scene there to keep it (its maps are written beside it)")})
+                    continue
                 self.set({key: value}, record=False)
             except EditorError as e:
                 refused.append({"key": e.key or str(item)[:100], "error": e.message})
@@ -643,7 +649,8 @@ class Session:
         URL holds them)."""
         from ..toml_writer import value_text
 
-        return [[k, value_text(v)] for k, v in self.changes.items()]
+        painted = [[PAINTED, ",".join(sorted(self.paint))]] if self.paint else []
+        return [[k, value_text(v)] for k, v in self.changes.items()] + painted
 
 
 def _texture_key(config: SceneConfig) -> tuple:
