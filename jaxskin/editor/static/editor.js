@@ -272,8 +272,8 @@ function control(key, spec, value) {
     n.type = "number"; n.step = "any"; n.value = value; n.min = spec.lo; n.max = spec.hi;
     guardNumber(n, key, spec);
     n.title = r.title;
-    const num = (v) => spec.kind === "int" ? parseInt(v) : parseFloat(v);
-    const at = () => fromPos(num(r.value));
+    const num = (v) => spec.kind === "int" ? wholeNumber(v) : parseFloat(v);  // as typed
+    const at = () => fromPos(spec.kind === "int" ? parseInt(r.value) : parseFloat(r.value));
     r.oninput = () => { n.value = at(); change({[key]: at()}, true); };
     r.onchange = () => change({[key]: at()}, false);
     n.onchange = () => {
@@ -291,7 +291,8 @@ function control(key, spec, value) {
     if (spec.kind !== "str") guardNumber(c, key, spec);
     if (spec.lo !== null && spec.hi !== null) c.title = `${key}: ${spec.lo} to ${spec.hi}`;
     c.onchange = () => {
-      const v = spec.kind === "str" ? c.value : spec.kind === "int" ? parseInt(c.value) : parseFloat(c.value);
+      const v = spec.kind === "str" ? c.value : spec.kind === "int" ? wholeNumber(c.value) :
+        parseFloat(c.value);
       if (spec.kind !== "str" && !isFinite(v)) { c.value = S.values[key]; notANumber(key, spec); return; }
       change({[key]: v}, false);
     };
@@ -349,10 +350,16 @@ function showParamError(key, text) {
 
 // A number box left empty or holding letters (the browser then reports ""): say what it
 // takes under the field, and show the value it keeps.
+// A whole number as typed, or NaN: "300.7" is not 300 (parseInt once cut it silently).
+function wholeNumber(text) {
+  return /^\s*[+-]?\d+\s*$/.test(text) ? parseInt(text) : NaN;
+}
+
 function notANumber(key, spec) {
   const range = spec.lo != null && spec.hi != null ? ` from ${spec.lo} to ${spec.hi}` : "";
   showParamError(key, `expected ${spec.kind === "int" ? "a whole number" : "a number"}${range}; ` +
     "kept the value before");
+  message("");  // an older error in the footer is not this one
 }
 
 // The browser drops a letter typed into a number box without a word: say it.
