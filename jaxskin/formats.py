@@ -173,7 +173,7 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1) -> T
             others = [_NAMES[d] for d in DELIMITERS if d != delimiter and d in line]
             hint = (f" (the header is {_NAMES[delimiter]}-separated; this row has "
                     f"{' and '.join(others)}s)") if others else ""
-            if len(cells) < len(header) and line.endswith(delimiter.strip() or delimiter):
+            if len(cells) < len(header) and line.endswith(delimiter):
                 raise InputError("empty cell: expected a number", path, number,
                                  header[len(cells)])
             raise InputError(f"{len(cells)} cells where the header has {len(header)}{hint}",

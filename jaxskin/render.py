@@ -188,18 +188,26 @@ def _check_call(config, params) -> None:
         raise TypeError(f"expected a SceneConfig{hint}, got {type(config).__name__}")
     if not isinstance(params, dict):
         raise TypeError(f"expected the params dict (scene.params), got {type(params).__name__}")
-    layers = [] if config.spectral is None else [layer.name for layer in config.spectral.layers]
-    known = {k for k, spec in SCHEMA.items() if spec.param} | set(SKIN_MAPS) | {
-        "material.lafortune"} | {f"layer.{n}.{a}" for n in layers for a in (*LAYER_SCHEMA, "map")}
+    known, layers = _known_keys(config)
     unknown = sorted(k for k in params if k not in known)
     if unknown:
         import difflib
 
-        near = difflib.get_close_matches(unknown[0], known, n=1, cutoff=0.6)
+        near = difflib.get_close_matches(unknown[0], sorted(known), n=1, cutoff=0.6)
         raise ValueError(f"params: unknown key {unknown[0]!r}"
                          + (f" (did you mean {near[0]!r}?)" if near else "")
                          + (f" and {len(unknown) - 1} more" if len(unknown) > 1 else "")
                          + f"; this scene's layers: {', '.join(layers) or 'none'}")
+
+
+@functools.lru_cache(maxsize=32)
+def _known_keys(config: SceneConfig) -> tuple[frozenset, list]:
+    """The params keys `config` may take (every differentiable scene key, the maps, the
+    lobes, its layers' keys), and its layers' names: once per configuration."""
+    layers = [] if config.spectral is None else [layer.name for layer in config.spectral.layers]
+    known = {k for k, spec in SCHEMA.items() if spec.param} | set(SKIN_MAPS) | {
+        "material.lafortune"} | {f"layer.{n}.{a}" for n in layers for a in (*LAYER_SCHEMA, "map")}
+    return frozenset(known), layers
 
 
 def _check_maps(params, arrays) -> None:

@@ -53,9 +53,9 @@ from .document import EditorError, keep_aspect, pair, put, relocate
 __all__ = ["EditorError", "Session"]
 
 HISTORY = 50  # undo steps kept
+PAINTED = "painted"  # in a link: the layers painted where it was made (the maps stay there)
 # Every scene key that names a file: confined to the session's folders (the skin's map
 # images once were not: the page could have the server open any file).
-PAINTED = "painted"  # in a link: the layers painted where it was made (the maps stay there)
 PATH_KEYS = ("mesh.file", "material.brdf", *(image for _, image in SKIN_MAPS.values()))
 LAYER_SET = ("material", *LAYER_SCHEMA)  # what the page may set on a layer
 
@@ -691,8 +691,6 @@ def _jsonable(v):
     if isinstance(v, tuple):
         return [_jsonable(x) for x in v]
     return v
-
-
 
 
 def keep_comments(source: str, doc: dict) -> str:

@@ -348,13 +348,13 @@ function showParamError(key, text) {
   if (el) el.textContent = text;
 }
 
-// A number box left empty or holding letters (the browser then reports ""): say what it
-// takes under the field, and show the value it keeps.
 // A whole number as typed, or NaN: "300.7" is not 300 (parseInt once cut it silently).
 function wholeNumber(text) {
   return /^\s*[+-]?\d+\s*$/.test(text) ? parseInt(text) : NaN;
 }
 
+// A number box left empty or holding letters (the browser then reports ""): say what it
+// takes under the field, and show the value it keeps.
 function notANumber(key, spec) {
   const range = spec.lo != null && spec.hi != null ? ` from ${spec.lo} to ${spec.hi}` : "";
   showParamError(key, `expected ${spec.kind === "int" ? "a whole number" : "a number"}${range}; ` +
@@ -525,6 +525,11 @@ function camera() {
   return [v["camera.zoom"], v["camera.center"]];
 }
 
+// A camera.center coordinate kept in the frame (-0.5 to 0.5), rounded for the URL.
+function inFrame(x) {
+  return Math.round(Math.min(0.5, Math.max(-0.5, x)) * 1e4) / 1e4;
+}
+
 function zoomAt(ev, factor) {
   // camera.zoom about the pointer (a new render, sharp at any zoom): the point of the
   // mesh under the pointer stays put; camera.center is in fractions of the whole frame
@@ -532,8 +537,7 @@ function zoomAt(ev, factor) {
   const r = $("view").getBoundingClientRect();
   const px = (ev.clientX - r.left) / r.width - 0.5, py = 0.5 - (ev.clientY - r.top) / r.height;
   const zn = Math.min(64, Math.max(1, z * factor));
-  const clamp = (x) => Math.round(Math.min(0.5, Math.max(-0.5, x)) * 1e4) / 1e4;
-  const cn = zn === 1 ? [0, 0] : [clamp(c[0] + px / z - px / zn), clamp(c[1] + py / z - py / zn)];
+  const cn = zn === 1 ? [0, 0] : [inFrame(c[0] + px / z - px / zn), inFrame(c[1] + py / z - py / zn)];
   change({"camera.zoom": Math.round(zn * 1e3) / 1e3, "camera.center": cn}, false);
 }
 
@@ -541,8 +545,7 @@ function panBy(dx, dy) {
   // a drag of (dx, dy) screen pixels moves the zoomed frame with the pointer
   const [z, c] = camera();
   const r = $("view").getBoundingClientRect();
-  const clamp = (x) => Math.round(Math.min(0.5, Math.max(-0.5, x)) * 1e4) / 1e4;
-  change({"camera.center": [clamp(c[0] - dx / r.width / z), clamp(c[1] + dy / r.height / z)]},
+  change({"camera.center": [inFrame(c[0] - dx / r.width / z), inFrame(c[1] + dy / r.height / z)]},
          false);
 }
 
