@@ -753,3 +753,18 @@ def test_a_link_with_paint_says_on_another_editor_that_the_paint_stayed_behind(t
     assert refused == [{"key": "painted", "error": "the paint on blush stays on the editor that "
                         "made this link; save the scene there to keep it (its maps are written "
                         "beside it)"}]
+
+
+def test_saved_paint_is_not_modified_until_painted_again(tmp_path):
+    """The title said "(modified)" right after a save of a painted layer: paint counted as a
+    change for as long as the session held it. Now only paint since the save does."""
+    (tmp_path / "tiny.toml").write_text(SCENE)
+    s = Session(str(tmp_path / "tiny.toml"), tmp_path / "out")
+    assert s.state()["modified"] is False
+    t = texture.mapped(*state_module._texture_key(s.scene.config))[1]
+    s.paint = {"blush": np.ones((t.height, t.width), np.uint16)}
+    assert s.state()["modified"] is True
+    s.save("painted")
+    assert s.state()["modified"] is False and s.state()["painted"] == ["blush"]
+    s.paint = {"blush": np.zeros((t.height, t.width), np.uint16)}  # a stroke: a new array
+    assert s.state()["modified"] is True

@@ -115,6 +115,7 @@ class Session:
         self.text = path.read_text(encoding="utf-8")  # its comments, kept by a save
         self.changes: dict = {}
         self.paint: dict[str, np.ndarray] = {}
+        self.saved_paint: dict[str, np.ndarray] = {}  # the maps as the scene file has them
         self.scene = scene_obj
         self.undo_stack: list = []
         self.redo_stack: list = []
@@ -576,6 +577,7 @@ class Session:
         paint, version = self.paint, self.version
         self.open(str(toml_path), {})
         self.paint, self.saved_as = paint, str(toml_path)
+        self.saved_paint = dict(paint)  # strokes replace arrays: `is` tells what changed
         self.scene = self._build({}, paint)
         self.version = version + 1
         return [str(toml_path), *(str(p) for p in pngs.values())]
@@ -640,9 +642,15 @@ class Session:
                 "query": self.query(), "edits": [dataclasses.asdict(e) for e in sc.edits],
                 "layers": layers, "version": self.version,
                 "image": [config.image, config.image_height or config.image],
-                "painted": sorted(self.paint), "undo": len(self.undo_stack),
+                "painted": sorted(self.paint), "modified": self.modified(),
+                "undo": len(self.undo_stack),
                 "redo": len(self.redo_stack), "output": str(self.output),
                 "saved_as": self.saved_as, "schema": schema()}
+
+    def modified(self) -> bool:
+        """Whether the page differs from its scene file: a change, or paint not saved."""
+        return bool(self.changes) or any(self.paint.get(k) is not self.saved_paint.get(k)
+                                         for k in {*self.paint, *self.saved_paint})
 
     def query(self) -> list[list[str]]:
         """The changes as `[key, value]` pairs with TOML values, the `-D` syntax (the page's

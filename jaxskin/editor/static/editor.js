@@ -123,7 +123,7 @@ function adopt(state) {
   history.replaceState(null, "", "?" + queryOf(state).toString());
   localStorage.setItem("jaxskin.last", location.search);
   $("scene-name").textContent = `${state.name} — ${state.source}` +
-    (Object.keys(state.changes).length || state.painted.length ? " (modified)" : "");
+    (state.modified ? " (modified)" : "");
   if (!$("save-name").value || $("save-name").dataset.auto === "1") {
     $("save-name").value = state.name;
     $("save-name").dataset.auto = "1";
