@@ -508,7 +508,9 @@ async function sendPaint() {
 function fitStage() {
   const vp = $("viewport"), img = $("view");
   const [w, h] = S ? S.image : [512, 512];
-  const scale = Math.min((vp.clientWidth - 24) / w, (vp.clientHeight - 24) / h);
+  // the image, centred, keeps clear of the hint line at the bottom (it covered the image)
+  const hint = $("hint").offsetHeight || 0;
+  const scale = Math.min((vp.clientWidth - 24) / w, (vp.clientHeight - 24 - 2 * hint) / h);
   img.style.width = `${w * scale}px`;
   img.style.height = `${h * scale}px`;
   placeStage();
@@ -743,6 +745,7 @@ function setTool(t) {
     fields: "click the mesh: add an edit at the nearest vertex · drag: its direction and magnitude · Shift: d2",
     paint: "drag: paint the layer's thickness · Alt: erase · [ ]: brush size",
   }[t];
+  fitStage();  // the hint's height may have changed
   if (t === "fields" && S) loadArrows(); else draw();
 }
 
