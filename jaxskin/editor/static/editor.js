@@ -567,7 +567,7 @@ function toImage(ev) {
 }
 
 function screenScale() {
-  // screen pixels per image pixel, the viewer's magnification aside
+  // screen pixels per image pixel
   return $("view").getBoundingClientRect().width / S.image[0] || 1;
 }
 
@@ -764,7 +764,7 @@ function wire() {
   $("viewport").addEventListener("dblclick", () => {
     if (S && tool === "orbit") change({"camera.zoom": 1, "camera.center": [0, 0]}, false);
   });
-  // the middle button (or any button with Space held) pans a magnified view
+  // the middle button (or any button with Space held) pans the view (camera.center)
   let panning = null, space = false;
   const typing = (t) => t && (t.tagName === "TEXTAREA" || t.tagName === "SELECT" ||
     (t.tagName === "INPUT" && !["range", "checkbox", "radio", "button"].includes(t.type)));
