@@ -82,10 +82,13 @@ def test_a_worker_killed_mid_run_has_its_task_retried_and_the_run_completes(
     render_unit = cluster.render_unit
 
     def dies_once(unit):  # a closure: pickled by value, run on the worker
-        if not os.path.exists(marker):
-            open(marker, "w").close()
-            os.kill(os.getpid(), signal.SIGKILL)
-        return render_unit(unit)
+        # O_EXCL: exactly one task dies. A check-then-create let the first tasks of both
+        # workers, started together, both find no marker and both die (CI saw 2 == 1).
+        try:
+            os.close(os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+        except FileExistsError:
+            return render_unit(unit)
+        os.kill(os.getpid(), signal.SIGKILL)
 
     monkeypatch.setattr(cluster, "render_unit", dies_once)
     assert main([*args, "-o", str(tmp_path / "cluster"), "--cluster",
