@@ -101,7 +101,8 @@ class Session:
         `changes` (from a link); returns the changes refused, each `{key, error}`."""
         path = self._scene_path(scene)
         try:
-            base = tomllib.loads(path.read_text(encoding="utf-8"))
+            text = path.read_text(encoding="utf-8")
+            base = tomllib.loads(text)
             scene_obj = parse_scene(base, path)
         except (OSError, UnicodeDecodeError) as e:
             raise EditorError(f"{path}: cannot read ({e.__class__.__name__})", 400) from None
@@ -112,7 +113,7 @@ class Session:
         self._check(scene_obj)
         self.source = scene if scene in BUILTIN_SCENES else str(path)
         self.path, self.base = path, base
-        self.text = path.read_text(encoding="utf-8")  # its comments, kept by a save
+        self.text = text  # its comments, kept by a save
         self.changes: dict = {}
         self.paint: dict[str, np.ndarray] = {}
         self.saved_paint: dict[str, np.ndarray] = {}  # the maps as the scene file has them
