@@ -745,8 +745,8 @@ function setTool(t) {
     fields: "click the mesh: add an edit at the nearest vertex · drag: its direction and magnitude · Shift: d2",
     paint: "drag: paint the layer's thickness · Alt: erase · [ ]: brush size",
   }[t];
-  fitStage();  // the hint's height may have changed
-  if (t === "fields" && S) loadArrows(); else draw();
+  fitStage();  // the hint's height may have changed; this redraws the overlay too
+  if (t === "fields" && S) loadArrows();
 }
 
 function wire() {
