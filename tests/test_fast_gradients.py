@@ -56,13 +56,18 @@ def test_cotangents_equal_autodiff_of_the_plain_forward(x64, blurred, per_texel_
     g = jnp.asarray(np.random.default_rng(1).normal(size=out.shape))
     expected = vjp(g)
     got = layered._cotangents(GRID, blurred, *args, g)
-    chunked = layered._cotangents_chunked(GRID, blurred, *args, g, chunk=16)  # ragged chunks
-    for name, e, a, c in zip("X E h h_l S K skin".split(), expected, got, chunked, strict=True):
-        assert a.shape == e.shape and c.shape == e.shape, name
+    # ragged chunks, one, two (the default) and three computed side by side per step
+    chunked = [layered._cotangents_chunked(GRID, blurred, *args, g, chunk=16, streams=k)
+               for k in (1, 2, 3)]
+    for name, e, a, *cs in zip("X E h h_l S K skin".split(), expected, got, *chunked,
+                               strict=True):
+        assert a.shape == e.shape, name
         scale = float(jnp.max(jnp.abs(e)))
         assert scale > 0, name
         assert float(jnp.max(jnp.abs(a - e))) <= 1e-10 * scale, name
-        assert float(jnp.max(jnp.abs(c - e))) <= 1e-10 * scale, name
+        for c in cs:
+            assert c.shape == e.shape, name
+            assert float(jnp.max(jnp.abs(c - e))) <= 1e-10 * scale, name
 
 
 @pytest.mark.parametrize("point", ["ordinary", "stiff"])

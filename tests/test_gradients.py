@@ -147,10 +147,10 @@ def test_radiance_of_bare_skin(x64):
 @pytest.mark.parametrize("blurred", [False, True], ids=["unblurred", "blurred"])
 def test_radiance_through_the_chunked_jvp(x64, blurred):
     """Three layers through the makeup gradient's own rule (`layered._colours`' custom JVP,
-    chunks of 1000 texels) on 2500 texels: two full chunks and a ragged 500, with and
-    without SSS; with respect to N, L, V, ambient and light, the skin spectrum and its
+    chunks of 1000 texels, two a step) on 2500 texels: a full step, then a ragged chunk of
+    500 beside one of padding only, with and without SSS; with respect to N, L, V, ambient and light, the skin spectrum and its
     highlight, the thickness maps, S, K and the layers' roughness and intensity."""
-    assert layered.CHUNK == 1000
+    assert layered.CHUNK == 1000 and layered.STREAMS == 2
     rng = np.random.default_rng(8)
     side = 50
     P = side * side

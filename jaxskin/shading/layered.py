@@ -146,6 +146,8 @@ def _joint(grid, blurred, *args):
 # aliasing among the ~30 arrays a fusion reads). Inside the whole render's gradient the
 # difference was within the load's noise.
 CHUNK = 1000
+# Chunks per step of the transpose's loop, computed side by side (`_cotangents_chunked`).
+STREAMS = 2
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
@@ -281,8 +283,7 @@ def _layer_SK(S, K, X, parts, aR, aT):
     a_q = 0.5 * ((aR_d * (S - R * SK) - aT_d * T * SK) * w - aT_d * X * sech * tau)
     a_S = tau * (aR_d * (1.0 - R) - aT_d * T)  # through S and S + K, τ held
     a_K = -tau * (aR_d * R + aT_d * T)
-    return (jnp.sum(a_S + (2.0 * K) * a_q, axis=0),
-            jnp.sum(a_K + (2.0 * SK) * a_q, axis=0))
+    return _colsum(a_S + (2.0 * K) * a_q), _colsum(a_K + (2.0 * SK) * a_q)
 
 
 # F(y) = Σ_k≥1 4^k y^(k−1)/(2k+1)!, highest power first (Horner), for `_layer_SK`: at
@@ -296,6 +297,13 @@ def _rowsum(a):
     reduction along the short band axis into the elementwise work and runs that loop
     unvectorised (measured: the backward pass 1.6-1.8× slower than with the product)."""
     return matmul(a, jnp.ones((a.shape[-1], 1), a.dtype))
+
+
+def _colsum(a):
+    """`a (P, n)` summed over texels, `(n,)`, as a product with ones: as a reduction along
+    the texel axis (the major one) XLA:CPU fuses the summand into a loop that strides
+    across it."""
+    return matmul(jnp.ones((1, a.shape[0]), a.dtype), a)[0]
 
 
 def _cotangents(grid, blurred, X, E, h, h_l, S, K, skin_R, g):
@@ -340,14 +348,17 @@ def _cotangents(grid, blurred, X, E, h, h_l, S, K, skin_R, g):
     aR_l, aT_l = [None] * n_layers, [None] * n_layers
     for i in range(n_layers - 1, 0, -1):
         cR, cT, _ = accs[i - 1]
-        inv = 1.0 / (1.0 - R[i] * cR)
-        inv2 = inv * inv
-        aR_l[i] = (a_R * (1.0 + T[i] * T[i] * cR * cR * inv2) + a_T * T[i] * cT * cR * inv2
-                   + a_Rb * cT * cT * inv2)
-        aT_l[i] = 2.0 * a_R * T[i] * cR * inv + a_T * cT * inv
-        a_R, a_T = (a_R * T[i] * T[i] * inv2 + a_T * T[i] * cT * R[i] * inv2
-                    + a_Rb * cT * cT * R[i] * R[i] * inv2,
-                    a_T * T[i] * inv + 2.0 * a_Rb * cT * R[i] * inv)
+        den = 1.0 - R[i] * cR
+        den2 = den * den
+        T2 = T[i] * T[i]
+        # Divided by den, den², not multiplied by their inverses: XLA:CPU then keeps each
+        # level's adjoints in memory (a division with several users is not recomputed),
+        # where products were recomputed inside every later consumer, the chain from the
+        # top once per layer's ∂/∂X, ∂/∂S and ∂/∂K.
+        aR_l[i] = (a_R * (den2 + T2 * cR * cR) + a_T * T[i] * cT * cR + a_Rb * cT * cT) / den2
+        aT_l[i] = (2.0 * a_R * T[i] * cR + a_T * cT) / den
+        a_R, a_T = ((a_R * T2 + a_T * T[i] * cT * R[i] + a_Rb * cT * cT * R[i] * R[i]) / den2,
+                    (a_T * T[i] + 2.0 * a_Rb * cT * R[i]) / den)
     aR_l[0], aT_l[0] = a_R + a_Rb, a_T
     # The highlights: dD_i = dD_(i−1) T_i² + h (T_i² − 1) + cover_i h_l,i, from the bottom.
     D = [jnp.zeros_like(Rt)]
@@ -372,20 +383,30 @@ def _cotangents(grid, blurred, X, E, h, h_l, S, K, skin_R, g):
         dS[i], dK[i] = _layer_SK(S[i], K[i], x[i], parts[i], aR_l[i], aT_l[i])
         a_D = a_D * T2
     dh = _rowsum(dh)
-    d_skin = a_s if skin_R.ndim == 2 else jnp.sum(a_s, axis=0)
+    d_skin = a_s if skin_R.ndim == 2 else _colsum(a_s)
     return (jnp.stack(dX), dE, dh, jnp.stack(dh_l), jnp.stack(dS), jnp.stack(dK),
             d_skin.astype(dtype))
 
 
-def _cotangents_chunked(grid, blurred, X, E, h, h_l, S, K, skin_R, g, chunk=None):
+def _cotangents_chunked(grid, blurred, X, E, h, h_l, S, K, skin_R, g, chunk=None,
+                        streams=None):
     """`_cotangents` in a loop over chunks of `chunk` texels (the last one padded), so that
     each chunk's pass stays in the cache; the per-band cotangents (S, K and a skin spectrum
-    shared by all texels) summed over the chunks."""
+    shared by all texels) summed over the chunks.
+
+    Each step of the loop takes `streams` chunks and runs `_cotangents` on each apart: two
+    programs with no data between them, which XLA:CPU's executor runs on two threads at
+    once. With one chunk a step, about half of the pass's ~45 fusions (the exps, the
+    divisions: cheap per byte) are too small for XLA to split across threads, and one
+    core waited on the other: on 2 cores the pass took 1.4× the three spectral products
+    where on one core it took 1.0× (benchmarks/RESULTS.md, issue 19)."""
     P = X.shape[1]
     chunk = chunk or CHUNK
+    streams = streams or STREAMS
+    step = chunk * streams
 
     def per_texel(a, axis):
-        return _per_texel(a, axis, P, chunk)
+        return _per_texel(a, axis, P, step)
 
     def unchunk(a, axis):  # the inverse of per_texel, the padding dropped
         a = jnp.moveaxis(a, 0, axis)
@@ -395,10 +416,20 @@ def _cotangents_chunked(grid, blurred, X, E, h, h_l, S, K, skin_R, g, chunk=None
     per = skin_R.ndim == 2
     local = (per_texel(X, 1), per_texel(E, 0), per_texel(h, 0), per_texel(h_l, 1),
              per_texel(skin_R, 0) if per else None, per_texel(g, 0))
+    axes = (1, 0, 0, 1, 0, 0)  # each local argument's texel axis
 
     def one(c):
-        x, e, hh, hl, sk, gg = c
-        return _cotangents(grid, blurred, x, e, hh, hl, S, K, sk if per else skin_R, gg)
+        parts = []
+        for j in range(streams):  # independent: the executor runs them side by side
+            x, e, hh, hl, sk, gg = (
+                None if a is None else jax.lax.slice_in_dim(a, j * chunk, (j + 1) * chunk,
+                                                            axis=ax)
+                for a, ax in zip(c, axes, strict=True))
+            parts.append(_cotangents(grid, blurred, x, e, hh, hl, S, K,
+                                     sk if per else skin_R, gg))
+        texel_axes = (1, 0, 0, 1, None, None, 0 if per else None)
+        return tuple(jnp.concatenate(p, axis=ax) if ax is not None else sum(p)
+                     for p, ax in zip(zip(*parts, strict=True), texel_axes, strict=True))
 
     dX, dE, dh, dh_l, dS, dK, dskin = jax.lax.map(one, local)
     return (unchunk(dX, 1), unchunk(dE, 0), unchunk(dh, 0), unchunk(dh_l, 1),
