@@ -58,8 +58,8 @@ from jaxskin.io import InputError, atomic_write
 from jaxskin.scene import LAYER_SCHEMA, SCHEMA, SKIN_MAPS, Scene
 
 __all__ = ["DEGENERATE", "FitKey", "ImageFit", "MAP_SCALARS", "blur_gain", "fit", "fit_keys",
-           "map_bounds", "pcg", "texel_blocks", "texel_jacobian", "view_diagonal", "view_matrix",
-           "weights", "write_report"]
+           "map_bounds", "noise_sigma", "pcg", "texel_blocks", "texel_jacobian", "view_diagonal",
+           "view_matrix", "weights", "write_report"]
 
 # A map key → the scalar it multiplies (the biophysical model's maps go here too). Layer
 # maps, `layer.NAME.map`, multiply `layer.NAME.thickness_mm`.
@@ -253,6 +253,41 @@ def weights(config, params, target_alpha=None, mask=None):
         if extra is not None:
             w = w * np.clip(np.asarray(extra, np.float64), 0.0, 1.0)
     return w
+
+
+def noise_sigma(image, w, min_pixels: int = 100) -> float | None:
+    """The noise σ of `image (H, W, C)` (display values) estimated from its pixel-to-pixel
+    variation where `w (H, W) > 0`, or `None` where fewer than `min_pixels` pixels have all
+    eight neighbours there.
+
+    Immerkær 1996, "Fast noise variance estimation": the image filtered with the 3×3 kernel
+    [[1, −2, 1], [−2, 4, −2], [1, −2, 1]], which is 0 on any plane (a smooth shading
+    gradient leaves no response) and turns white noise of σ into a response of standard
+    deviation 6σ (the kernel's squares sum to 36); so σ = sqrt(π/2) mean|response| / 6.
+    Texture, edges and wrinkles add to the response: for a render the value is an upper
+    estimate of the noise, which keeps `run_command`'s warning from crying wolf."""
+    img = np.asarray(image, np.float64)
+    if img.ndim == 2:
+        img = img[..., None]
+    inside = np.asarray(w) > 0
+    H, W = inside.shape
+    if H < 3 or W < 3:
+        return None
+    k = np.array([[1.0, -2.0, 1.0], [-2.0, 4.0, -2.0], [1.0, -2.0, 1.0]])
+    response = np.zeros((H - 2, W - 2, img.shape[-1]))
+    full = np.ones((H - 2, W - 2), bool)
+    for dy in range(3):
+        for dx in range(3):
+            response += k[dy, dx] * img[dy:dy + H - 2, dx:dx + W - 2]
+            full &= inside[dy:dy + H - 2, dx:dx + W - 2]
+    if full.sum() < min_pixels:
+        return None
+    return float(np.sqrt(np.pi / 2.0) * np.abs(response[full]).mean() / 6.0)
+
+
+# fit-image warns when its RMS ends above this many times the target's noise (and above
+# half an 8-bit step, the least difference a PNG can hold).
+ABOVE_NOISE = 3.0
 
 
 def _pairs(mask: np.ndarray):
@@ -965,8 +1000,19 @@ def run_command(args, run) -> int:
             print(f"{fk.key:<28} {_fmt(params[fk.key]):>12} {_fmt(values[fk.key]):>12}")
         else:
             print(f"{fk.key:<28} {'(map)':>12} {'× ' + _fmt(values[fk.scalar]):>12}")
+    sigma = noise_sigma(target, w)
     print(f"RMS difference {result.rms:.4g} (display values) after {result.steps} steps "
-          f"({result.seconds:.1f} s)")
+          f"({result.seconds:.1f} s)"
+          + ("" if sigma is None else f"; the target's noise estimate {sigma:.2g}"))
+    if sigma is not None and result.rms > ABOVE_NOISE * max(sigma, 0.5 / 255):
+        limit = (f"; it stopped at the --steps limit ({args.steps})"
+                 if result.steps >= args.steps else "")
+        warnings.warn(f"the fit ends at RMS {result.rms:.3g}, {result.rms / sigma:.0f}x the "
+                      f"target's noise estimate ({sigma:.2g}, from its pixel-to-pixel "
+                      "variation, texture included)"
+                      f"{limit}: the fitted keys do not explain the image; fit more keys, "
+                      "start closer (-D KEY=VALUE) or allow more --steps, and see the "
+                      "residual in the report", stacklevel=1)
     cli._print_written(outputs)
     return 0
 
