@@ -1,6 +1,7 @@
 """Cosmetics on the face (issue 6): frame time, gradient, and error against run time.
 
     python benchmarks/bench_makeup.py         # about two minutes on 2 cores
+    python benchmarks/bench_makeup.py --quick --results /tmp/R.md   # tiny sizes: that it runs
 
 1. The built-in `makeup` scene (its layers; 10 nm; SSS) at 1280×720: cold and warm frame
    times, with texture 512² (the default) and 1024², beside the bare face and SSS off; the
@@ -24,13 +25,18 @@ import jax.numpy as jnp
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import HERE, machine, srgb_lab, table, timeit, write_section  # noqa: E402
+from common import machine, srgb_lab, table, timeit, write_section  # noqa: E402
 
 from jaxskin import km, render  # noqa: E402
 from jaxskin.scene import load_scene  # noqa: E402
 from jaxskin.view import coverage  # noqa: E402
 
 HD = ["camera.size=1280", "camera.height=720"]
+# The sizes measured; `--quick` swaps in tiny ones (a check that the script runs).
+SIZES = {"frame": HD, "grid": ["camera.size=512"], "textures": (256, 512, 1024, 2048),
+         "texture": 512, "big texture": 1024}
+QUICK = {"frame": ["camera.size=96", "camera.height=54"], "grid": ["camera.size=48"],
+         "textures": (32, 64, 128, 256), "texture": 64, "big texture": 128}
 
 
 def delta_e(a, b, mask):
@@ -56,16 +62,18 @@ def frame(name, overrides):
 def frame_times():
     rows, grad_rows = [], []
     for label, name, extra in [
-            ("makeup, texture 512² (default)", "makeup", []),
-            ("makeup, texture 1024²", "makeup", ["texture.size=1024"]),
+            (f"makeup, texture {SIZES['texture']}² (default)", "makeup",
+             [f"texture.size={SIZES['texture']}"]),
+            (f"makeup, texture {SIZES['big texture']}²", "makeup",
+             [f"texture.size={SIZES['big texture']}"]),
             ("makeup, SSS off", "makeup", ["sss.enabled=false"]),
             ("bare face (no layers: no KM)", "face", []),
             ("bare face, SSS off", "face", ["sss.enabled=false"])]:
-        sc, arrays, _, prep, cold, warm = frame(name, HD + extra)
+        sc, arrays, _, prep, cold, warm = frame(name, SIZES["frame"] + extra)
         rows.append((label, f"{prep:.2f}", f"{cold:.2f}", f"{warm * 1e3:.0f}",
                      f"{1 / warm:.1f}"))
         print(rows[-1], flush=True)
-        if name == "makeup" and not extra:  # the default (1024²: 7.7 s and 10 GB by hand)
+        if name == "makeup" and "default" in label:  # (1024²: 7.7 s and 10 GB by hand)
             config, params = sc.config, sc.params
 
             def loss(cover, p, a, config=config):
@@ -83,8 +91,8 @@ def grid_study():
     """Spectral grids against 1 nm, on the makeup scene at 512² (SSS on)."""
     results = {}
     for step in (1, 5, 10, 20):
-        sc, arrays, image, _, _, warm = frame("makeup", ["camera.size=512",
-                                                         f"spectral.step={step}"])
+        sc, arrays, image, _, _, warm = frame("makeup", SIZES["grid"] + [
+            f"texture.size={SIZES['texture']}", f"spectral.step={step}"])
         results[step] = (image, warm)
         print(f"grid {step} nm: {warm * 1e3:.0f} ms", flush=True)
     mask = np.asarray(coverage(render.prepare(sc.config).view.mask, sc.config.supersample)) == 1
@@ -105,19 +113,21 @@ def texture_study():
     Without wrinkles: the furrow program works in texels, so each texture size grows other
     furrows, and the difference would measure the pattern, not the resolution."""
     images = {}
-    for size in (256, 512, 1024, 2048):
-        sc, _, image, _, _, warm = frame("makeup", HD + [f"texture.size={size}",
-                                                         "wrinkles.enabled=false"])
+    sizes = SIZES["textures"]
+    for size in sizes:
+        sc, _, image, _, _, warm = frame("makeup", SIZES["frame"] + [
+            f"texture.size={size}", "wrinkles.enabled=false"])
         images[size] = (image, warm)
         print(f"texture {size}²: {warm * 1e3:.0f} ms", flush=True)
     mask = np.asarray(coverage(render.prepare(sc.config).view.mask, sc.config.supersample)) == 1
-    ref = images[2048][0]
+    ref = images[sizes[-1]][0]
     curve = {s: (w, float(np.percentile(delta_e(i, ref, mask), 99))) for s, (i, w) in
-             images.items() if s != 2048}
-    rows = [(f"{s}²" + (" (default)" if s == 512 else ""), f"{w * 1e3:.0f}",
+             images.items() if s != sizes[-1]}
+    rows = [(f"{s}²" + (" (default)" if s == SIZES["texture"] else ""), f"{w * 1e3:.0f}",
              f"{e:.3f}") for s, (w, e) in curve.items()]
-    rows.append(("2048² (reference)", f"{images[2048][1] * 1e3:.0f}", "0"))
-    sc = load_scene("makeup", HD + ["wrinkles.enabled=false"])
+    rows.append((f"{sizes[-1]}² (reference)", f"{images[sizes[-1]][1] * 1e3:.0f}", "0"))
+    sc = load_scene("makeup", SIZES["frame"] + [f"texture.size={SIZES['texture']}",
+                                                "wrinkles.enabled=false"])
     arrays = render.prepare(sc.config).arrays
     with jax.enable_x64(True):
         a64 = jax.tree.map(lambda v: v.astype(jnp.float64)
@@ -126,7 +136,7 @@ def texture_study():
         f64 = jax.jit(lambda p, a: render.render_prepared(sc.config, p, a))
         image64 = np.asarray(f64(p64, a64))
         t64 = timeit(f64, p64, a64, repeat=3)
-    image32, t32 = images[512]
+    image32, t32 = images[SIZES["texture"]]
     d = delta_e(image32, image64, mask)
     precision = [("float32 (default)", f"{t32 * 1e3:.0f}", f"{d.mean():.5f}",
                   f"{d.max():.5f}"), ("float64 (reference)", f"{t64 * 1e3:.0f}", "0", "0")]
@@ -136,7 +146,7 @@ def texture_study():
 def shortcut_study():
     """Spectral layering against the paper's RGB shortcut, per texel of the makeup texture
     (512², 10 nm): the diffuse colour E · R_total, no SSS, no highlight."""
-    sc = load_scene("makeup")
+    sc = load_scene("makeup", [f"texture.size={SIZES['texture']}"])
     p = render.prepare(sc.config)
     grid = sc.config.spectral.grid
     S, K = p.arrays["S"], p.arrays["K"]
@@ -210,7 +220,7 @@ def plot(grids, shortcut, path, textures=None):
     _log_axes(ax, "warm time, ms (frame 512² for grids; KM stage for the shortcut)",
               "ΔE2000, 99th percentile", "Cosmetics: error against run time (2 CPU cores)")
     if textures:
-        _points(axes[0, 1], textures, 512, "C1", "{}²")
+        _points(axes[0, 1], textures, SIZES["texture"], "C1", "{}²")
         _log_axes(axes[0, 1], "warm frame time, ms (1280×720, SSS)",
                   "ΔE2000 p99 against a 2048² texture", "Texture size")
     fig.tight_layout()
@@ -223,13 +233,15 @@ def plot(grids, shortcut, path, textures=None):
 def main(argv: list[str] | None = None):
     import common
 
-    common.options(__doc__, argv)  # --help; --results redirects the section
+    args = common.options(__doc__, argv)  # --help; --results redirects the section
+    if args.quick:
+        SIZES.update(QUICK)
     print(machine())
     rows, grad_rows = frame_times()
     grid_rows, grids = grid_study()
     short_rows, shortcut = shortcut_study()
     texture_rows, textures, precision = texture_study()
-    plot(grids, shortcut, HERE / "makeup_error.png", textures)
+    plot(grids, shortcut, common.RESULTS.parent / "makeup_error.png", textures)
     t5 = table(["texture", "warm ms (1280×720)", "p99 ΔE2000 vs 2048²"], texture_rows)
     t6 = table(["precision", "warm ms", "mean ΔE2000", "max ΔE2000"], precision)
     t1 = table(["scene at 1280×720", "prepare s", "cold s", "warm ms", "fps"], rows)
@@ -247,7 +259,8 @@ def main(argv: list[str] | None = None):
     frame_ms, ratio = grad_rows[0][1], grad_rows[0][3]
     write_section("makeup", f"""## Cosmetics on the face (issue 6)
 
-Command: `python benchmarks/bench_makeup.py`. Machine: {machine()}.
+Command: `python benchmarks/bench_makeup.py{" --quick" if args.quick else ""}`.
+Machine: {machine()}.
 {time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}.
 
 The `makeup` scene (layers, bottom to top: {layers}; 10 nm; SSS by FFT) and the bare
@@ -295,7 +308,7 @@ aims stand: the frame at the default 512² texture takes {frame_ms} ms (the aim:
 gradient with respect to every thickness map {ratio} the forward pass (the aim: ≤ 2×,
 issue 19).
 """)
-    print(f"wrote {HERE / 'RESULTS.md'}")
+    print(f"wrote {common.RESULTS}")
 
 
 if __name__ == "__main__":

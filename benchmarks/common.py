@@ -149,4 +149,5 @@ def options(doc: str, argv: list[str] | None = None):
     args = ap.parse_args(argv or [])
     if args.results:
         RESULTS = args.results
+        RESULTS.parent.mkdir(parents=True, exist_ok=True)
     return args
