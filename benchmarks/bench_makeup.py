@@ -61,14 +61,14 @@ def frame(name, overrides):
 
 def frame_times():
     rows, grad_rows = [], []
+    texture = f"texture.size={SIZES['texture']}"
     for label, name, extra in [
-            (f"makeup, texture {SIZES['texture']}² (default)", "makeup",
-             [f"texture.size={SIZES['texture']}"]),
+            (f"makeup, texture {SIZES['texture']}² (default)", "makeup", [texture]),
             (f"makeup, texture {SIZES['big texture']}²", "makeup",
              [f"texture.size={SIZES['big texture']}"]),
-            ("makeup, SSS off", "makeup", ["sss.enabled=false"]),
-            ("bare face (no layers: no KM)", "face", []),
-            ("bare face, SSS off", "face", ["sss.enabled=false"])]:
+            ("makeup, SSS off", "makeup", [texture, "sss.enabled=false"]),
+            ("bare face (no layers: no KM)", "face", [texture]),
+            ("bare face, SSS off", "face", [texture, "sss.enabled=false"])]:
         sc, arrays, _, prep, cold, warm = frame(name, SIZES["frame"] + extra)
         rows.append((label, f"{prep:.2f}", f"{cold:.2f}", f"{warm * 1e3:.0f}",
                      f"{1 / warm:.1f}"))
