@@ -171,6 +171,9 @@ def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
     this pass at about 2.3×: the primal's three products and the transpose's one pass,
     1.3–1.6× their cost). Later, with the S and K cotangents through q (`_layer_SK`), on a
     2-core AVX2 machine: scalars 2.8–3.1×, maps 2.3–2.4× (benchmarks/RESULTS.md, issue 19).
+    Then with two chunks a step side by side (`STREAMS`), the stack's adjoints divided and
+    the S and K sums as products (2-core AVX-512, ABBA): maps 1.91–2.05×, scalars
+    2.28–2.53×.
     Earlier: plain reverse mode through this forward (the `switch` inside a `map` keeps
     every branch's residuals) 162× and 21 GB; reverse mode over checkpointed chunks of
     `_joint` 5.8–14×.
