@@ -192,9 +192,11 @@ def _slab(x):
 
 
 def _promote(*xs):
-    """Arrays of one floating dtype: the inputs' own if floating, else the default float."""
+    """Arrays of one floating dtype: the inputs' own (at least float32) if any is a floating
+    array; for Python numbers alone JAX's default float (float64 under `jax_enable_x64`:
+    a float64 check written with literals was quietly float32, a newcomer's trial)."""
     arrays = [jnp.asarray(x) for x in xs]
-    dtype = jnp.result_type(*arrays, jnp.float32)
+    dtype = jnp.result_type(*arrays)
     if not jnp.issubdtype(dtype, jnp.floating):
-        dtype = jnp.float32
-    return [a.astype(dtype) for a in arrays]
+        dtype = jnp.result_type(float)
+    return [a.astype(jnp.promote_types(dtype, jnp.float32)) for a in arrays]

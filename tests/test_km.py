@@ -95,9 +95,18 @@ def test_layer_bounded_and_finite_at_extremes(x64, dtype):
     assert bool(jnp.all(R0 + T <= 1 + 4 * eps))
 
 
-def test_python_scalars_default_to_float32_even_with_x64(x64):
+def test_python_numbers_follow_jax_default_float(x64):
+    """Python numbers alone take JAX's default float (float64 here, under x64), as
+    `jnp.exp(1.0)` does; with a float32 array they follow it (once they were float32 even
+    under x64, so a float64 check written with literals ran in float32: 3e-8 off)."""
     R0, T = km.layer(1.0, 0.5, 0.1)
-    assert R0.dtype == jnp.float32 and T.dtype == jnp.float32
+    assert R0.dtype == jnp.float64 and T.dtype == jnp.float64
+    assert km.r_inf(30.0, 2).dtype == jnp.float64
+    assert km.layer(jnp.float32(1.0), 0.5, 0.1)[0].dtype == jnp.float32
+    assert km.layer(np.float16(1.0), 0.5, 0.1)[0].dtype == jnp.float32  # at least float32
+    # against the closed form with a = (S + K)/S, b = sqrt(a² − 1): R∞ = a − b
+    a = (30.0 + 2.0) / 30.0
+    assert abs(float(km.r_inf(30.0, 2.0)) - (a - np.sqrt(a * a - 1.0))) < 1e-15
 
 
 def test_r_inf_and_inverse(x64):
