@@ -2,7 +2,8 @@
 
 Built-in names (`hand`, `hand_closed`, `foot`, `arm`, `face`) resolve to files in data/meshes.
 A file that is not a triangle mesh, is empty, or has no usable faces is an `InputError`;
-degenerate and duplicate faces are removed with a warning, never left to fail later.
+degenerate and duplicate faces are removed with a warning, never left to fail later; a mesh
+whose triangles wind inward (its normals into the body) is turned outward with a warning.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import numpy as np
 
 from .io import InputError, data_dir
 
-__all__ = ["BUILTIN", "Mesh", "load_mesh"]
+__all__ = ["BUILTIN", "Mesh", "load_mesh", "signed_volume"]
 
 BUILTIN = {
     "hand": "hand_lowres.obj",
@@ -82,15 +83,56 @@ def load_mesh(name_or_path) -> Mesh:
     if drop.all():
         raise InputError("every triangle is degenerate (zero area)", path)
     if drop.any():
-        warnings.warn(f"{path}: removed {int(degenerate.sum())} degenerate and "
-                      f"{int((duplicate & ~degenerate).sum())} duplicate triangles", stacklevel=2)
+        _warn_once(path, f"{path}: removed {int(degenerate.sum())} degenerate and "
+                         f"{int((duplicate & ~degenerate).sum())} duplicate triangles")
         faces = faces[~drop]
+    if signed_volume(vertices, faces) < -INWARD:
+        _warn_once(path, f"{path}: the triangles wind inward (clockwise seen from outside: "
+                         "normals into the body, which would render flat and dark); "
+                         "reversed for the render")
+        faces = faces[:, ::-1].copy()
     normals = _vertex_normals(vertices, faces)
     uv = None
     visual_uv = getattr(getattr(loaded, "visual", None), "uv", None)
     if visual_uv is not None and len(visual_uv) == len(vertices):
         uv = np.asarray(visual_uv, np.float64)
     return Mesh(key if key in BUILTIN else path.stem, vertices, faces, normals, uv)
+
+
+# A mesh whose signed volume about its centroid is below −INWARD × its bounding box's
+# volume winds inward. Measured: the built-in meshes (open at the wrist, the cuts, the
+# face's shell) +0.12 to +0.35, a capsule +0.72, an open tube +0.52; reversed, the same
+# negated; a flat patch about 0, left as it is.
+INWARD = 0.05
+
+
+def signed_volume(vertices, faces) -> float:
+    """The volume the triangles enclose about the vertices' centroid, by the right-hand
+    rule of their vertex order, as a fraction of the bounding box's volume (its extent in
+    the flattest direction floored at a thousandth of the largest): > 0 for outward
+    normals, < 0 inward, near 0 for an open patch."""
+    o = vertices.mean(axis=0)
+    a, b, c = (vertices[faces[:, i]] - o for i in range(3))
+    volume = float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum()) / 6.0
+    extent = np.ptp(vertices, axis=0)
+    box = float(np.prod(np.maximum(extent, 1e-3 * extent.max())))
+    return volume / box if box > 0 else 0.0
+
+
+_WARNED: set = set()
+
+
+def _warn_once(path, message: str) -> None:
+    """A warning about a mesh file, once per process for the file as it is (a command loads
+    a mesh more than once: checks, then the work)."""
+    try:
+        st = Path(path).stat()
+        key = (str(Path(path).resolve()), st.st_mtime_ns, st.st_size, message)
+    except OSError:
+        key = (str(path), message)
+    if key not in _WARNED:
+        _WARNED.add(key)
+        warnings.warn(message, stacklevel=3)
 
 
 def _vertex_normals(vertices, faces):

@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import warnings
 
 import numpy as np
 
@@ -153,11 +154,28 @@ def _uv(mesh: Mesh, size: int) -> TextureMap:
         raise ValueError(f"mesh '{mesh.name}' has no texture coordinates; use planar or "
                          "cylindrical projection")
     xy = np.stack([mesh.uv[:, 0] * size, (1 - mesh.uv[:, 1]) * size], axis=1)
-    # Per face, the linear map M from the face plane to pixels: M [e1 e2] = [f1 f2].
     f = mesh.faces
+    corners = xy[f]  # (F, 3, 2)
+    span = np.ptp(corners, axis=1)  # (F, 2)
+    # A triangle across more than half the texture is a seam whose vertices are shared
+    # (u running 0 → 1 round a cylinder and back to 0): drawn as it is, it smears across
+    # every row of the texture. Across u it is read as a wrap (the cylindrical projection's
+    # rule: the texture wraps in u); across v nothing can be done but say so.
+    wrap = bool((span[:, 0] > size / 2).any())
+    if wrap:
+        warnings.warn(f"mesh '{mesh.name}': {int((span[:, 0] > size / 2).sum())} triangles "
+                      "span more than half the texture in u: read as a seam where u wraps "
+                      "from 1 back to 0 (the texture wraps in u)", stacklevel=3)
+        corners = unwrap_seam(corners, size)
+    if (span[:, 1] > size / 2).any():
+        warnings.warn(f"mesh '{mesh.name}': {int((span[:, 1] > size / 2).sum())} triangles "
+                      "span more than half the texture in v (a seam with shared vertices?): "
+                      "they smear across the texture; split the seam's vertices", stacklevel=3)
+    # Per face, the linear map M from the face plane to pixels: M [e1 e2] = [f1 f2].
     E = np.stack([mesh.vertices[f[:, 1]] - mesh.vertices[f[:, 0]],
                   mesh.vertices[f[:, 2]] - mesh.vertices[f[:, 0]]], axis=2)  # (F, 3, 2)
-    Fp = np.stack([xy[f[:, 1]] - xy[f[:, 0]], xy[f[:, 2]] - xy[f[:, 0]]], axis=2)  # (F, 2, 2)
+    Fp = np.stack([corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]],
+                  axis=2)  # (F, 2, 2)
     M_face = Fp @ np.linalg.pinv(E)  # (F, 2, 3)
     area = 0.5 * np.linalg.norm(np.cross(E[..., 0], E[..., 1]), axis=1)
     M = np.zeros((len(xy), 2, 3))
@@ -166,5 +184,5 @@ def _uv(mesh: Mesh, size: int) -> TextureMap:
         np.add.at(M, f[:, i], M_face * area[:, None, None])
         np.add.at(weight, f[:, i], area)
     M /= np.maximum(weight, 1e-300)[:, None, None]
-    tmap = TextureMap("uv", mesh, size, size, xy, None, False, M, keep_magnitude=True)
+    tmap = TextureMap("uv", mesh, size, size, xy, None, wrap, M, keep_magnitude=True)
     return dataclasses.replace(tmap, texel=tmap.texel_size())
