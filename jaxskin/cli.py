@@ -746,7 +746,7 @@ def main(argv=None) -> int:
     run = _Run()
     commands = {"calibrate": _calibrate, "fit-brdf": _fit_brdf, "render": _render,
                 "fit-skin": _fit_skin, "edit": _edit, "fit-image": _fit_image}
-    with _signals():
+    with _signals(), _pipe_safe_stdout():
         try:
             code = commands[args.command](args, run)
             _raise_pending()
@@ -770,6 +770,50 @@ def main(argv=None) -> int:
             _say(f"jaxskin: error: {args.command} failed unexpectedly while {run.stage} "
                  f"({what}); {run.finished()}; run again with --debug for the traceback")
             return EXIT_FAILURE
+
+
+class _PipeSafe:
+    """Standard output that a closed pipe (`jaxskin calibrate … | head -2`) does not stop:
+    what is printed after the reader went is dropped, the work goes on and its files are
+    written (a BrokenPipeError from a progress line ended calibrate with exit 1)."""
+
+    def __init__(self, stream):
+        self._stream, self._broken = stream, False
+
+    def write(self, text):
+        if not self._broken:
+            try:
+                return self._stream.write(text)
+            except BrokenPipeError:
+                self._gone()
+        return len(text)
+
+    def flush(self):
+        if not self._broken:
+            try:
+                self._stream.flush()
+            except BrokenPipeError:
+                self._gone()
+
+    def _gone(self):
+        self._broken = True
+        with contextlib.suppress(OSError, ValueError):  # the interpreter's last flush too
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, self._stream.fileno())
+            os.close(devnull)
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
+@contextlib.contextmanager
+def _pipe_safe_stdout():
+    old = sys.stdout
+    sys.stdout = _PipeSafe(old)
+    try:
+        yield
+    finally:
+        sys.stdout = old
 
 
 def _say(line: str) -> None:

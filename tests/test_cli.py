@@ -91,6 +91,28 @@ def test_list_names_every_builtin(capsys):
         assert sorted(n for k, n in rows if k == kind) == sorted(names), kind
 
 
+def test_a_closed_standard_output_does_not_stop_the_work(tmp_path):
+    """`jaxskin calibrate A B -o DIR | head -2`: the reader goes away, the next print raised
+    BrokenPipeError and calibrate ended with exit 1 "failed unexpectedly while writing"
+    (a newcomer's trial, 2 runs of 3). Here the reader is gone before the first line: exit
+    0, both materials written, nothing on stderr."""
+    import json
+
+    data = Path(__file__).resolve().parents[1] / "data" / "measurements"
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "jaxskin", "calibrate",
+                             str(data / "lipstick_red.csv"), str(data / "blush_rose.csv"),
+                             "-o", str(out), "--no-report"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc.stdout.close()
+    err = proc.stderr.read()
+    assert proc.wait(timeout=300) == 0, err
+    assert err == "", err
+    assert sorted(p.name for p in out.iterdir()) == ["blush_rose.json", "lipstick_red.json"]
+    for p in out.iterdir():
+        assert json.loads(p.read_text())["S_per_mm"]
+
+
 @pytest.mark.parametrize("sig, code", [("SIGINT", 130), ("SIGTERM", 143)])
 def test_a_signal_mid_run_stops_cleanly(tmp_path, sig, code):
     """Several scenes; the signal arrives once the first image exists. Exit 130 / 143, one
