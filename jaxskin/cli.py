@@ -256,9 +256,11 @@ def _parser() -> argparse.ArgumentParser:
         "with --maps also DIR/<scene>_height.png (16-bit grey), DIR/<scene>_normal.png (the "
         "bump-mapped normal map) and DIR/<scene>_field.png (the mesh with d1 in red and d2 in "
         "green, as in the paper's fig. 3.4). With -D overrides the name gets "
-        "_<key>-<value> for each (DIR/hand_material.melanin-0.5.png), a sweep "
+        "_<key>-<value> for each (DIR/hand_material.melanin-0.5.png; past 120 characters "
+        "_D-<12 hex digits>, a digest of the overrides), a sweep "
         "_sweep-<index>_<key>-<value> with a zero-padded index (DIR/hand_sweep-02_"
-        "material.melanin-0.25.png). A scene name must be a plain file name (no '/', '..', "
+        "material.melanin-0.25.png; --maps and --glb are written once, for the scene's own "
+        "value of the swept key). A scene name must be a plain file name (no '/', '..', "
         "leading dot or control character) or it is refused. Everything is checked before "
         "anything is written: every scene, override, sweep, mesh, material, BRDF file, layer "
         "image and polygon, the output folder, that no output is an input, and that the "
@@ -529,6 +531,9 @@ def _parse_sweep(text: str, sc):
         near = difflib.get_close_matches(key, names, n=1)
         hint = (f"did you mean '{near[0]}'?" if near and key not in SCHEMA
                 else f"parameters: {', '.join(names)}")
+        if key in SCHEMA and not SCHEMA[key].param:
+            hint = ("it is a static setting (each value compiles its own program): render "
+                    f"each value with -D {key}=VALUE instead")
         raise InputError(f"--sweep: '{key}' is not a scalar parameter of this scene; {hint}",
                          sc.source)
     layers = [layer.name for layer in sc.layers]

@@ -423,6 +423,9 @@ def load_scene(name_or_path, overrides=()) -> Scene:
     """A built-in scene by name or a TOML scene file, with `-D key=value` `overrides`."""
     key = str(name_or_path)
     path = builtin_scenes().get(key, Path(key))
+    if path.is_dir():
+        raise InputError("is a folder; expected a TOML scene file or a built-in scene "
+                         f"({', '.join(BUILTIN_SCENES)})", path)
     if not path.is_file():
         raise InputError(f"no such scene file; built-in scenes: {', '.join(BUILTIN_SCENES)}",
                          path)
@@ -444,6 +447,10 @@ def parse_scene(doc: dict, path, overrides=()) -> Scene:
     doc = copy.deepcopy(doc)
     edits_raw = doc.get("fields", {}).pop("edit", []) if isinstance(doc.get("fields"), dict) \
         else []
+    if not isinstance(edits_raw, list):  # [fields.edit] written for [[fields.edit]]
+        raise InputError("expected [[fields.edit]] tables, one per edit (an array of "
+                         "tables: two brackets), got one [fields.edit] table", path,
+                         key="fields.edit")
     layers_raw = doc.pop("layer", [])
     if not isinstance(layers_raw, list):
         raise InputError("expected [[layer]] tables (an array of tables)", path, key="layer")
@@ -457,11 +464,11 @@ def parse_scene(doc: dict, path, overrides=()) -> Scene:
     flat = _flatten(doc, path)
     for k, v in flat.items():
         values[k] = _check(k, v, path)
-    from_command_line = set()
+    from_command_line = {}  # key → the -D item that set it last
     for item in overrides:
         k, v = _parse_override(item)
         values[k] = _check(k, v, f"-D {item}", names)
-        from_command_line.add(k)
+        from_command_line[k] = f"-D {item}"
     if "camera.size" in from_command_line and "camera.height" not in from_command_line:
         values["camera.height"] = _kept_aspect(values, flat.get("camera.size",
                                                                 SCHEMA["camera.size"].default))
@@ -472,6 +479,9 @@ def parse_scene(doc: dict, path, overrides=()) -> Scene:
 
     def base(key):  # a path in the file is relative to it; one given with -D, to the cwd
         return Path.cwd() if key in from_command_line else path.parent
+
+    def source(key):  # where a value came from, for its error: the file or the -D item
+        return from_command_line.get(key, path)
 
     if values["name"] is None:
         values["name"] = path.stem
@@ -484,8 +494,8 @@ def parse_scene(doc: dict, path, overrides=()) -> Scene:
             base("material.brdf") / brdf).resolve()
         if not brdf_path.is_file():
             raise InputError("expected 'skin' (the preset) or a Lafortune JSON file (as "
-                             f"written by jaxskin fit-brdf); no file {brdf_path}", path,
-                             key="material.brdf")
+                             f"written by jaxskin fit-brdf); no file {brdf_path}",
+                             source("material.brdf"), key="material.brdf")
         values["material.brdf"] = str(brdf_path)
     for _, image_key in SKIN_MAPS.values():
         image = values[image_key]
@@ -494,8 +504,8 @@ def parse_scene(doc: dict, path, overrides=()) -> Scene:
         image_path = Path(image) if Path(image).is_absolute() else (
             base(image_key) / image).resolve()
         if not image_path.is_file():
-            raise InputError(f"expected a greyscale image file, got {image!r}", path,
-                             key=image_key)
+            raise InputError(f"expected a greyscale image file, got {image!r}",
+                             source(image_key), key=image_key)
         values[image_key] = str(image_path)
     edits = tuple(_edit(i, e, path) for i, e in enumerate(edits_raw))
     return Scene(values["name"], str(path), values, edits, layers)

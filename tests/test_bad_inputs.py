@@ -159,6 +159,9 @@ CASES = {
         t, '[[layer]]\nname = "a"\nmaterial = "blush_rose"\n'),
     "toml-uv-without-uvs": lambda t: scene(t, '[mesh]\nprojection = "uv"\n'),
     "toml-missing-file": lambda t: ["render", str(t / "nope.toml"), "-o", str(t / "out")],
+    "toml-edit-single-brackets": lambda t: scene(
+        t, "[fields.edit]\nvertex = 1\nd1 = [1.0, 0.0, 0.0]\nd2 = [0.0, 1.0, 0.0]\n"),
+    "scene-is-a-folder": lambda t: ["render", str(t), "-o", str(t / "out")],
     "name-parent": lambda t: scene(t, 'name = "../x"\n'),
     "name-absolute": lambda t: scene(t, f'name = "{t / "abs"}"\n'),
     "name-newline": lambda t: scene(t, 'name = "a\\nb"\n'),
@@ -169,6 +172,8 @@ CASES = {
     "D-nan": lambda t: hand(t, "-D", "material.melanin=nan"),
     "D-out-of-range": lambda t: hand(t, "-D", "material.melanin=5"),
     "D-unknown-key": lambda t: hand(t, "-D", "nosuch.key=1"),
+    "D-brdf-missing": lambda t: hand(t, "-D", "material.model=lafortune", "-D",
+                                     "material.brdf=nope.json"),
     "D-no-equals": lambda t: hand(t, "-D", "material.melanin"),
     "D-name-parent": lambda t: hand(t, "-D", "name=../escaped"),
     "D-name-absolute": lambda t: hand(t, "-D", f"name={t / 'abs'}"),
@@ -353,3 +358,19 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
     shutil.rmtree(out)
     with pytest.raises(OSError, match="No space"):
         main(["--debug", *argv])
+
+
+@pytest.mark.parametrize("case, words", [
+    ("toml-edit-single-brackets", "expected [[fields.edit]] tables, one per edit"),
+    ("scene-is-a-folder", "is a folder; expected a TOML scene file"),
+    ("D-brdf-missing", "jaxskin: error: -D material.brdf=nope.json: key 'material.brdf'"),
+    ("sweep-static-key", "static setting (each value compiles its own program): render each "
+                         "value with -D texture.size=VALUE"),
+])
+def test_what_the_line_says(case, words, tmp_path, capsys, monkeypatch):
+    """The line names the mistake: '[fields.edit]' said "expected a table with at…" of what
+    is a table; a folder said "no such scene file"; a missing BRDF file given with -D was
+    blamed on the scene file (a newcomer's trial)."""
+    monkeypatch.chdir(tmp_path)
+    code, err, _ = run(CASES[case](tmp_path), tmp_path, capsys, False)
+    assert code == 2 and words in err, err
