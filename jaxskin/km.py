@@ -54,7 +54,10 @@ def layer(
     K = 0 (R0 = SX/(1 + SX)), S = 0 (T = exp(−KX)), X = 0 (R0 = 0, T = 1), and large z
     (R0 → R∞, T → 0, no overflow for any finite z). Always 0 <= R0, T and R0 + T <= 1.
     Work that depends on S and K only is done on their own shapes (per layer and band in a
-    render), and the per-texel part costs one exp.
+    render), and the per-texel part costs one exp. Float32 limits, far outside physical
+    values (per mm, S and K of 1e-3 to 1e5; X under a metre): K(K + 2S) overflows past
+    ~1e38 (R0 and T come out 0), and the S, K gradient overflows where K(K + 2S) < ~1e-26
+    with X > ~1e12 mm; float64 has neither within its range.
 
     **Arguments:**
 
