@@ -149,6 +149,23 @@ def cylinder_to_xyz(s, t, r):
     return np.stack([r * np.sin(s), t, r * np.cos(s)], axis=-1)
 
 
+SEAM_STRETCH = 4.0  # texels per unit length, against the mesh's median, that mark a seam
+
+
+def _seams(mesh: Mesh, corners: np.ndarray, size: int) -> np.ndarray:
+    """Per face and UV axis (F, 2): whether the triangle is a seam with shared vertices.
+
+    It spans more than half the texture along that axis and covers more than SEAM_STRETCH
+    times the mesh's median texels per unit of its longest edge: a square mapped onto the
+    whole texture by two triangles spans it all without being a seam."""
+    span = np.ptp(corners, axis=1)  # (F, 2) texels
+    p = mesh.vertices[mesh.faces]  # (F, 3, 3)
+    edge = np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).max(axis=1)  # (F,)
+    stretch = span / np.maximum(edge, 1e-300)[:, None]
+    typical = np.median(stretch, axis=0)
+    return (span > size / 2) & (stretch > SEAM_STRETCH * typical)
+
+
 def _uv(mesh: Mesh, size: int) -> TextureMap:
     if mesh.uv is None:
         raise ValueError(f"mesh '{mesh.name}' has no texture coordinates; use planar or "
@@ -156,21 +173,22 @@ def _uv(mesh: Mesh, size: int) -> TextureMap:
     xy = np.stack([mesh.uv[:, 0] * size, (1 - mesh.uv[:, 1]) * size], axis=1)
     f = mesh.faces
     corners = xy[f]  # (F, 3, 2)
-    span = np.ptp(corners, axis=1)  # (F, 2)
-    # A triangle across more than half the texture is a seam whose vertices are shared
-    # (u running 0 → 1 round a cylinder and back to 0): drawn as it is, it smears across
-    # every row of the texture. Across u it is read as a wrap (the cylindrical projection's
-    # rule: the texture wraps in u); across v nothing can be done but say so.
-    wrap = bool((span[:, 0] > size / 2).any())
-    if wrap:
-        warnings.warn(f"mesh '{mesh.name}': {int((span[:, 0] > size / 2).sum())} triangles "
-                      "span more than half the texture in u: read as a seam where u wraps "
-                      "from 1 back to 0 (the texture wraps in u)", stacklevel=3)
+    seam = _seams(mesh, corners, size)  # (F, 2)
+    # A triangle across more than half the texture, stretched far beyond the mesh's usual
+    # texels per unit length, is a seam whose vertices are shared (u running 0 → 1 round a
+    # cylinder and back to 0): drawn as it is, it smears across every row of the texture.
+    # Across u it is read as a wrap (the cylindrical projection's rule: the texture wraps
+    # in u); across v nothing can be done but say so.
+    if seam[:, 0].any():
+        warnings.warn(f"mesh '{mesh.name}': {int(seam[:, 0].sum())} triangles span more "
+                      "than half the texture in u: read as a seam where u wraps from 1 back "
+                      "to 0 (the texture wraps in u)", stacklevel=3)
         corners = unwrap_seam(corners, size)
-    if (span[:, 1] > size / 2).any():
-        warnings.warn(f"mesh '{mesh.name}': {int((span[:, 1] > size / 2).sum())} triangles "
-                      "span more than half the texture in v (a seam with shared vertices?): "
-                      "they smear across the texture; split the seam's vertices", stacklevel=3)
+    if seam[:, 1].any():
+        warnings.warn(f"mesh '{mesh.name}': {int(seam[:, 1].sum())} triangles span more "
+                      "than half the texture in v (a seam with shared vertices?): they "
+                      "smear across the texture; split the seam's vertices", stacklevel=3)
+    wrap = bool(seam[:, 0].any())
     # Per face, the linear map M from the face plane to pixels: M [e1 e2] = [f1 f2].
     E = np.stack([mesh.vertices[f[:, 1]] - mesh.vertices[f[:, 0]],
                   mesh.vertices[f[:, 2]] - mesh.vertices[f[:, 0]]], axis=2)  # (F, 3, 2)

@@ -10,6 +10,25 @@ import numpy as np
 import pytest
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _no_persistent_cache_in_process():
+    """`main()` called in-process would switch JAX's persistent compilation cache on for the
+    rest of the session (a global setting); commands run as subprocesses still use it, and
+    `test_persistent_compilation_cache` checks it there. Session-scoped: module fixtures
+    (e.g. test_fit_skin's `fitted`) call `main()` before any function fixture is set up."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr("jaxskin.cli._enable_compilation_cache", lambda: None)
+        yield
+
+
+@pytest.fixture(autouse=True)
+def _cache_stays_off():
+    # CI crashed twice (SIGSEGV serializing, SIGABRT deserializing the makeup gradient's
+    # program) once the cache was on in the long pytest process: nothing may switch it on.
+    yield
+    assert not jax.config.jax_compilation_cache_dir, "a test switched the persistent cache on"
+
+
 @pytest.fixture
 def x64():
     with jax.enable_x64(True):

@@ -285,7 +285,8 @@ def test_same_inputs_same_bytes(tmp_path, capsys):
 
 def test_a_sweep_key_typo_gets_a_suggestion():
     """`--sweep layer.lipstik.thickness_mm=…` once answered with the scene's 28 parameters;
-    a near miss now names the one meant (a static key still gets the list)."""
+    a near miss now names the one meant, a static key says to use -D, anything else gets
+    the list."""
     from jaxskin.cli import _parse_sweep
     from jaxskin.io import InputError
     from jaxskin.scene import load_scene
@@ -293,8 +294,10 @@ def test_a_sweep_key_typo_gets_a_suggestion():
     makeup = load_scene("makeup")
     with pytest.raises(InputError, match="did you mean 'layer.lipstick.thickness_mm'"):
         _parse_sweep("layer.lipstik.thickness_mm=0:0.03:3", makeup)
-    with pytest.raises(InputError, match="parameters: wrinkles.k_noise"):
+    with pytest.raises(InputError, match="static setting .* -D camera.size=VALUE instead"):
         _parse_sweep("camera.size=16:32:2", makeup)
+    with pytest.raises(InputError, match="parameters: wrinkles.k_noise"):
+        _parse_sweep("zzzz=0:1:2", makeup)
 
 
 def test_list_shows_each_scene_description_whole(capsys):
