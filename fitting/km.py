@@ -33,7 +33,7 @@ from jaxskin.precision import einsum, matmul
 
 from .measurements import Measurement
 
-__all__ = ["KMFit", "closed_form", "fit", "identifiable", "model_reflectance"]
+__all__ = ["KMFit", "closed_form", "fit", "identifiable", "model_reflectance", "suspect_labels"]
 
 DEFAULT_NOISE = 0.002  # σ of one reflectance reading
 MAX_NOISE = 0.5  # σ beyond this is not a reflectance measurement
@@ -98,6 +98,36 @@ def identifiable(m: Measurement, noise: float = DEFAULT_NOISE) -> np.ndarray:
     thin = np.max(np.abs(m.R - m.R_inf), axis=0) > NOISE_SIGMAS * noise
     background = np.abs(m.R_g - m.R_inf) > NOISE_SIGMAS * noise
     return thin & background
+
+
+def suspect_labels(m: Measurement, noise: float = DEFAULT_NOISE) -> list[str]:
+    """Readings in an order the model cannot produce, as one line each (empty: none).
+
+    A layer over the background reflects between R_g (no layer) and R_inf (opaque), the
+    nearer R_inf the thicker it is. A thin layer on the other side of R_inf, or further from
+    it than R_g or than a thinner layer, breaks that: columns swapped or mislabelled. Each
+    rule is reported when it is broken by more than 3σ at more bands than it visibly holds
+    at (by more than 3σ), so noise alone does not trigger it.
+    """
+    tol = NOISE_SIGMAS * noise
+    towards_g = np.sign(m.R_g - m.R_inf)
+    # Distance from R_inf, positive on R_g's side: R_g, then the thin layers, thinnest first.
+    d = [(R - m.R_inf) * towards_g for R in (m.R_g, *m.R)]
+    names = ["R_g", *m.columns]
+    n = len(m.wavelength_nm)
+    lines = []
+    for k, column in enumerate(m.columns, start=1):  # one line per column at most
+        other_side = np.sum(d[k] < -tol), np.sum(d[k] > tol)
+        further = np.sum(d[k] - d[k - 1] > tol), np.sum(d[k - 1] - d[k] > tol)
+        if other_side[0] > other_side[1]:
+            lines.append(f"{m.path}: column '{column}' lies on the other side of R_inf from R_g "
+                         f"at {other_side[0]} of {n} bands, where a layer over the background "
+                         "reflects between the two: R_inf and a thin layer swapped?")
+        elif further[0] > further[1]:
+            lines.append(f"{m.path}: column '{column}' is further from R_inf than "
+                         f"'{names[k - 1]}' at {further[0]} of {n} bands, where a thicker layer "
+                         "lies nearer R_inf: columns swapped or thicknesses mislabelled?")
+    return lines
 
 
 def closed_form(m: Measurement) -> tuple[np.ndarray, np.ndarray]:

@@ -2,7 +2,7 @@
 
 The format (also in the documentation, docs/reference/formats.md):
 
-    # name: foundation_1          (optional; default: the file's stem)
+    # name: foundation_1          (optional; default: the file's stem, made safe)
     # thickness_mm: 0.15          (optional; the thickness of a bare `R` column)
     wavelength_nm,R_0.05mm,R_0.15mm,R_inf,R_g
     380,0.0712,0.1134,0.2051,0.0398
@@ -15,6 +15,9 @@ The format (also in the documentation, docs/reference/formats.md):
 - Raw radiance instead: the same columns with `E_` in place of `R_` (`E_0.15mm`, `E_inf`,
   `E_g`; `E_R_0.15mm` is accepted too) plus `E_white`, the barium sulfate standard; then
   R = E / E_white (eq. 8).
+
+The header is the first row whose first cell names the wavelength (`wavelength_nm`, `nm`,
+`Wavelength (nm)`, ...) and that has a column starting with `R` or `E`.
 
 Anything else is an `InputError` naming the file, the line and the column.
 """
@@ -29,18 +32,19 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxskin.formats import read_table
+from jaxskin.formats import WAVELENGTH_RANGE_NM, read_table
 from jaxskin.io import InputError
+from jaxskin.outputs import MAX_NAME
 
 __all__ = ["Measurement", "is_wavelength_column", "read_measurement"]
 
 _THIN = re.compile(r"^(?:R|E)_(?P<x>[^m]+)mm$")
 # The first column: wavelength_nm (the format's name) or what instrument software writes:
-# "Wavelength", "Wavelength (nm)", "wavelength [µm]", "lambda", "wl", ...
+# "Wavelength", "Wavelength (nm)", "wavelength [µm]", "lambda", "wl", "nm", ...
 _WAVELENGTH = re.compile(
     r"(?i)(?:wave\s*length|wl|lambda|λ)(?:\s*[_(\[]\s*(?P<unit>nm|um|µm|micron|microns)"
-    r"\s*[)\]]?)?")
-WAVELENGTH_RANGE_NM = (200.0, 3000.0)  # what a spectroradiometer can measure, generously
+    r"\s*[)\]]?)?|nm")
+_NAME = re.compile(r"[\w.+-]+")  # a material name (it names the output files)
 MAX_THICKNESS_MM = 100.0  # a cosmetic layer is µm to a few mm; beyond this it is a typo
 MAX_RADIANCE = 1e30  # any unit of radiance or counts; beyond this it is an overflow
 PERCENT_MEDIAN = 1.5  # reflectances read as percent when their median is above this
@@ -49,6 +53,11 @@ PERCENT_MEDIAN = 1.5  # reflectances read as percent when their median is above 
 def is_wavelength_column(name: str) -> bool:
     """Whether a header cell names the wavelength column (what starts a measurement's table)."""
     return _WAVELENGTH.fullmatch(name.strip()) is not None
+
+
+def _is_reading(name: str) -> bool:
+    """Whether a header cell may name a reading: reflectance `R…` or radiance `E…`."""
+    return name.startswith(("R", "E"))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -90,7 +99,7 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
     **Returns:** a `Measurement`. **Raises:** `InputError` on anything malformed.
     """
     table = read_table(path, is_wavelength_column, "wavelength_nm,R_<X>mm,...,R_inf,R_g",
-                       min_rows=2)
+                       min_rows=2, other_column=_is_reading)
     path, meta, header, header_line = table.path, table.meta, table.header, table.header_line
 
     comment_thickness = None
@@ -116,17 +125,39 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
             "R_g equals R_inf at every wavelength: the background must differ from the opaque "
             "layer (a black or white card)", path, header_line, _column_of(columns, "g"),
         )
-    name = meta.get("name", (path.stem, 0))[0] or path.stem
-    if not re.fullmatch(r"[\w.+-]+", name):
+    name, line = meta.get("name", ("", 0))
+    if not name:
+        name = _name_from_stem(path, notes)
+    elif not _NAME.fullmatch(name):
         raise InputError(
             f"name {name!r} must be letters, digits, '.', '_', '+' or '-' (it names files)",
-            path, meta["name"][1],
+            path, line,
         )
     return Measurement(
         path=path, name=name, wavelength_nm=wl, thickness_mm=np.array([x for x, _ in thin]),
         R=R, R_inf=R_inf, R_g=R_g, columns=tuple(n for _, n in thin), header_line=header_line,
         notes=tuple(notes),
     )
+
+
+def _name_from_stem(path, notes) -> str:
+    """The file's stem as the material name; one that the name rule refuses
+    (`Lipstick Red (batch 5)`) is made safe: lowercase, runs of other characters as `_`,
+    no `_`, `.`, `+`, `-` at the ends (`lipstick_red_batch_5`), with a note."""
+    stem = path.stem
+    name = stem
+    if not _NAME.fullmatch(stem) or stem.startswith("."):
+        name = re.sub(r"[^a-z0-9.+-]+", "_", stem.lower()).strip("_.+-")
+    if not name:
+        raise InputError(f"the file name {path.name!r} has no letters or digits to name the "
+                         "material: add a line '# name: NAME' to the file", path)
+    if len(name) > MAX_NAME:
+        raise InputError(f"the material name from the file name is {len(name)} characters, "
+                         f"more than {MAX_NAME}: add a line '# name: NAME' to the file", path)
+    if name != stem:
+        notes.append(f"{path}: the file name is not a material name (letters, digits, '.', "
+                     f"'_', '+', '-'): named it '{name}' (set it with '# name: NAME')")
+    return name
 
 
 def _wavelengths_nm(wl, column, path, numbers):

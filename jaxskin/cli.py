@@ -225,17 +225,18 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("-o", "--output", required=True, metavar="OUTDIR",
                    help="folder for <name>.json and <name>.png (created if missing)")
     c.add_argument("--thickness", type=_number(above=0.0, hi=100.0), metavar="MM",
-                   help="thickness in mm of a bare 'R' column (overrides '# thickness_mm:')")
+                   help="thickness in mm of a bare 'R' column (overrides '# thickness_mm:'); "
+                   "warned of when no file has one")
     c.add_argument("--percent", action="store_true",
                    help="reflectance columns are in percent (0–100) instead of 0–1")
     c.add_argument("--smooth", type=_number(lo=0.0, hi=1e6), default=0.0, metavar="W",
                    help="smoothness prior: neighbouring bands' log S and log K differ by about "
                    "1/W (a Gaussian prior weighed against readings of σ = --noise); 0 (default) "
                    "fits each band on its own; 20 allows about 5%% per band")
-    c.add_argument("--noise", type=_number(lo=0.0, hi=1.0), default=None, metavar="σ",
-                   help="standard deviation of one reflectance reading (default 0.002); a band "
-                   "is identifiable when some thin layer and the background each differ from "
-                   "R_inf by more than 3σ")
+    c.add_argument("--noise", type=_number(above=0.0, hi=1.0), default=None, metavar="σ",
+                   help="standard deviation of one reflectance reading, > 0 (default 0.002); a "
+                   "band is identifiable when some thin layer and the background each differ "
+                   "from R_inf by more than 3σ; a fit whose RMS error is above 3σ is warned of")
     c.add_argument("--extrapolate", choices=("hold", "linear"), default=None,
                    help="how the renderer may extend S, K beyond the measured wavelengths to "
                    "its 380-780 nm grid: hold the end values, or continue log S, log K "
@@ -463,8 +464,15 @@ def _calibrate(args, run: _Run) -> int:
             print(f"jaxskin: warning: {m.path}: covers {wl[0]:g}-{wl[-1]:g} nm, not the "
                   f"renderer's {grid[0]:g}-{grid[-1]:g} nm: the material will be refused at "
                   "render time; pass --extrapolate hold|linear to allow it", file=sys.stderr)
+        for line in fit_km.suspect_labels(m, noise):
+            print(f"jaxskin: warning: {line}", file=sys.stderr)
+    if args.thickness is not None and not any({"R", "E"} & set(m.columns)
+                                              for m in measurements):
+        print(f"jaxskin: warning: --thickness {args.thickness:g} was ignored: no file has a bare "
+              "R (or E) column; each gives its thicknesses in its column names (R_<X>mm)",
+              file=sys.stderr)
 
-    rows = []
+    rows, mismatched = [], []
     fit = functools.partial(fit_km.fit, smooth=args.smooth, noise=noise)
     with cluster.pool(args.cluster) as pool:
         run.stage = f"fitting {measurements[0].name}"
@@ -479,8 +487,16 @@ def _calibrate(args, run: _Run) -> int:
                 write_report(m, result, png_path)
                 outputs.done(png_path)
             rows.append((m.name, result, dt + time.perf_counter() - t0))
+            if result.rmse > fit_km.NOISE_SIGMAS * noise:
+                mismatched.append(
+                    f"{m.path}: the fit's RMS error {result.rmse:.2g} is "
+                    f"{result.rmse / noise:.1f}x --noise {noise:g}: S, K do not reproduce the "
+                    "readings (columns or thicknesses mislabelled, or readings noisier than "
+                    "--noise: see the report)")
             if k + 1 < len(measurements):
                 run.stage = f"fitting {measurements[k + 1].name}"
+    for line in mismatched:
+        print(f"jaxskin: warning: {line}", file=sys.stderr)
     print(f"{'material':<24} {'bands':>5} {'identifiable':>12} {'rmse':>9} {'steps':>5} "
           f"{'time s':>7}")
     for name, r, dt in rows:

@@ -8,11 +8,13 @@ modules (`km`, `skin`, `shading`) take and return arrays only.
 CSV tables (`read_table`) are read as spectroradiometer software writes them:
 
 - the delimiter is a comma, a tab or a semicolon (the one that splits the header into the
-  most cells), fields may be quoted (`"R_inf"`), a UTF-8 byte-order mark is ignored;
+  most cells), fields may be quoted (`"R_inf"`); the text is UTF-8 (a byte-order mark is
+  ignored), UTF-16 with a byte-order mark (Windows software's "Unicode") or Windows-1252;
 - numbers use a decimal point: `0,45` (a decimal comma) is refused with a one-line error;
 - a preamble before the header is skipped: free text, `key: value` or `key,value` lines;
   `# key: value` comments before the header are kept as metadata (`Table.meta`);
-- the header is the first row whose first cell names the first column (e.g. `wavelength_nm`);
+- the header is the first row whose first cell names the first column (e.g. `wavelength_nm`)
+  and, where the reader asks, that has a cell naming one of the other columns;
 - after it, blank lines and `#` lines are skipped; a trailing empty cell (a delimiter at the
   end of every row) is dropped.
 
@@ -21,6 +23,7 @@ Every problem is an `InputError` naming the file, the line and the column.
 
 from __future__ import annotations
 
+import codecs
 import contextlib
 import csv
 import dataclasses
@@ -42,6 +45,7 @@ __all__ = ["MaterialFile", "Table", "nist_reflectance", "nist_spectrum", "read_j
 
 DELIMITERS = (",", "\t", ";")
 MAX_BYTES = 256 * 2**20  # a spectrum at 0.01 nm with 50 columns is ~40 MB
+WAVELENGTH_RANGE_NM = (200.0, 3000.0)  # what a spectroradiometer can measure, generously
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 _DECIMAL_COMMA = re.compile(r"[+-]?\d+,\d+")
 _NAMES = {"\t": "tab", ",": "comma", ";": "semicolon"}
@@ -72,10 +76,10 @@ class Table:
 
 
 def read_text(path, fallback: str | None = None) -> str:
-    """A text file's contents (UTF-8, a byte-order mark dropped); `InputError` if it is not
-    one: missing, unreadable, binary, not UTF-8 (unless it decodes as the `fallback`
-    encoding, e.g. "cp1252" for Windows exports such as the NIST file) or larger than
-    `MAX_BYTES`."""
+    """A text file's contents (UTF-8, or UTF-16 when it starts with UTF-16's byte-order mark;
+    the mark dropped); `InputError` if it is not one: missing, unreadable, binary, not UTF-8
+    (unless it decodes as the `fallback` encoding, e.g. "cp1252" for Windows exports such as
+    the NIST file) or larger than `MAX_BYTES`."""
     path = Path(path)
     try:
         size = path.stat().st_size
@@ -89,6 +93,16 @@ def read_text(path, fallback: str | None = None) -> str:
         raise InputError("is a folder, expected a file", path) from None
     except OSError as e:
         raise InputError(f"cannot read ({e.strerror or e.__class__.__name__})", path) from None
+    if raw.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        try:
+            text = raw.decode("utf-16")  # the mark says which byte order
+        except UnicodeDecodeError as e:
+            raise InputError(f"not UTF-16 text, though it starts with UTF-16's byte-order mark "
+                             f"({e.reason} at byte {e.start})", path) from None
+        if "\0" in text:
+            raise InputError("a binary file (a NUL character), expected text", path,
+                             text[:text.index("\0")].count("\n") + 1)
+        return text
     if b"\0" in raw:
         line = raw[:raw.index(b"\0")].count(b"\n") + 1
         raise InputError("a binary file (a NUL byte), expected UTF-8 text", path, line)
@@ -112,14 +126,17 @@ def _split(line: str, delimiter: str) -> list[str]:
     return cells
 
 
-def read_table(path, first_column, expected_header: str, min_rows: int = 1) -> Table:
+def read_table(path, first_column, expected_header: str, min_rows: int = 1,
+               other_column=None) -> Table:
     """Read a numeric CSV table.
 
     **Arguments:**
 
     - `path`: the file.
     - `first_column`: a function telling whether a cell names the first column: the header
-      is the first row whose first cell it accepts.
+      is the first row whose first cell it accepts (and, with `other_column`, that has a
+      later cell `other_column` accepts: a preamble line such as `Wavelength range,350`
+      is not the header).
     - `expected_header`: shown when no header is found.
     - `min_rows`: the fewest data rows accepted.
 
@@ -144,7 +161,8 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1) -> T
                     meta.setdefault(key.strip().lower(), (value.strip(), number))
                 continue
             split = {d: _split(line, d) for d in DELIMITERS}
-            found = [d for d in DELIMITERS if first_column(split[d][0])]
+            found = [d for d in DELIMITERS if first_column(split[d][0]) and (
+                other_column is None or any(other_column(c) for c in split[d][1:]))]
             if found:
                 delimiter = max(found, key=lambda d: len(split[d]))
                 header, header_line = split[delimiter], number
@@ -313,8 +331,12 @@ class MaterialFile:
 
 
 def read_material(path) -> MaterialFile:
-    """Read and check a material JSON (what `jaxskin calibrate` writes)."""
+    """Read and check a material JSON (what `jaxskin calibrate` writes); a measurement CSV
+    given instead is refused with a line saying to calibrate it first."""
     path = Path(path)
+    if path.suffix.lower() == ".csv" and path.is_file():
+        raise InputError(f"a CSV file, expected a material JSON: run 'jaxskin calibrate {path} "
+                         "-o DIR' first and give the DIR/<name>.json it writes", path)
     doc = read_json(path, "material file")
     if not isinstance(doc, dict):
         raise InputError("expected a JSON object (a material written by jaxskin calibrate)",
@@ -335,6 +357,10 @@ def read_material(path) -> MaterialFile:
                          f"{len(S)}, {len(K)}; expected equal", path, key="S_per_mm")
     if np.any(np.diff(wl) <= 0):
         raise InputError("wavelengths must increase", path, key="wavelength_nm")
+    lo, hi = WAVELENGTH_RANGE_NM
+    if wl[0] < lo or wl[-1] > hi:
+        raise InputError(f"wavelengths {wl[0]:g}-{wl[-1]:g} must lie in {lo:g}-{hi:g} nm (µm "
+                         "given? write nm)", path, key="wavelength_nm")
     for k, v in (("S_per_mm", S), ("K_per_mm", K)):
         if np.any(v <= 0):
             raise InputError("must be > 0 at every band", path, key=k)

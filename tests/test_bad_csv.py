@@ -32,7 +32,10 @@ CASES = [
     ("neither UTF-8 nor Windows-1252", GOOD.encode().replace(b"# name: good",
                                                                b"# unit: \x81\x8dm"), 1, None,
      "not UTF-8 nor cp1252"),
-    ("UTF-16 with a BOM", GOOD.encode("utf-16"), 1, None, "binary"),
+    ("UTF-16's byte-order mark, then an odd byte", b"\xff\xfe" + "wl".encode("utf-16-le") + b"\x00",
+     None, None, "not UTF-16 text"),
+    ("UTF-16 with a NUL character", GOOD.replace("# name: good", "# name: good\0").encode("utf-16"),
+     1, None, "a binary file (a NUL character)"),
     ("mixed delimiters", GOOD.replace("0.31,0.41,0.46,0.04", "0.31;0.41;0.46;0.04"), 4, None,
      "semicolons"),
     ("ragged row, short", GOOD.replace("0.41,0.46", "0.41"), 4, None, "4 cells where"),
@@ -115,6 +118,25 @@ def test_a_windows_1252_export_reads(tmp_path):
     m = read_measurement(path)
     assert m.name == "win"
     np.testing.assert_array_equal(m.wavelength_nm, [400, 410, 420])
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-16-le", "utf-16-be", "utf-8-sig"])
+def test_a_unicode_export_with_a_byte_order_mark_reads(tmp_path, encoding):
+    """Windows instrument software saves "Unicode" text: UTF-16 with a byte-order mark (a
+    newcomer's trial: refused as a binary file). Read by the mark, as UTF-8 with one is."""
+    from jaxskin.fitting.measurements import read_measurement
+
+    path = tmp_path / "u.csv"
+    text = GOOD.replace("# name: good", "# name: good\n# unit: \xb5m, \u201cblush\u201d")
+    bom = {"utf-16-le": "\ufeff", "utf-16-be": "\ufeff"}.get(encoding, "")
+    path.write_bytes((bom + text).encode(encoding))
+    m = read_measurement(path)
+    plain = tmp_path / "plain.csv"
+    plain.write_text(GOOD)
+    expected = read_measurement(plain)
+    assert m.name == "good"
+    for a in ("wavelength_nm", "R", "R_inf", "R_g", "thickness_mm"):
+        np.testing.assert_array_equal(getattr(m, a), getattr(expected, a))
 
 
 @pytest.mark.parametrize("contents, line, column, words",

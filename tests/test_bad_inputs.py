@@ -223,6 +223,10 @@ CASES = {
         -1.0] * len(good_material()["K_per_mm"])}),
     "material-nested": lambda t: material(t, "[" * 100000 + "]" * 100000),
     "material-missing": lambda t: layered(t, "nope.json"),
+    "material-wavelength-um": lambda t: material(t, {**good_material(), "extrapolate": "hold",
+                                                     "wavelength_nm": [
+        w / 1000 for w in good_material()["wavelength_nm"]]}),
+    "material-is-a-csv": lambda t: layered(t, Path(measurement(t)).name),
     # --- BRDF JSON
     "brdf-all-zero": lambda t: brdf(t, {"model": "lafortune", "diffuse": [0, 0, 0], "lobes": [
         {"Cxy": [0, 0, 0], "Cz": [0, 0, 0], "n": [1, 1, 1]}]}),
@@ -268,6 +272,8 @@ CASES = {
                                       "--smooth", "-1"],
     "cli-noise-inf": lambda t: ["calibrate", measurement(t), "-o", str(t / "out"), "--noise",
                                 "inf"],
+    "cli-noise-zero": lambda t: ["calibrate", measurement(t), "-o", str(t / "out"), "--noise",
+                                 "0"],
     "cli-thickness-zero": lambda t: ["calibrate", measurement(t), "-o", str(t / "out"),
                                      "--thickness", "0"],
     "cli-lobes-zero": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "f.json"), "--lobes",
@@ -366,6 +372,11 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
     ("D-brdf-missing", "jaxskin: error: -D material.brdf=nope.json: key 'material.brdf'"),
     ("sweep-static-key", "static setting (each value compiles its own program): render each "
                          "value with -D texture.size=VALUE"),
+    ("material-wavelength-um", "key 'wavelength_nm': wavelengths 0.38-0.78 must lie in "
+                               "200-3000 nm"),
+    ("material-is-a-csv", "blush.csv: a CSV file, expected a material JSON: run 'jaxskin "
+                          "calibrate"),
+    ("cli-noise-zero", "argument --noise: expected a finite number > 0"),
 ])
 def test_what_the_line_says(case, words, tmp_path, capsys, monkeypatch):
     """The line names the mistake: '[fields.edit]' said "expected a table with at…" of what

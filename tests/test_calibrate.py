@@ -133,6 +133,26 @@ def test_nothing_identifiable_is_a_clear_error():
         fkm.fit(m)
 
 
+@pytest.mark.parametrize("swap", ["thin layers", "R_inf and the thickest", "R_g and R_inf"])
+def test_swapped_labels_are_suspected(swap):
+    """Readings in an order the model cannot produce (a newcomer's trial: the fit ran and
+    said nothing) give one line naming the column; noisy data labelled right gives none."""
+    S, K = make_measurements.true_spectra("foundation_beige")
+    m = synthetic(S, K, FOUNDATION_MM, BLACK, noise=0.002, seed=4)
+    assert fkm.suspect_labels(m, 0.002) == []
+    R = m.R.copy()
+    if swap == "thin layers":
+        bad, words = dataclasses.replace(m, R=R[::-1]), "is further from R_inf than 'R_0.003mm'"
+    elif swap == "R_inf and the thickest":
+        R[-1] = m.R_inf
+        bad, words = dataclasses.replace(m, R=R, R_inf=m.R[-1]), "on the other side of R_inf"
+    else:
+        bad, words = dataclasses.replace(m, R_g=m.R_inf, R_inf=m.R_g), "is further from R_inf"
+    lines = fkm.suspect_labels(bad, 0.002)
+    assert len(lines) == 1 and lines[0].startswith("synthetic.csv: column 'R_0.01mm' "), lines
+    assert words in lines[0], lines[0]
+
+
 def test_shipped_examples_recover_their_true_spectra():
     for name in ("foundation_beige", "blush_rose"):
         m = read_measurement(ROOT / "data" / "measurements" / f"{name}.csv")
@@ -248,6 +268,72 @@ def test_cli_instrument_export_coverage_and_extrapolation(tmp_path, capsys):
     # The fit itself, from 6-digit µm/percent text: the true S (measured: within 1.2e-5 on
     # the 3 and 10 µm films).
     assert np.max(np.abs(np.asarray(doc["S_per_mm"]) / S - 1)) < 3e-5
+
+
+def _without_name(tmp_path, filename, source="foundation_beige"):
+    text = (ROOT / "data" / "measurements" / f"{source}.csv").read_text()
+    path = tmp_path / filename
+    path.write_text("".join(line for line in text.splitlines(keepends=True)
+                            if not line.startswith("# name:")))
+    return path
+
+
+def test_cli_a_file_name_with_spaces_and_brackets(tmp_path, capsys):
+    """`Lipstick Red (batch 5).csv` (a newcomer's trial: refused, then a crash with exit 1):
+    the material is named lipstick_red_batch_5, and one note line says so."""
+    src = _without_name(tmp_path, "Lipstick Red (batch 5).csv", "lipstick_red")
+    out = tmp_path / "out"
+    assert main(["calibrate", str(src), "-o", str(out), "--no-report"]) == 0
+    assert [p.name for p in out.iterdir()] == ["lipstick_red_batch_5.json"]
+    assert json.loads((out / "lipstick_red_batch_5.json").read_text())["name"] == \
+        "lipstick_red_batch_5"
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"jaxskin: note: {src}: the file name is not a material name (letters, "
+                   "digits, '.', '_', '+', '-'): named it 'lipstick_red_batch_5' (set it with "
+                   "'# name: NAME')"]
+
+
+def test_cli_warns_of_a_fit_far_from_the_readings_and_of_swapped_columns(tmp_path, capsys):
+    """The thin layers' columns swapped: a warning before the fit names the column, and one
+    after it gives the RMS error against --noise; the material is still written. A --noise
+    far below the readings' own gives the RMS warning alone; the shipped example labelled
+    right and with the default --noise gives none."""
+    good = _without_name(tmp_path, "beige.csv")
+    text = good.read_text().replace("R_0.003mm,R_0.01mm", "R_0.01mm,R_0.003mm")
+    (tmp_path / "swapped.csv").write_text(text)
+    assert main(["calibrate", str(tmp_path / "swapped.csv"), "-o", str(tmp_path / "a"),
+                 "--no-report"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 2, err
+    assert err[0].startswith(f"jaxskin: warning: {tmp_path / 'swapped.csv'}: column "
+                             "'R_0.01mm' is further from R_inf than 'R_0.003mm' at ")
+    assert err[1].startswith(f"jaxskin: warning: {tmp_path / 'swapped.csv'}: the fit's RMS "
+                             "error ") and "x --noise 0.002: S, K do not reproduce" in err[1]
+    assert (tmp_path / "a" / "swapped.json").exists()
+
+    assert main(["calibrate", str(good), "-o", str(tmp_path / "b"), "--no-report", "--noise",
+                 "0.0001"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"jaxskin: warning: {good}: the fit's RMS "
+                                               "error 0.0006 is 6.0x --noise 0.0001"), err
+    assert main(["calibrate", str(good), "-o", str(tmp_path / "c"), "--no-report"]) == 0
+    assert capsys.readouterr().err == ""
+
+
+def test_cli_warns_when_thickness_is_not_used(tmp_path, capsys):
+    """--thickness with files that each name their thicknesses (R_<X>mm) was silently
+    ignored: now one warning; with a bare R column it is used and there is none."""
+    good = _without_name(tmp_path, "beige.csv")
+    assert main(["calibrate", str(good), "-o", str(tmp_path / "a"), "--no-report",
+                 "--thickness", "0.01"]) == 0
+    assert capsys.readouterr().err.splitlines() == [
+        "jaxskin: warning: --thickness 0.01 was ignored: no file has a bare R (or E) column; "
+        "each gives its thicknesses in its column names (R_<X>mm)"]
+    bare = tmp_path / "bare.csv"
+    bare.write_text(good.read_text().replace("R_0.003mm,R_0.01mm", "R_0.003mm,R"))
+    assert main(["calibrate", str(good), str(bare), "-o", str(tmp_path / "b"), "--no-report",
+                 "--thickness", "0.01"]) == 0
+    assert capsys.readouterr().err == ""
 
 
 # ------------------------------------------------------------------ the banded solver
@@ -376,6 +462,7 @@ def test_ten_thousand_bands(smooth):
 
 @pytest.mark.parametrize("flags", [["--smooth", "inf"], ["--smooth", "nan"], ["--smooth", "-1"],
                                    ["--smooth", "1e300"], ["--noise", "nan"], ["--noise", "2"],
+                                   ["--noise", "0"], ["--noise", "-0.001"],
                                    ["--thickness", "inf"], ["--thickness", "1e308"]])
 def test_cli_non_finite_or_absurd_flags_exit_2(tmp_path, capsys, flags):
     src = ROOT / "data" / "measurements" / "blush_rose.csv"
@@ -404,6 +491,21 @@ def test_cli_a_fit_that_fails_exits_1_with_one_line(tmp_path, capsys, monkeypatc
     assert len(err) == 1 and err[0].startswith(f"jaxskin: error: {src}:")
     assert "the fit failed" in err[0]
     assert not (tmp_path / "out" / "foundation_beige.json").exists()
+
+
+def test_render_refuses_a_material_in_micrometres(tmp_path, capsys):
+    """A hand-written material in µm (0.38-0.78) with "extrapolate" was taken, S and K then
+    held flat across the whole grid: now refused, naming the file and the key."""
+    doc = {"wavelength_nm": [0.38, 0.55, 0.78], "S_per_mm": [5, 5, 5], "K_per_mm": [1, 1, 1],
+           "extrapolate": "hold"}
+    (tmp_path / "um.json").write_text(json.dumps(doc))
+    scene = (ROOT / "data" / "scenes" / "makeup.toml").read_text().replace(
+        'material = "foundation_light"', 'material = "um.json"', 1)
+    (tmp_path / "s.toml").write_text(scene)
+    assert main(["render", str(tmp_path / "s.toml"), "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"jaxskin: error: {tmp_path / 'um.json'}: key 'wavelength_nm': wavelengths "
+                   "0.38-0.78 must lie in 200-3000 nm (µm given? write nm)"]
 
 
 def test_render_refuses_a_material_that_does_not_cover_the_grid(tmp_path, capsys):

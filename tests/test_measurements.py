@@ -101,8 +101,11 @@ BAD = [
         "R_g equals R_inf",
     ),
     ("duplicate column", lambda t: t.replace("R_0.15mm", "R_0.05mm"), 2, "R_0.05mm", "twice"),
-    ("no wavelength column", lambda t: t.replace("wavelength_nm", "nm"), None, None,
+    ("no wavelength column", lambda t: t.replace("wavelength_nm", "frequency_hz"), None, None,
      "no header row"),
+    # A header needs a reading column (R… or E…) too; without the rule this row was the
+    # header and the error 'unknown column'.
+    ("no reading column", lambda t: t.replace(",R_", ",r_"), None, None, "no header row"),
     ("bare R without thickness", lambda t: t.replace("R_0.15mm", "R"), 2, "R", "thickness"),
     (
         "bad thickness comment",
@@ -166,6 +169,12 @@ STYLES = {
         ["Wavelength (nm)", *NAMES], ",",
         "Date,2026-11-29\nOperator,lab 3\nIntegration Time (ms),100\n", trailing=","),
     "µm with the unit in the header": _export(["wavelength [µm]", *NAMES], scale_wl=1e-3),
+    # The wavelength column named by its unit alone (a newcomer's trial: refused before).
+    "nm as the wavelength column": _export(["nm", *NAMES]),
+    # A preamble row that starts with the wavelength's name but has no reading column is not
+    # the header (it was: 'unknown column 400-420').
+    "a preamble row starting 'Wavelength'": _export(["Wavelength (nm)", *NAMES], ",",
+                                                    "Wavelength,400-420\nPoints,3\n"),
 }
 
 
@@ -222,3 +231,27 @@ def test_percent_on_fractions_warns(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         read_spectra(tmp_path / "p.csv", percent=True)
+
+
+def test_a_file_name_that_is_not_a_name_is_made_safe_with_a_note(tmp_path):
+    """`Lipstick Red (batch 5).csv` without '# name:' (a newcomer's trial: refused, then a
+    crash): named `lipstick_red_batch_5`, and a note says so; a valid stem is kept as it is;
+    a derived name that is empty or over the length limit is an error naming the file."""
+    text = GOOD.replace("# name: test_foundation\n", "")
+    m = read_measurement(write(tmp_path, text, "Lipstick Red (batch 5).csv"))
+    assert m.name == "lipstick_red_batch_5"
+    assert m.notes == (f"{tmp_path / 'Lipstick Red (batch 5).csv'}: the file name is not a "
+                       "material name (letters, digits, '.', '_', '+', '-'): named it "
+                       "'lipstick_red_batch_5' (set it with '# name: NAME')",)
+    m = read_measurement(write(tmp_path, text, "Foundation_2.csv"))
+    assert m.name == "Foundation_2" and m.notes == ()
+    with pytest.raises(InputError) as info:
+        read_measurement(write(tmp_path, text, "(((.csv"))
+    assert str(info.value) == (f"{tmp_path / '(((.csv'}: the file name '(((.csv' has no letters "
+                               "or digits to name the material: add a line '# name: NAME' to "
+                               "the file")
+    long = write(tmp_path, text, "A b" * 70 + ".csv")
+    with pytest.raises(InputError) as info:
+        read_measurement(long)
+    assert str(info.value).startswith(f"{long}: the material name from the file name is 210 "
+                                      "characters, more than 200: add a line '# name: NAME'")
