@@ -5,6 +5,8 @@
 rendering is never changed globally.
 """
 
+import gc
+
 import jax
 import numpy as np
 import pytest
@@ -21,10 +23,20 @@ def _no_persistent_cache_in_process():
         yield
 
 
+@pytest.fixture(autouse=True, scope="module")
+def _free_compiled_programs():
+    """Each compiled XLA:CPU program holds a few memory mappings until JAX's caches drop it;
+    the whole suite in one process once passed Linux's 65,530 (vm.max_map_count) in
+    test_makeup and crashed compiling (SIGSEGV, or SIGABRT in the compilation cache). Freed
+    after each module: the count then stays near one module's programs."""
+    yield
+    jax.clear_caches()
+    gc.collect()
+
+
 @pytest.fixture(autouse=True)
 def _cache_stays_off():
-    # CI crashed twice (SIGSEGV serializing, SIGABRT deserializing the makeup gradient's
-    # program) once the cache was on in the long pytest process: nothing may switch it on.
+    # Tests run in-process do not write JAX's persistent cache into the user's home.
     yield
     assert not jax.config.jax_compilation_cache_dir, "a test switched the persistent cache on"
 
