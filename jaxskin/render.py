@@ -86,7 +86,11 @@ def _prepare(config: SceneConfig) -> Prepared:
         arrays["h0"] = texture.furrows(config.texture)[0]
         arrays["noise"] = texture.noise(config.texture)
         arrays.update(s.frame)  # the surface gradients for the general bump form
+    # The camera's rotation (and eye) as arguments: a turn or a zoom in the editor then
+    # reuses the compiled program (only the view's arrays change), not compiles a new one.
+    arrays["view_R"] = np.asarray(view.R)
     if view.eye is not None:  # perspective: the view direction varies per texel
+        arrays["eye"] = np.asarray(view.eye)
         arrays["positions"] = interpolate(s.mesh.vertices.astype(np.float32), s.mesh.faces,
                                           s.tmap.raster)
     sp, texel_mm = config.spectral, 0.0
@@ -283,7 +287,7 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
         n = to_view(normals)
         nn = jnp.sum(n * n, axis=-1, keepdims=True)
         N = jnp.where(nn > 0, n / jnp.sqrt(jnp.where(nn > 0, nn, 1.0)), 0.0)
-        L, V = _light_and_view(p.view, params["light.direction"], jnp.float32,
+        L, V = _light_and_view(arrays, params["light.direction"], jnp.float32,
                                lambda: to_view(arrays["positions"]))
         ambient, light = params["light.ambient"], params["light.intensity"]
         if "lit" in arrays:  # shadows: the direct light only where the light reaches
@@ -329,15 +333,16 @@ def texture_to_view(config: SceneConfig, arrays: dict, texture_image):
     return downsample(samples, config.supersample)
 
 
-def _light_and_view(view: View, direction, dtype, positions):
+def _light_and_view(arrays: dict, direction, dtype, positions):
     """Unit light and view directions in the object's frame (where the normals are): L and
-    V turned by Rᵀ instead of every normal by R, as N·L = n·RᵀL. Orthographic: one V;
-    perspective: a V per point, `positions()` giving the points (camera frame)."""
-    R = jnp.asarray(view.R, dtype)
+    V turned by Rᵀ instead of every normal by R, as N·L = n·RᵀL. The view's rotation R is
+    `arrays["view_R"]`. Orthographic: one V; perspective (`arrays["eye"]`): a V per point,
+    `positions()` giving the points (object frame)."""
+    R = jnp.asarray(arrays["view_R"], dtype)
     L = matmul(direction / jnp.linalg.norm(direction), R)
-    if view.eye is None:
+    if "eye" not in arrays:
         return L, matmul(jnp.asarray([0.0, 0.0, 1.0], dtype), R)
-    to_eye = jnp.asarray(view.eye, dtype) - matmul(positions(), R.T)
+    to_eye = jnp.asarray(arrays["eye"], dtype) - matmul(positions(), R.T)
     return L, matmul(to_eye / jnp.linalg.norm(to_eye, axis=-1, keepdims=True), R)
 
 
@@ -386,7 +391,7 @@ def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: d
         return out.at[texels].set(values, unique_indices=True).reshape(*shape, -1)
 
     normals = to_list(normals)
-    L, V = _light_and_view(p.view, params["light.direction"], normals.dtype,
+    L, V = _light_and_view(arrays, params["light.direction"], normals.dtype,
                            lambda: to_list(arrays["positions"]))  # per texel
     light = params["light.intensity"]
     if "lit" in arrays:  # shadows, per texel: the blur below softens their edges

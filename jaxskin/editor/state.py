@@ -329,10 +329,14 @@ class Session:
 
     def _key(self, config: SceneConfig) -> SceneConfig:
         """The configuration to compile `config` as: the first seen that differs only in
-        what `arrays` passes in (edits, layer materials and maps, the shadow's direction)."""
+        what `arrays` passes in (edits, layer materials and maps, the shadow's direction,
+        the camera's turn, zoom, centre and field of view): a turn or a zoom renders in the
+        program compiled already (0.5 s a new one on the 64² hand, and a few memory
+        mappings each, which a long session would run out of)."""
         sig = dataclasses.replace(
             config, texture=dataclasses.replace(config.texture, edits=()),
-            shadow=None if config.shadow is None else (0.0, 0.0, 1.0))
+            shadow=None if config.shadow is None else (0.0, 0.0, 1.0),
+            rotate=(0.0, 0.0, 0.0), zoom=1.0, center=(0.0, 0.0), fov=0.0)
         if config.spectral is not None:
             sig = dataclasses.replace(sig, spectral=dataclasses.replace(
                 config.spectral, layers=tuple(LayerSpec(s.name, "", None)
@@ -344,7 +348,10 @@ class Session:
         field edits where one with them is at hand, the edits' furrows and painted maps put
         in."""
         prepared = render.prepare(self._prepared_config(config))
-        arrays = dict(prepared.arrays)
+        # Without the view's transpose table (reverse mode only; the editor takes no
+        # gradients): its row count changes with every turn or zoom, and so would the
+        # arrays' shapes and the compiled program.
+        arrays = {k: v for k, v in prepared.arrays.items() if k not in render.VIEW_TABLE}
         if config.needs_furrows:
             arrays["h0"] = texture.furrows(config.texture)[0]
         if self.paint and config.spectral is not None:
