@@ -149,21 +149,27 @@ def cylinder_to_xyz(s, t, r):
     return np.stack([r * np.sin(s), t, r * np.cos(s)], axis=-1)
 
 
-SEAM_STRETCH = 4.0  # texels per unit length, against the mesh's median, that mark a seam
-
-
 def _seams(mesh: Mesh, corners: np.ndarray, size: int) -> np.ndarray:
     """Per face and UV axis (F, 2): whether the triangle is a seam with shared vertices.
 
-    It spans more than half the texture along that axis and covers more than SEAM_STRETCH
-    times the mesh's median texels per unit of its longest edge: a square mapped onto the
-    whole texture by two triangles spans it all without being a seam."""
-    span = np.ptp(corners, axis=1)  # (F, 2) texels
+    It spans more than half the texture along that axis, and drawn the short way round
+    (`unwrap_seam`) its texels per unit of its longest edge come nearer the mesh's median
+    than they are: an N-sided tube's seam face spans (N-1)/N of the texture and 1/N once
+    unwrapped, as its neighbours do; a square mapped onto the whole texture by two triangles
+    spans it all as every face does, and unwrapped collapses."""
     p = mesh.vertices[mesh.faces]  # (F, 3, 3)
-    edge = np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).max(axis=1)  # (F,)
-    stretch = span / np.maximum(edge, 1e-300)[:, None]
-    typical = np.median(stretch, axis=0)
-    return (span > size / 2) & (stretch > SEAM_STRETCH * typical)
+    edge = np.maximum(np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).max(axis=1), 1e-300)
+    seam = np.zeros((len(corners), 2), bool)
+    for axis in (0, 1):
+        c = corners[..., [axis, 1 - axis]]  # the axis first, as unwrap_seam reads x
+        span = np.ptp(c[..., 0], axis=1)
+        short = np.ptp(unwrap_seam(c, size)[..., 0], axis=1)
+        typical = np.median(span / edge)
+        with np.errstate(divide="ignore"):
+            before = np.abs(np.log(span / edge / typical))
+            after = np.abs(np.log(short / edge / typical))
+        seam[:, axis] = (span > size / 2) & (after < before)
+    return seam
 
 
 def _uv(mesh: Mesh, size: int) -> TextureMap:

@@ -211,3 +211,20 @@ def test_uv_seam_with_shared_vertices_wraps_like_a_split_one(tmp_path):
     m = shared.raster.mask
     cos = (n * true).sum(-1)[m] / np.linalg.norm(n, axis=-1)[m]
     assert np.degrees(np.arccos(np.clip(cos, -1, 1))).max() < 4.0
+
+
+@pytest.mark.parametrize("around", [3, 4, 5])
+def test_a_low_poly_tube_seam_wraps_too(tmp_path, around):
+    """An N-sided tube's seam face spans (N-1)/N of the texture, only N-1 times its
+    neighbours: still a seam (a rule on stretch alone missed N ≤ 5 and smeared it again).
+    A square over the whole texture, which is no seam, is test_makeup's texel-size test."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        shared = project("uv", load_mesh(_tube(tmp_path / "s.obj", around, split_seam=False)),
+                         48)
+    said = [str(w.message) for w in caught if "span more than half" in str(w.message)]
+    assert said == [f"mesh 's': {2 * 8} triangles span more than half the texture in u: read "
+                    "as a seam where u wraps from 1 back to 0 (the texture wraps in u)"]
+    split = project("uv", load_mesh(_tube(tmp_path / "t.obj", around)), 48)
+    assert shared.wrap_x and not split.wrap_x
+    assert np.array_equal(shared.raster.mask, split.raster.mask)
