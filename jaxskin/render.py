@@ -261,7 +261,9 @@ def _view_table(arrays: dict):
 def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "display"):
     if output not in OUTPUTS:
         raise ValueError(f"output must be one of {OUTPUTS}, got {output!r}")
-    p = prepare(config)  # host-side, cached: only static facts (rotation, eye) are used
+    # host-side, cached: only texture facts (wrap_x, texel_mm) are read from it; the camera's
+    # come in `arrays` (the editor compiles under a key config with another camera)
+    p = prepare(config)
     mask, view_mask, k = arrays["mask"], arrays["view_mask"], config.supersample
 
     table = _view_table(arrays)

@@ -34,11 +34,16 @@ def _free_compiled_programs():
     gc.collect()
 
 
+_CACHE_DIR = jax.config.jax_compilation_cache_dir  # as the environment set it (usually None)
+
+
 @pytest.fixture(autouse=True)
 def _cache_stays_off():
     # Tests run in-process do not write JAX's persistent cache into the user's home.
     yield
-    assert not jax.config.jax_compilation_cache_dir, "a test switched the persistent cache on"
+    changed = jax.config.jax_compilation_cache_dir != _CACHE_DIR
+    jax.config.update("jax_compilation_cache_dir", _CACHE_DIR)  # later tests start clean
+    assert not changed, "a test switched the persistent cache on"
 
 
 @pytest.fixture
