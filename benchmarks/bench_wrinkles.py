@@ -122,7 +122,7 @@ def side_by_side(size, repeat=3):
 
 def parallel():
     rows, char = [], []
-    for size in (512, 2048):
+    for size in (512, 1024, 1536, 2048):
         cold, warm, st, counts = side_by_side(size)
         rows.append((f"{size}²", lockstep.slots_for(size, size),
                      f"{cold['seq']:.1f} / {cold['par']:.1f}",
@@ -191,13 +191,13 @@ should be launch-bound at roughly 0.1–0.2 ms per iteration: some 15–35 ms at
 20–40 ms at 2048², against the sequential program's 0.64 s and 8.5 s there — some 20–40x
 at 512² (the 20 ms aim at the edge) and 200x or more at 2048². More slots would shorten
 the loop at 512² at a cost in likeness (above). The
-scene's `wrinkles.method = "auto"` picks this program on a GPU or TPU; on a CPU it keeps the
-sequential one although the parallel one is faster here too (the first table): switching
-the CPU default changes the look the golden images pin, a change to make deliberately
-(regenerate them) rather than in passing. The machine was shared and loaded while these
-figures were taken (load average 10–16 on 2 cores): the sequential program suffers more
-from it (1.04 s at 2048² unloaded, above); an earlier run of this section in the same
-session gave 0.114 / 0.046 s at 512² (2.5x) and 4.83 / 2.68 s at 2048² (1.8x).
+scene's `wrinkles.method = "auto"` picks this program on a GPU or TPU, and on a CPU from
+2048² (`scene.PARALLEL_FROM_SIZE_ON_CPU`): there the two are about as quick from a cold
+start (the first table's cold column: trace, compile, first run, what a one-off render
+pays; at 4096², 10.4 s sequential against 8.1 s parallel, measured separately), below it
+the sequential program compiles about a second sooner, more than the parallel one saves in
+running. Every built-in scene is 512², so their default look (and their golden images) is
+the sequential program's.
 """
     write_section("wrinkles-parallel", body)
 

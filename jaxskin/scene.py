@@ -14,7 +14,7 @@ k_noise = 0.0                      # 0–1: noise added to the height field
 k_bump = 0.5                       # 0–1: depth of the bump mapping
 seed = 0                           # the furrows' random numbers
 method = "auto"                    # auto | parallel | sequential: the furrow program (static;
-                                   #   auto: sequential on a CPU, parallel on a GPU/TPU)
+                                   #   auto: parallel on a GPU/TPU, and on a CPU from 2048²)
 [material]
 model = "blinn"                    # blinn | lafortune | spectral (the cosmetics model) |
                                    #   biophysical (the cosmetics model over a biophysical skin)
@@ -320,16 +320,28 @@ class SceneConfig:
         return self.texture.wrinkles and self.mode in ("wrinkles", "height")
 
 
-def furrow_method(method: str) -> str:
-    """`wrinkles.method` resolved: "auto" is the parallel program on a GPU or TPU (the
-    sequential one took 0.64 s at 512² on an H100, slower than on a CPU) and the sequential
-    one on a CPU — there the parallel one measured 2–5x faster too (benchmarks/RESULTS.md),
-    but the CPU default keeps the look the golden images pin; ask for "parallel"."""
+# The texture size from which "auto" picks the parallel furrow program on a CPU: where it
+# is as quick from a cold start (trace, compile, first run: what a one-off render pays) as
+# the sequential one. Measured on the hand, 2 cores (benchmarks/RESULTS.md, "Parallel furrow
+# program"), the furrow program alone, cold, sequential / parallel: 2.4 / 3.3–3.4 s at
+# 512², 2.6–3.0 / 3.6–3.9 s at 1024², 4.0–4.3 / 3.4–4.6 s at 2048², 10.4 / 8.1 s at 4096²;
+# warm the parallel one is 1.9–3.5x quicker (512² to 2048², two runs).
+PARALLEL_FROM_SIZE_ON_CPU = 2048
+
+
+def furrow_method(method: str, size: int = 512) -> str:
+    """`wrinkles.method` resolved for a `size`² texture: "auto" is the parallel program on
+    a GPU or TPU (the sequential one took 0.64 s at 512² on an H100, slower than on a CPU),
+    and on a CPU the one that is quicker there from a cold start: the sequential one below
+    `PARALLEL_FROM_SIZE_ON_CPU` (so the built-in scenes, all 512², keep the look their golden
+    images pin), the parallel one from it."""
     if method != "auto":
         return method
     import jax
 
-    return "sequential" if jax.default_backend() == "cpu" else "parallel"
+    if jax.default_backend() != "cpu":
+        return "parallel"
+    return "parallel" if size >= PARALLEL_FROM_SIZE_ON_CPU else "sequential"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -349,7 +361,8 @@ class Scene:
         v = self.values
         tex = TextureConfig(v["mesh.file"], v["mesh.projection"], v["texture.size"],
                             v["wrinkles.enabled"], v["wrinkles.k_scale"], v["wrinkles.seed"],
-                            self.edits, furrow_method(v["wrinkles.method"]))
+                            self.edits,
+                            furrow_method(v["wrinkles.method"], v["texture.size"]))
         spectral = None
         if v["material.model"] in SPECTRAL_MODELS:
             spectral = SpectralConfig(v["skin.subject"], v["spectral.step"],

@@ -236,14 +236,24 @@ def test_two_sweeps_are_refused_before_anything_is_written(tmp_path):
 def test_a_first_render_inside_jit_leaves_no_tracer_in_the_cache():
     """`prepare` first asked for inside a trace (the README's fitting pattern under `jit`)
     must cache concrete arrays: before the fix, the next call raised UnexpectedTracerError."""
+    for method in ("sequential", "parallel"):  # the furrow programs run inside it too
+        render.prepare.cache_clear()
+        texture.setup.cache_clear()
+        texture.furrows.cache_clear()
+        sc = load_scene("hand", ["texture.size=64", "camera.size=32",
+                                 f"wrinkles.method={method}"])
+        assert not render._tracing()
+        inside = jax.jit(lambda p: (_assert_tracing(), render.render(sc.config, p))[1])(
+            sc.params)
+        outside = render.render(sc.config, sc.params)
+        # One float32 ulp apart (max 1.5e-7): XLA fuses the nested jit differently.
+        np.testing.assert_allclose(np.asarray(inside), np.asarray(outside), rtol=0, atol=1e-6)
     render.prepare.cache_clear()
-    texture.setup.cache_clear()
-    sc = load_scene("hand", ["texture.size=64", "camera.size=32", "wrinkles.enabled=false"])
-    inside = jax.jit(lambda p: render.render(sc.config, p))(sc.params)
-    outside = render.render(sc.config, sc.params)
-    # One float32 ulp apart (max 1.5e-7): XLA fuses the nested jit differently.
-    np.testing.assert_allclose(np.asarray(inside), np.asarray(outside), rtol=0, atol=1e-6)
-    render.prepare.cache_clear()
+    texture.furrows.cache_clear()
+
+
+def _assert_tracing():
+    assert render._tracing()
 
 
 def test_a_sweep_frame_does_not_depend_on_the_sweep_around_it():
