@@ -6,10 +6,31 @@ rendering is never changed globally.
 """
 
 import gc
+import os
 
 import jax
 import numpy as np
 import pytest
+
+# pyproject's addopts run the suite as `-n auto --dist loadfile` (pytest-xdist): one worker
+# process per core, a module's tests in one worker. Each worker peaks near WORKER_GB of
+# memory (the makeup scene's preparation and gradients).
+MAX_WORKERS, WORKER_GB = 4, 3.0
+
+
+def pytest_xdist_auto_num_workers(config):
+    """How many workers `-n auto` starts: one per core this process may use, at most
+    MAX_WORKERS and at most one per WORKER_GB of available memory; 0 (the tests run in this
+    process, no workers) where that leaves fewer than two."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    n = min(cores or 1, MAX_WORKERS)
+    try:
+        with open("/proc/meminfo") as f:
+            kb = next(int(line.split()[1]) for line in f if line.startswith("MemAvailable:"))
+        n = min(n, int(kb / 2**20 // WORKER_GB))
+    except (OSError, StopIteration, ValueError):
+        pass  # not Linux: cores only
+    return n if n >= 2 else 0
 
 
 @pytest.fixture(autouse=True, scope="session")

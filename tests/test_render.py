@@ -243,7 +243,7 @@ def test_a_first_render_inside_jit_leaves_no_tracer_in_the_cache():
         sc = load_scene("hand", ["texture.size=64", "camera.size=32",
                                  f"wrinkles.method={method}"])
         assert not render._tracing()
-        inside = jax.jit(lambda p: (_assert_tracing(), render.render(sc.config, p))[1])(
+        inside = jax.jit(lambda p, c=sc.config: (_assert_tracing(), render.render(c, p))[1])(
             sc.params)
         outside = render.render(sc.config, sc.params)
         # One float32 ulp apart (max 1.5e-7): XLA fuses the nested jit differently.
