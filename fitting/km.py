@@ -369,6 +369,10 @@ def fit(m: Measurement, smooth: float = 0.0, noise: float = DEFAULT_NOISE,
     """
     if solver not in ("banded", "dense"):
         raise ValueError(f"solver must be 'banded' or 'dense', got {solver!r}")
+    if not 0.0 < noise <= MAX_NOISE:  # also refuses nan
+        raise ValueError(f"noise must be > 0 and <= {MAX_NOISE:g}, got {noise!r}")
+    if not 0.0 <= smooth <= MAX_SMOOTH:
+        raise ValueError(f"smooth must be >= 0 and <= {MAX_SMOOTH:g}, got {smooth!r}")
     ident = identifiable(m, noise)
     if not ident.any():
         raise InputError(

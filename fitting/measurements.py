@@ -116,6 +116,14 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
     data, numbers = table.data, table.lines
 
     wl, notes = _wavelengths_nm(data[:, 0], header[0], path, numbers)
+    if comment_thickness is not None:  # said, so not dropped in silence
+        value, number = meta["thickness_mm"]
+        said = f"{path}:{number}: '# thickness_mm: {value}'"
+        if not {"R", "E"} & set(columns):
+            notes.append(f"{said} is not used: no bare R (or E) column; the R_<X>mm columns "
+                         "name their own thicknesses")
+        elif thickness_mm is not None and thickness_mm != comment_thickness:
+            notes.append(f"{said} is overridden by --thickness {thickness_mm:g}")
     reflectance = _reflectances(data, header, columns, path, numbers, percent, notes)
     thin = sorted((x, name) for name, (kind, x) in columns.items() if kind == "thin")
     R = np.stack([reflectance[name] for _, name in thin])

@@ -229,12 +229,15 @@ def _parser() -> argparse.ArgumentParser:
                    "warned of when no file has one")
     c.add_argument("--percent", action="store_true",
                    help="reflectance columns are in percent (0–100) instead of 0–1")
+    # The bounds are fitting.km's MAX_SMOOTH and MAX_NOISE (not imported: that imports JAX,
+    # and --help stays quick; tests/test_calibrate.py checks that they agree).
     c.add_argument("--smooth", type=_number(lo=0.0, hi=1e6), default=0.0, metavar="W",
                    help="smoothness prior: neighbouring bands' log S and log K differ by about "
                    "1/W (a Gaussian prior weighed against readings of σ = --noise); 0 (default) "
                    "fits each band on its own; 20 allows about 5%% per band")
-    c.add_argument("--noise", type=_number(above=0.0, hi=1.0), default=None, metavar="σ",
-                   help="standard deviation of one reflectance reading, > 0 (default 0.002); a "
+    c.add_argument("--noise", type=_number(above=0.0, hi=0.5), default=None, metavar="σ",
+                   help="standard deviation of one reflectance reading, > 0 and <= 0.5 "
+                   "(default 0.002); a "
                    "band is identifiable when some thin layer and the background each differ "
                    "from R_inf by more than 3σ; a fit whose RMS error is above 3σ is warned of")
     c.add_argument("--extrapolate", choices=("hold", "linear"), default=None,

@@ -330,14 +330,37 @@ class MaterialFile:
     extrapolate: str | None
 
 
+_CALIBRATE_FIRST = ("run 'jaxskin calibrate {path} -o DIR' first and give the DIR/<name>.json "
+                    "it writes")
+
+
+def _is_measurement_table(path: Path) -> bool:
+    """Whether a file that is not JSON reads as a measurement CSV's table: some line of its
+    first 200 whose first cell names the wavelength column (`wavelength_nm`, `nm`, ...)."""
+    from jaxskin.fitting.measurements import is_wavelength_column
+
+    try:
+        lines = read_text(path).splitlines()[:200]
+    except InputError:
+        return False
+    return any(is_wavelength_column(_split(line, d)[0]) for line in lines
+               if line.strip() and not line.startswith("#") for d in DELIMITERS)
+
+
 def read_material(path) -> MaterialFile:
     """Read and check a material JSON (what `jaxskin calibrate` writes); a measurement CSV
     given instead is refused with a line saying to calibrate it first."""
     path = Path(path)
     if path.suffix.lower() == ".csv" and path.is_file():
-        raise InputError(f"a CSV file, expected a material JSON: run 'jaxskin calibrate {path} "
-                         "-o DIR' first and give the DIR/<name>.json it writes", path)
-    doc = read_json(path, "material file")
+        raise InputError(f"a CSV file, expected a material JSON: {_CALIBRATE_FIRST}".format(
+            path=path), path)
+    try:
+        doc = read_json(path, "material file")
+    except InputError:
+        if _is_measurement_table(path):  # a measurement saved as .txt, .dat, ...
+            raise InputError("a measurement table (a wavelength column), expected a material "
+                             f"JSON: {_CALIBRATE_FIRST}".format(path=path), path) from None
+        raise
     if not isinstance(doc, dict):
         raise InputError("expected a JSON object (a material written by jaxskin calibrate)",
                          path)

@@ -227,6 +227,13 @@ CASES = {
                                                      "wavelength_nm": [
         w / 1000 for w in good_material()["wavelength_nm"]]}),
     "material-is-a-csv": lambda t: layered(t, Path(measurement(t)).name),
+    "material-is-a-measurement-as-txt": lambda t: layered(t, Path(write(
+        t, "blush.txt", (ROOT / "data" / "measurements" / "blush_rose.csv").read_text())).name),
+    "material-is-a-tab-measurement-as-dat": lambda t: layered(t, Path(write(
+        t, "blush.dat", (ROOT / "data" / "measurements" / "blush_rose.csv").read_text()
+        .replace(",", "\t"))).name),
+    "material-is-prose": lambda t: layered(t, Path(write(t, "notes.txt",
+                                                         "S and K to follow\n")).name),
     # --- BRDF JSON
     "brdf-all-zero": lambda t: brdf(t, {"model": "lafortune", "diffuse": [0, 0, 0], "lobes": [
         {"Cxy": [0, 0, 0], "Cz": [0, 0, 0], "n": [1, 1, 1]}]}),
@@ -376,6 +383,11 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
                                "200-3000 nm"),
     ("material-is-a-csv", "blush.csv: a CSV file, expected a material JSON: run 'jaxskin "
                           "calibrate"),
+    ("material-is-a-measurement-as-txt", "blush.txt: a measurement table (a wavelength "
+                                         "column), expected a material JSON: run 'jaxskin "
+                                         "calibrate"),
+    ("material-is-a-tab-measurement-as-dat", "blush.dat: a measurement table"),
+    ("material-is-prose", "notes.txt:1: not a JSON material file"),
     ("cli-noise-zero", "argument --noise: expected a finite number > 0"),
 ])
 def test_what_the_line_says(case, words, tmp_path, capsys, monkeypatch):

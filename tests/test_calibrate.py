@@ -470,6 +470,31 @@ def test_ten_thousand_bands(smooth):
 # ------------------------------------------------------------------ finite numbers only
 
 
+def test_the_cli_bounds_are_the_fits_bounds(tmp_path, capsys):
+    """--noise and --smooth refuse what `fitting.km.fit` refuses, no more, no less."""
+    src = str(ROOT / "data" / "measurements" / "blush_rose.csv")
+    m = read_measurement(src)
+    for flag, bound, key in (("--noise", fkm.MAX_NOISE, "noise"),
+                             ("--smooth", fkm.MAX_SMOOTH, "smooth")):
+        with pytest.raises(SystemExit) as info:
+            main(["calibrate", src, "-o", str(tmp_path / "out"), flag, repr(bound * 1.01)])
+        assert info.value.code == 2
+        assert f"argument {flag}: expected a finite number" in capsys.readouterr().err
+        with pytest.raises(ValueError, match=f"{key} must be"):
+            fkm.fit(m, **{key: bound * 1.01})
+    parser_noise = [a for a in _calibrate_actions() if a.dest == "noise"][0]
+    assert parser_noise.type(repr(fkm.MAX_NOISE)) == fkm.MAX_NOISE
+    parser_smooth = [a for a in _calibrate_actions() if a.dest == "smooth"][0]
+    assert parser_smooth.type(repr(fkm.MAX_SMOOTH)) == fkm.MAX_SMOOTH
+
+
+def _calibrate_actions():
+    from jaxskin.cli import _parser
+
+    sub = [a for a in _parser()._actions if a.choices and "calibrate" in a.choices][0]
+    return sub.choices["calibrate"]._actions
+
+
 @pytest.mark.parametrize("flags", [["--smooth", "inf"], ["--smooth", "nan"], ["--smooth", "-1"],
                                    ["--smooth", "1e300"], ["--noise", "nan"], ["--noise", "2"],
                                    ["--noise", "0"], ["--noise", "-0.001"],

@@ -35,6 +35,23 @@ def test_bare_r_thickness_from_comment_or_flag(tmp_path):
     assert read_measurement(path).thickness_mm.tolist() == [0.2]
     assert read_measurement(path, thickness_mm=0.1).thickness_mm.tolist() == [0.1]
     assert read_measurement(path).name == "bare"
+    assert read_measurement(path).notes == ()
+    assert read_measurement(path, thickness_mm=0.2).notes == ()
+
+
+def test_a_thickness_comment_that_is_not_used_gets_a_note(tmp_path):
+    """'# thickness_mm:' over named columns only (each names its own thickness), or under
+    --thickness: a note naming the line, not silence."""
+    path = write(tmp_path, "# thickness_mm: 0.2\n" + GOOD.replace("# name: test_foundation\n",
+                                                                  ""), "named.csv")
+    m = read_measurement(path)
+    assert m.thickness_mm.tolist() == [0.05, 0.15]
+    assert m.notes == (f"{path}:1: '# thickness_mm: 0.2' is not used: no bare R (or E) "
+                       "column; the R_<X>mm columns name their own thicknesses",)
+    text = "# thickness_mm: 0.2\nwavelength_nm,R,R_inf,R_g\n400,0.3,0.4,0.04\n410,0.3,0.4,0.04\n"
+    path = write(tmp_path, text, "bare.csv")
+    assert read_measurement(path, thickness_mm=0.1).notes == (
+        f"{path}:1: '# thickness_mm: 0.2' is overridden by --thickness 0.1",)
 
 
 def test_percent_and_radiance(tmp_path):
