@@ -341,10 +341,10 @@ def _is_measurement_table(path: Path) -> bool:
 
     try:
         lines = read_text(path).splitlines()[:200]
-    except InputError:
+        return any(is_wavelength_column(_split(line, d)[0]) for line in lines
+                   if line.strip() and not line.startswith("#") for d in DELIMITERS)
+    except (InputError, csv.Error):  # e.g. a cell over the csv module's field limit
         return False
-    return any(is_wavelength_column(_split(line, d)[0]) for line in lines
-               if line.strip() and not line.startswith("#") for d in DELIMITERS)
 
 
 def read_material(path) -> MaterialFile:
