@@ -237,9 +237,9 @@ def _parser() -> argparse.ArgumentParser:
                    "fits each band on its own; 20 allows about 5%% per band")
     c.add_argument("--noise", type=_number(above=0.0, hi=0.5), default=None, metavar="σ",
                    help="standard deviation of one reflectance reading, > 0 and <= 0.5 "
-                   "(default 0.002); a "
-                   "band is identifiable when some thin layer and the background each differ "
-                   "from R_inf by more than 3σ; a fit whose RMS error is above 3σ is warned of")
+                   "(default 0.002); a band is identifiable when some thin layer and the "
+                   "background each differ from R_inf by more than 3σ; a fit whose RMS error "
+                   "is above 3σ is warned of")
     c.add_argument("--extrapolate", choices=("hold", "linear"), default=None,
                    help="how the renderer may extend S, K beyond the measured wavelengths to "
                    "its 380-780 nm grid: hold the end values, or continue log S, log K "
