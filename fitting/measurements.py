@@ -99,7 +99,7 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
     **Returns:** a `Measurement`. **Raises:** `InputError` on anything malformed.
     """
     table = read_table(path, is_wavelength_column, "wavelength_nm,R_<X>mm,...,R_inf,R_g",
-                       min_rows=2, other_column=_is_reading)
+                       min_rows=2, other_column=_is_reading, once=("name", "thickness_mm"))
     path, meta, header, header_line = table.path, table.meta, table.header, table.header_line
 
     comment_thickness = None

@@ -127,7 +127,7 @@ def _split(line: str, delimiter: str) -> list[str]:
 
 
 def read_table(path, first_column, expected_header: str, min_rows: int = 1,
-               other_column=None) -> Table:
+               other_column=None, once: tuple[str, ...] = ()) -> Table:
     """Read a numeric CSV table.
 
     **Arguments:**
@@ -139,6 +139,8 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
       is not the header).
     - `expected_header`: shown when no header is found.
     - `min_rows`: the fewest data rows accepted.
+    - `once`: `# key:` lines the caller reads: one given twice with another value is an
+      error (which would count is a guess); other keys keep their first value.
 
     **Returns:** a `Table`. **Raises:** `InputError` on anything malformed.
     """
@@ -158,7 +160,12 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
             if line.startswith("#"):
                 if ":" in line:
                     key, value = line[1:].split(":", 1)
-                    meta.setdefault(key.strip().lower(), (value.strip(), number))
+                    key, value = key.strip().lower(), value.strip()
+                    if key in once and key in meta and meta[key][0] != value:
+                        raise InputError(f"'# {key}:' again, with another value than on line "
+                                         f"{meta[key][1]} ({meta[key][0]!r}); keep one",
+                                         path, number)
+                    meta.setdefault(key, (value, number))
                 continue
             split = {d: _split(line, d) for d in DELIMITERS}
             found = [d for d in DELIMITERS if first_column(split[d][0]) and (

@@ -54,6 +54,24 @@ def test_a_thickness_comment_that_is_not_used_gets_a_note(tmp_path):
         f"{path}:1: '# thickness_mm: 0.2' is overridden by --thickness 0.1",)
 
 
+@pytest.mark.parametrize("key, first, second", [("thickness_mm", "0.2", "0.02"),
+                                                ("name", "blush_a", "blush_b")])
+def test_a_key_given_twice_with_two_values_is_an_error(tmp_path, key, first, second):
+    """A '# thickness_mm:' put above an instrument's own (or a second '# name:') once went
+    unnoticed: the first was used. Now the second line is named; the same value twice and
+    a repeated free-form comment key are fine."""
+    body = "wavelength_nm,R,R_inf,R_g\n400,0.3,0.4,0.04\n410,0.3,0.4,0.04\n"
+    path = write(tmp_path, f"# {key}: {first}\n# note: a\n# {key}: {second}\n# note: b\n"
+                 + ("# thickness_mm: 0.1\n" if key == "name" else "") + body)
+    with pytest.raises(InputError) as info:
+        read_measurement(path)
+    assert str(info.value) == (f"{path}:3: '# {key}:' again, with another value than on "
+                               f"line 1 ({first!r}); keep one")
+    same = write(tmp_path, f"# {key}: {first}\n# {key}: {first}\n"
+                 + ("# thickness_mm: 0.1\n" if key == "name" else "") + body, "same.csv")
+    assert read_measurement(same).notes == ()
+
+
 def test_percent_and_radiance(tmp_path):
     pct = write(
         tmp_path,
