@@ -126,6 +126,19 @@ def _split(line: str, delimiter: str) -> list[str]:
     return cells
 
 
+def _header_row(line: str, first_column, other_column=None):
+    """`(cells, delimiter)` if `line` is a table's header row (its first cell accepted by
+    `first_column` and, with `other_column`, a later cell by that), else None; of several
+    delimiters that fit, the one that gives the most cells. Raises `csv.Error`."""
+    split = {d: _split(line, d) for d in DELIMITERS}
+    found = [d for d in DELIMITERS if first_column(split[d][0]) and (
+        other_column is None or any(other_column(c) for c in split[d][1:]))]
+    if not found:
+        return None
+    delimiter = max(found, key=lambda d: len(split[d]))
+    return split[delimiter], delimiter
+
+
 def read_table(path, first_column, expected_header: str, min_rows: int = 1,
                other_column=None, once: tuple[str, ...] = ()) -> Table:
     """Read a numeric CSV table.
@@ -167,12 +180,9 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
                                          path, number)
                     meta.setdefault(key, (value, number))
                 continue
-            split = {d: _split(line, d) for d in DELIMITERS}
-            found = [d for d in DELIMITERS if first_column(split[d][0]) and (
-                other_column is None or any(other_column(c) for c in split[d][1:]))]
-            if found:
-                delimiter = max(found, key=lambda d: len(split[d]))
-                header, header_line = split[delimiter], number
+            row = _header_row(line, first_column, other_column)
+            if row is not None:
+                (header, delimiter), header_line = row, number
                 break
     except csv.Error as e:
         raise InputError(f"not CSV ({e})", path, number) from None
@@ -337,19 +347,20 @@ class MaterialFile:
     extrapolate: str | None
 
 
-_CALIBRATE_FIRST = ("run 'jaxskin calibrate {path} -o DIR' first and give the DIR/<name>.json "
-                    "it writes")
+def _calibrate_first(path: Path) -> str:
+    return f"run 'jaxskin calibrate {path} -o DIR' first and give the DIR/<name>.json it writes"
 
 
 def _is_measurement_table(path: Path) -> bool:
-    """Whether a file that is not JSON reads as a measurement CSV's table: some line of its
-    first 200 whose first cell names the wavelength column (`wavelength_nm`, `nm`, ...)."""
+    """Whether a file that is not JSON reads as a measurement CSV's table: one of its first
+    200 lines is a header row (`read_table`'s rule) whose first cell names the wavelength
+    column (`wavelength_nm`, `nm`, ...)."""
     from jaxskin.fitting.measurements import is_wavelength_column
 
     try:
-        lines = read_text(path).splitlines()[:200]
-        return any(is_wavelength_column(_split(line, d)[0]) for line in lines
-                   if line.strip() and not line.startswith("#") for d in DELIMITERS)
+        lines = (line.strip() for line in read_text(path, fallback="cp1252").splitlines()[:200])
+        return any(_header_row(line, is_wavelength_column) for line in lines
+                   if line and not line.startswith("#"))
     except (InputError, csv.Error):  # e.g. a cell over the csv module's field limit
         return False
 
@@ -359,14 +370,14 @@ def read_material(path) -> MaterialFile:
     given instead is refused with a line saying to calibrate it first."""
     path = Path(path)
     if path.suffix.lower() == ".csv" and path.is_file():
-        raise InputError(f"a CSV file, expected a material JSON: {_CALIBRATE_FIRST}".format(
-            path=path), path)
+        raise InputError(f"a CSV file, expected a material JSON: {_calibrate_first(path)}",
+                         path)
     try:
         doc = read_json(path, "material file")
     except InputError:
         if _is_measurement_table(path):  # a measurement saved as .txt, .dat, ...
             raise InputError("a measurement table (a wavelength column), expected a material "
-                             f"JSON: {_CALIBRATE_FIRST}".format(path=path), path) from None
+                             f"JSON: {_calibrate_first(path)}", path) from None
         raise
     if not isinstance(doc, dict):
         raise InputError("expected a JSON object (a material written by jaxskin calibrate)",
