@@ -293,8 +293,10 @@ def _parser() -> argparse.ArgumentParser:
                    "material.melanin=0:1:5; writes "
                    "DIR/<scene>_sweep-<i>_<key>-<value>.png")
     r.add_argument("-D", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a scene value, e.g. -D wrinkles.k_scale=1.3 (repeatable; "
-                   "applies to every scene)")
+                   help="override a scene value, e.g. -D wrinkles.k_scale=1.3 or -D "
+                   "layer.blush.material=foundation_dark (a shipped material or a calibrate "
+                   "JSON; paths from the working directory); repeatable; applies to every "
+                   "scene")
     cluster.add_option(r, f"batch of {cluster.SWEEP_BATCH} sweep values, or scene")
 
     f = sub.add_parser(

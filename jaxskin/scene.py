@@ -468,7 +468,8 @@ def parse_scene(doc: dict, path, overrides=()) -> Scene:
     if not isinstance(layers_raw, list):
         raise InputError("expected [[layer]] tables (an array of tables)", path, key="layer")
     values = {k: spec.default for k, spec in SCHEMA.items()}
-    layers = tuple(_layer(i, e, path, values) for i, e in enumerate(layers_raw))
+    materials = _material_overrides(overrides)
+    layers = tuple(_layer(i, e, path, values, materials) for i, e in enumerate(layers_raw))
     names = [layer.name for layer in layers]
     for name in names:
         if names.count(name) > 1:
@@ -480,6 +481,9 @@ def parse_scene(doc: dict, path, overrides=()) -> Scene:
     from_command_line = {}  # key → the -D item that set it last
     for item in overrides:
         k, v = _parse_override(item)
+        if k.startswith("layer.") and k.endswith(".material") and k.count(".") == 2 \
+                and k.split(".")[1] in names:
+            continue  # a layer's material: taken by _layer
         values[k] = _check(k, v, f"-D {item}", names)
         from_command_line[k] = f"-D {item}"
     if "camera.size" in from_command_line and "camera.height" not in from_command_line:
@@ -564,8 +568,8 @@ def _check(key: str, value, where, layers=()):
                              f"{', '.join(layers) or 'none'})", where, key=key)
         spec = LAYER_SCHEMA.get(parts[2])
         if spec is None:
-            raise InputError(f"a layer's value to set must be one of {', '.join(LAYER_SCHEMA)}",
-                             where, key=key)
+            raise InputError("a layer's value to set must be one of "
+                             f"{', '.join([*LAYER_SCHEMA, 'material'])}", where, key=key)
     if spec is None:
         near = difflib.get_close_matches(key, [*SCHEMA, "fields.edit", "layer"], n=1,
                                          cutoff=0.5)
@@ -651,8 +655,22 @@ def _edit(i, e, path) -> EditSpec:
                     _vector(e["d2"], f"{where}.d2", path, 2.0), float(weight))
 
 
-def _layer(i, e, path, values) -> LayerSpec:
-    """One [[layer]] table: its static spec; its parameters go into `values`."""
+def _material_overrides(overrides) -> dict:
+    """`-D layer.NAME.material=...` items: `{NAME: (value, item)}`, the last one given
+    winning (a name that is no layer's is left for `_check` to report)."""
+    out = {}
+    for item in overrides:
+        k, v = _parse_override(item)
+        parts = k.split(".")
+        if len(parts) == 3 and parts[0] == "layer" and parts[2] == "material":
+            out[parts[1]] = (v, f"-D {item}")
+    return out
+
+
+def _layer(i, e, path, values, materials=None) -> LayerSpec:
+    """One [[layer]] table: its static spec; its parameters go into `values`. `materials`:
+    `_material_overrides`, which replace the table's material (a path taken from the
+    working directory, as any path given with -D)."""
     where = f"layer[{i}]"
     if not isinstance(e, dict):
         raise InputError("expected a table with name, material, thickness_mm, ...", path,
@@ -666,14 +684,16 @@ def _layer(i, e, path, values) -> LayerSpec:
     where = f"layer.{name}"
     for k, spec in LAYER_SCHEMA.items():
         values[f"{where}.{k}"] = _check(f"{where}.{k}", e.get(k, spec.default), path, (name,))
-    material = e.get("material")
-    if not isinstance(material, str):
+    material, source, base = e.get("material"), path, path.parent
+    if name in (materials or {}):
+        (material, source), base = materials[name], Path.cwd()
+    if not isinstance(material, str) or not material:
         raise InputError("expected a material: a shipped one's name or a JSON file written "
-                         "by jaxskin calibrate", path, key=f"{where}.material")
-    file = cosmetics.material_path(material, path.parent)
+                         "by jaxskin calibrate", source, key=f"{where}.material")
+    file = cosmetics.material_path(material, base)
     if not file.is_file():
         names = ", ".join(cosmetics.shipped_materials())
-        raise InputError(f"no material file {file} (shipped materials: {names})", path,
+        raise InputError(f"no material file {file} (shipped materials: {names})", source,
                          key=f"{where}.material")
     cosmetics.check_material(file)  # readable and covering the render grid, before any work
     material = str(file)

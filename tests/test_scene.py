@@ -197,3 +197,44 @@ def test_an_override_the_scene_does_not_use_is_found():
     assert unused("face", "skin.subject=50", "material.melanin=0.5") == ["material.melanin=0.5"]
     assert unused("hand", "material.melanin=0.2", "name=x") == []  # the scene's own value
     assert unused("makeup", "layer.blush.thickness_mm=0.02", "camera.size=64") == []
+
+
+def test_a_layers_material_is_set_with_D(tmp_path, monkeypatch):
+    """`-D layer.NAME.material=...` swaps a layer's product for a batch render: a shipped
+    name, or a file taken from the working directory (as every path given with -D), checked
+    like the file's own before any work."""
+    import shutil
+
+    from jaxskin.cosmetics import data_dir
+
+    def material(sc, name):
+        return next(layer.material for layer in sc.config.spectral.layers if layer.name == name)
+
+    shipped = data_dir() / "materials"
+    base = load_scene("makeup", ["camera.size=64"])
+    assert material(base, "foundation") == str(shipped / "foundation_light.json")
+    dark = load_scene("makeup", ["layer.foundation.material=foundation_dark"])
+    assert material(dark, "foundation") == str(shipped / "foundation_dark.json")
+    assert material(dark, "blush") == material(base, "blush")
+    (tmp_path / "mine").mkdir()
+    shutil.copy(shipped / "lipstick_red.json", tmp_path / "mine" / "red.json")
+    monkeypatch.chdir(tmp_path)
+    mine = load_scene("makeup", ["layer.blush.material=mine/red.json",
+                                 "layer.blush.thickness_mm=0.02"])
+    assert material(mine, "blush") == str(tmp_path / "mine" / "red.json")
+    assert mine.params["layer.blush.thickness_mm"] == 0.02
+    last = load_scene("makeup", ["layer.blush.material=foundation_dark",
+                                 "layer.blush.material=mine/red.json"])
+    assert material(last, "blush") == str(tmp_path / "mine" / "red.json")
+    bad = [("layer.blush.material=nope", "-D layer.blush.material=nope: key "
+            "'layer.blush.material': no material file"),
+           ("layer.blush.material=1", "-D layer.blush.material=1: key 'layer.blush.material': "
+            "expected a material"),
+           ("layer.cheek.material=blush_rose", "no layer named 'cheek'"),
+           ("layer.blush.colour=red", "one of thickness_mm, .*, material")]
+    for item, words in bad:
+        with pytest.raises(InputError, match=words):
+            load_scene("makeup", [item])
+    (tmp_path / "table.csv").write_text("wavelength_nm,value\n400,1\n")
+    with pytest.raises(InputError, match="table.csv: a CSV file, .*jaxskin calibrate"):
+        load_scene("makeup", ["layer.blush.material=table.csv"])

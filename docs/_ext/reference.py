@@ -237,7 +237,10 @@ def scene_page() -> tuple[str, list[str]]:
         "",
         f"{describe('layer')}. Only with the cosmetics model (`material.model` "
         + " or ".join(f'`"{m}"`' for m in getattr(scene, "SPECTRAL_MODELS", ("spectral",)))
-        + "). Each layer's values are addressed as `layer.<name>.<key>`.",
+        + "). Each layer's values are addressed as `layer.<name>.<key>`; with `-D`, its "
+        "numbers and its `material` (`-D layer.blush.material=foundation_dark`, or a JSON "
+        "file from `jaxskin calibrate`, taken from the working directory); its image and "
+        "regions only in the file.",
         "",
         "| key | default | values | kind | description |",
         "|---|---|---|---|---|",
