@@ -61,13 +61,19 @@ class View:
     wrap_x: bool
     raster: Raster | None = None
     xy: np.ndarray | None = None  # (V, 2) the mesh's vertices in (supersampled) pixels
+    # Perspective: the image plane's shift in half-widths and half-heights (x right, y up),
+    # which centres the projected mesh: the optical axis meets the (unzoomed) image at pixel
+    # (W/2 (1 + shift_x), H/2 (1 − shift_y)).
+    shift: tuple = (0.0, 0.0)
 
 
 def make_view(tmap: TextureMap, size: int, projection: str = "orthographic",
               supersample: int = 1, fov: float = 30.0, rotate=(0.0, 0.0, 0.0),
               height: int = 0, zoom: float = 1.0, center=(0.0, 0.0)) -> View:
     """The view of `tmap`'s mesh in an image `size` pixels wide and `height` high (0:
-    square); the mesh's bounding box fills the image's shorter side, less a margin.
+    square); the mesh fills the image's shorter side, less a margin (orthographic: its
+    bounding box; perspective: its projection, every vertex inside, the pinhole on the axis
+    through the bounding box's centre).
 
     `zoom` magnifies that frame about `center` (fractions of the frame from its middle, x
     right, y up): a crop of the image plane, so the view at `zoom` 2 is exactly the middle
@@ -84,18 +90,20 @@ def make_view(tmap: TextureMap, size: int, projection: str = "orthographic",
         scale = (1 - 2 * MARGIN) * min(n / max(extent[0], 1e-300), m / max(extent[1], 1e-300))
         xy = np.stack([(v[:, 0] - centre[0]) * scale + n / 2,
                        m / 2 - (v[:, 1] - centre[1]) * scale], axis=1)
-        depth, eye, w = -v[:, 2], None, None
+        depth, eye, w, shift = -v[:, 2], None, None, (0.0, 0.0)
     elif projection == "perspective":
-        # A pinhole at the distance where the bounding box fills the view at its centre;
-        # `fov` spans the image's width, pixels are square.
-        extent = hi[:2] - lo[:2]
-        half = 0.5 * max(extent[0], extent[1] * n / m) / (1 - 2 * MARGIN)
+        # A pinhole on the axis through the bounding box's centre, as near as lets every
+        # vertex project inside the frame less the margin, and the frame centred on the
+        # projected mesh (a shift of the image plane; the pinhole stays on the axis). `fov`
+        # spans the image's width, pixels are square. A flat mesh facing the camera fills
+        # the frame as its bounding box does in the orthographic view.
         focal = 1.0 / math.tan(math.radians(fov) / 2)
-        eye = centre + np.array([0.0, 0.0, half * focal])
+        d, shift = _pinhole(v - centre, focal, n / m)
+        eye = centre + np.array([0.0, 0.0, d])
         c = v - eye  # camera space, looking down -z
         w = -c[:, 2]
-        xy = np.stack([n / 2 * (1 + focal * c[:, 0] / w), m / 2 - n / 2 * focal * c[:, 1] / w],
-                      axis=1)
+        xy = np.stack([n / 2 * (1 + focal * c[:, 0] / w + shift[0]),
+                       m / 2 * (1 - (focal * c[:, 1] / w * n / m + shift[1]))], axis=1)
         depth = w
     else:
         raise ValueError(f"camera projection must be orthographic or perspective, got "
@@ -112,7 +120,41 @@ def make_view(tmap: TextureMap, size: int, projection: str = "orthographic",
     corners = tmap.face_corners()  # (F, 3, 2) texture coordinates, unwrapped at the seam
     tex = np.einsum("hwk,hwkc->hwc", bary, corners[safe])
     return View(tex.astype(np.float32), r.mask, R, eye, tmap.wrap_x,
-                Raster(r.tri, bary.astype(np.float32)), xy)
+                Raster(r.tri, bary.astype(np.float32)), xy, tuple(float(a) for a in shift))
+
+
+def _pinhole(c, focal: float, aspect: float):
+    """The perspective camera's distance `d` from the bounding box's centre and the image
+    plane's shift `(2,)` (in half-widths and half-heights) for vertices `c (V, 3)` relative
+    to that centre: the nearest pinhole on the +z axis at which every vertex projects
+    inside the frame less `MARGIN` on each side once the projection is centred. The
+    projected extent shrinks as the pinhole backs away, so `d` is found by bisection (to
+    1e-9 of the mesh's size); with the pinhole too near, vertices spill out of the frame
+    (a face at fov 60 lost its forehead and chin)."""
+    size = max(float(np.ptp(c, axis=0).max()), 1e-300)
+    near = float(c[:, 2].max()) + 1e-6 * size  # every vertex in front of the pinhole
+    limit = 2 * (1 - 2 * MARGIN)
+
+    def projected(d):
+        w = d - c[:, 2]
+        return focal * c[:, 0] / w, focal * c[:, 1] / w * aspect
+
+    def fits(d):
+        x, y = projected(d)
+        return max(np.ptp(x), np.ptp(y)) <= limit
+
+    lo, hi = near, near + size * (focal + 1)
+    while not fits(hi):
+        lo, hi = hi, 2 * hi - near
+    if fits(lo):
+        hi = lo
+    for _ in range(200):
+        if hi - lo <= 1e-9 * size:
+            break
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if fits(mid) else (mid, hi)
+    x, y = projected(hi)
+    return hi, np.array([-(x.max() + x.min()) / 2, -(y.max() + y.min()) / 2])
 
 
 def sample(image, tex, mask, wrap_x: bool, background=0.0):

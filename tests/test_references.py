@@ -515,7 +515,10 @@ def test_perspective_view_by_ray_casting():
     R = rotation(rotate)
     focal = 1 / math.tan(math.radians(fov) / 2)
     ii, jj = np.nonzero(vw.mask)
-    d = np.stack([((jj + 0.5) / (n / 2) - 1) / focal, -((ii + 0.5) - n / 2) / (n / 2) / focal,
+    sx, sy = vw.shift  # the image plane shifted to centre the projected square
+    assert abs(sx) + abs(sy) > 0.01
+    d = np.stack([((jj + 0.5) / (n / 2) - 1 - sx) / focal,
+                  (1 - (ii + 0.5) / (n / 2) - sy) / focal,
                   -np.ones(len(ii))], 1)  # camera looks down −z, pixels square
     normal = R @ np.array([0.0, 0.0, 1.0])  # the square's plane, through the origin
     t = -(vw.eye @ normal) / (d @ normal)

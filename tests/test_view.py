@@ -94,3 +94,47 @@ def test_camera_zoom_is_a_crop_of_a_larger_image(projection):
     np.testing.assert_allclose(zoomed, quarter, rtol=0, atol=1e-6)
     # and it is not the whole image shrunk, nor another quarter
     assert np.abs(zoomed - whole[32:, :32]).max() > 0.1
+
+
+@pytest.mark.parametrize("over", [["camera.fov=60"], ["camera.fov=120"],
+                                  ["camera.rotate=[0, 40, 0]"], ["camera.rotate=[30, 0, 0]"],
+                                  ["camera.height=40"], ["camera.height=160"]],
+                         ids=["fov60", "fov120", "turned", "tilted", "wide", "tall"])
+def test_a_perspective_view_keeps_the_whole_mesh_inside_the_margin(over):
+    """Every vertex of the face projects inside the frame less the 5 % margin on each side,
+    and the projection is centred, at any field of view and turn (a pinhole placed where
+    only the bounding box's middle fits cut off the forehead and chin at fov 60 and a
+    turned face's side); the frame is filled: one of the two extents meets the margin."""
+    from jaxskin.view import MARGIN
+
+    sc = load_scene("face", ["texture.size=64", "camera.size=80", "camera.supersample=1",
+                             "camera.projection=perspective", *over])
+    view = render.prepare(sc.config).view
+    H, W = view.mask.shape
+    u, v = view.xy[:, 0] / W, view.xy[:, 1] / H
+    lo, hi = MARGIN - 1e-6, 1 - MARGIN + 1e-6
+    assert u.min() >= lo and u.max() <= hi and v.min() >= lo and v.max() <= hi
+    assert max(u.max() - u.min(), v.max() - v.min()) == pytest.approx(1 - 2 * MARGIN, abs=1e-6)
+    np.testing.assert_allclose([u.min() + u.max(), v.min() + v.max()], 1.0, atol=1e-6)
+    edge = np.concatenate([view.mask[0], view.mask[-1], view.mask[:, 0], view.mask[:, -1]])
+    assert not edge.any()
+
+
+def test_a_flat_mesh_facing_a_perspective_camera_fills_the_frame_as_orthographic():
+    """With no depth, the perspective framing is the orthographic one: the square's
+    corners at the margin in both."""
+    from jaxskin.mesh import Mesh
+    from jaxskin.projection import project
+    from jaxskin.view import MARGIN, make_view
+
+    v = np.array([[-1, -2, 0], [3, -2, 0], [3, 1, 0], [-1, 1, 0.0]])
+    mesh = Mesh("rect", v, np.array([[0, 1, 2], [0, 2, 3]]), np.tile([0, 0, 1.0], (4, 1)),
+                None)
+    tmap = project("planar", mesh, 16)
+    for projection in ("orthographic", "perspective"):
+        view = make_view(tmap, 100, projection, fov=50.0)
+        x, y = view.xy[:, 0], view.xy[:, 1]
+        np.testing.assert_allclose([x.min(), x.max()], [100 * MARGIN, 100 * (1 - MARGIN)],
+                                   atol=1e-6)
+        np.testing.assert_allclose([y.min(), y.max()], [50 - 90 * 3 / 8, 50 + 90 * 3 / 8],
+                                   atol=1e-6)
