@@ -4,7 +4,7 @@ The rules every command follows, all checked before any work:
 
 - The output folder exists or can be created, is a folder (not a file) and is writable.
 - An output name is one safe path component: no separator, no `..`, no leading dot, no
-  control character, at most 200 characters. A scene name that breaks this is refused
+  control character, at most 200 characters and 240 bytes in UTF-8. A scene name that breaks this is refused
   (exit 2), never silently changed; the parts jaxskin adds itself (override and sweep
   suffixes) are sanitised by `slug`.
 - Every output path lies directly inside the output folder (checked on resolved paths).
@@ -24,6 +24,9 @@ from .io import InputError
 __all__ = ["Outputs", "check_folder", "check_name", "slug"]
 
 MAX_NAME = 200
+# A file name's bytes (UTF-8) at most: file systems allow 255, and `io.atomic_write`'s
+# temporary file beside it adds 14 ("." + name + ".XXXXXXXX.tmp").
+MAX_NAME_BYTES = 240
 _UNSAFE = re.compile(r"[^A-Za-z0-9._+=-]+")
 
 
@@ -40,6 +43,10 @@ def check_name(name: str, where=None, key: str | None = "name") -> str:
         why = "starts with a dot"
     elif len(name) > MAX_NAME:
         why = f"is longer than {MAX_NAME} characters"
+    elif len(name.encode("utf-8", "surrogatepass")) > MAX_NAME_BYTES:
+        why = (f"is {len(name.encode('utf-8', 'surrogatepass'))} bytes in UTF-8, over the "
+               f"{MAX_NAME_BYTES} a file name may take here (letters such as é take 2 bytes, "
+               "most CJK 3)")
     if why is not None:
         raise InputError(f"an output name must be one plain file name (no '/', '..', leading "
                          f"dot or control characters); {name!r} {why}", where, key=key)

@@ -168,6 +168,10 @@ CASES = {
     "name-nul": lambda t: scene(t, 'name = "a\\u0000b"\n'),
     "name-leading-dot": lambda t: scene(t, 'name = ".hidden"\n'),
     "name-empty": lambda t: scene(t, 'name = ""\n'),
+    # 120 two-byte letters: 200 characters allowed, but with the suffixes over 255 bytes
+    # (the file system's limit): failed with exit 1 after the render
+    "name-too-many-bytes": lambda t: hand(t, "-D", "name=" + "é" * 120, "-D",
+                                          "material.melanin=0.31"),
     # --- -D and --sweep
     "D-nan": lambda t: hand(t, "-D", "material.melanin=nan"),
     "D-out-of-range": lambda t: hand(t, "-D", "material.melanin=5"),
@@ -268,6 +272,10 @@ CASES = {
     "fit-brdf-out-newline": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "a\nb.json")],
     "fit-brdf-out-under-file": lambda t: ["fit-brdf", brdf_csv(t), "-o",
                                           str(Path(write(t, "afile", "x")) / "fit.json")],
+    "calibrate-name-too-many-bytes": lambda t: ["calibrate", write(
+        t, "long.csv", (ROOT / "data" / "measurements" / "blush_rose.csv").read_text()
+        .replace("# name: blush_rose", f"# name: {'é' * 150}")),
+        "-o", str(t / "out")],
     "calibrate-out-is-file": lambda t: ["calibrate", measurement(t), "-o", write(t, "afile", "x")],
     # --- command lines
     "cli-unknown-option": lambda t: hand(t, "--mapz"),

@@ -230,3 +230,20 @@ def test_glb_normal_map_rebuilds_the_bumped_normals(glbs, name):
     rebuilt = ts[:, :1] * T + ts[:, 1:2] * B + ts[:, 2:] * N
     err = np.linalg.norm(rebuilt - normals[inside], axis=1)
     assert np.percentile(err, 99) < 0.02, np.percentile(err, [50, 99, 100])
+
+
+def test_a_name_is_limited_in_bytes_as_the_file_system_is():
+    """File systems allow 255 bytes a name, and the temporary file beside an output adds
+    14: a name of 200 characters could be 400 bytes (é) and failed at the write, after the
+    work (exit 1). Now refused before any work, naming the bytes."""
+    from jaxskin.io import InputError
+    from jaxskin.outputs import MAX_NAME_BYTES, check_name
+
+    assert MAX_NAME_BYTES + len(".") + len(".abcdefgh.tmp") <= 255
+    assert check_name("é" * 120) == "é" * 120  # 240 bytes
+    for name, size in (("é" * 121, 242), ("日本" * 41, 246), ("a" * 199 + "😀" * 1, 203)):
+        if size > MAX_NAME_BYTES:
+            with pytest.raises(InputError, match=f"is {size} bytes in UTF-8, over the 240"):
+                check_name(name)
+        else:
+            assert check_name(name) == name
