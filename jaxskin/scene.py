@@ -443,12 +443,26 @@ def load_scene(name_or_path, overrides=()) -> Scene:
         raise InputError(f"no such scene file; built-in scenes: {', '.join(BUILTIN_SCENES)}",
                          path)
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, OSError) as e:
-        raise InputError(f"cannot read ({e.__class__.__name__})", path) from None
+        raw = path.read_bytes()
+    except OSError as e:
+        raise InputError(f"cannot read ({e.strerror or e.__class__.__name__})", path) from None
+    try:
+        doc = tomllib.loads(toml_text(raw, path))
     except tomllib.TOMLDecodeError as e:
         raise InputError(f"not valid TOML: {e}", path) from None
     return parse_scene(doc, path, overrides)
+
+
+def toml_text(raw: bytes, path) -> str:
+    """A TOML scene file's bytes as text: UTF-8, with or without the byte-order mark that
+    Windows editors write; `InputError` naming `path` for anything else."""
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise InputError("is UTF-16 text; a TOML file is UTF-8: save it as UTF-8", path)
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise InputError(f"is not UTF-8 text (byte {e.start}); expected a TOML scene file, "
+                         "saved as UTF-8", path) from None
 
 
 def parse_scene(doc: dict, path, overrides=()) -> Scene:

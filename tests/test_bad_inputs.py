@@ -150,6 +150,8 @@ CASES = {
     "toml-nested-arrays": lambda t: scene(t, "x = " + "[" * 3000 + "]" * 3000 + "\n"),
     "toml-nested-tables": lambda t: scene(t, ".".join(["a"] * 3000) + " = 1\n"),
     "toml-not-utf8": lambda t: scene(t, b"\xff\xfe\x00garbage\x80\x81"),
+    "toml-utf16": lambda t: scene(t, 'name = "x"\n'.encode("utf-16")),
+    "toml-binary": lambda t: scene(t, b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\x00\xff"),
     "toml-zero-light": lambda t: scene(t, "[light]\ndirection = [0.0, 0.0, 0.0]\n"),
     "toml-edit-vertex-missing": lambda t: scene(
         t, "[[fields.edit]]\nvertex = 999999\nd1 = [1.0, 0.0, 0.0]\nd2 = [0.0, 1.0, 0.0]\n"),

@@ -238,3 +238,20 @@ def test_a_layers_material_is_set_with_D(tmp_path, monkeypatch):
     (tmp_path / "table.csv").write_text("wavelength_nm,value\n400,1\n")
     with pytest.raises(InputError, match="table.csv: a CSV file, .*jaxskin calibrate"):
         load_scene("makeup", ["layer.blush.material=table.csv"])
+
+
+def test_a_scene_saved_with_a_byte_order_mark_and_crlf_reads_as_without(tmp_path):
+    """Windows editors save UTF-8 with a byte-order mark and CRLF line ends: read alike
+    (the mark was 'Invalid statement (at line 1, column 1)'); UTF-16 and binary files get
+    a message that says what the file is."""
+    plain, marked = tmp_path / "plain.toml", tmp_path / "marked.toml"
+    plain.write_text(GOOD, encoding="utf-8")
+    marked.write_bytes(b"\xef\xbb\xbf" + GOOD.replace("\n", "\r\n").encode("utf-8"))
+    a, b = load_scene(plain), load_scene(marked)
+    assert a.config == b.config and a.values == {**b.values, "name": a.values["name"]}
+    (tmp_path / "wide.toml").write_bytes(GOOD.encode("utf-16"))
+    with pytest.raises(InputError, match="wide.toml: is UTF-16 text; a TOML file is UTF-8"):
+        load_scene(tmp_path / "wide.toml")
+    (tmp_path / "image.toml").write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00")
+    with pytest.raises(InputError, match=r"image.toml: is not UTF-8 text \(byte 0\)"):
+        load_scene(tmp_path / "image.toml")

@@ -45,6 +45,7 @@ from ..scene import (
     builtin_scenes,
     check_value,
     parse_scene,
+    toml_text,
 )
 from ..toml_writer import dumps
 from . import brush
@@ -101,10 +102,10 @@ class Session:
         `changes` (from a link); returns the changes refused, each `{key, error}`."""
         path = self._scene_path(scene)
         try:
-            text = path.read_text(encoding="utf-8")
+            text = toml_text(path.read_bytes(), path)
             base = tomllib.loads(text)
             scene_obj = parse_scene(base, path)
-        except (OSError, UnicodeDecodeError) as e:
+        except OSError as e:
             raise EditorError(f"{path}: cannot read ({e.__class__.__name__})", 400) from None
         except tomllib.TOMLDecodeError as e:
             raise EditorError(f"{path}: not valid TOML: {e}", 400) from None
@@ -616,7 +617,7 @@ class Session:
                 if suffix == ".json":
                     cosmetics.check_material(probe)
                 else:
-                    doc = tomllib.loads(data.decode("utf-8"))
+                    doc = tomllib.loads(toml_text(data, name))
                     parse_scene(doc, target)
             except InputError as e:
                 raise EditorError(f"{name}: {e.message}", 400, e.key) from None
