@@ -150,12 +150,13 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
 
 def _name_from_stem(path, notes) -> str:
     """The file's stem as the material name; one that the name rule refuses
-    (`Lipstick Red (batch 5)`) is made safe: lowercase, runs of other characters as `_`,
-    no `_`, `.`, `+`, `-` at the ends (`lipstick_red_batch_5`), with a note."""
+    (`Lipstick Red (batch 5)`) is made safe: lowercase, runs of characters other than
+    letters (any script's), digits, `.`, `+`, `-` as `_`, no `_`, `.`, `+`, `-` at the ends
+    (`lipstick_red_batch_5`, `Crème teint 3` → `crème_teint_3`), with a note."""
     stem = path.stem
     name = stem
     if not _NAME.fullmatch(stem) or stem.startswith("."):
-        name = re.sub(r"[^a-z0-9.+-]+", "_", stem.lower()).strip("_.+-")
+        name = re.sub(r"[^\w.+-]+", "_", stem.lower()).strip("_.+-")
     if not name:
         raise InputError(f"the file name {path.name!r} has no letters or digits to name the "
                          "material: add a line '# name: NAME' to the file", path)

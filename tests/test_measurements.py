@@ -280,6 +280,11 @@ def test_a_file_name_that_is_not_a_name_is_made_safe_with_a_note(tmp_path):
                        "'lipstick_red_batch_5' (set it with '# name: NAME')",)
     m = read_measurement(write(tmp_path, text, "Foundation_2.csv"))
     assert m.name == "Foundation_2" and m.notes == ()
+    # letters of any script are letters (a newcomer's 'Crème teint 3' lost its è, and
+    # '日本語 ファンデ' was said to have no letters)
+    for stem, name in (("Crème teint 3", "crème_teint_3"), ("日本語 ファンデ", "日本語_ファンデ"),
+                       ("日本語ファンデ", "日本語ファンデ")):
+        assert read_measurement(write(tmp_path, text, f"{stem}.csv")).name == name
     with pytest.raises(InputError) as info:
         read_measurement(write(tmp_path, text, "(((.csv"))
     assert str(info.value) == (f"{tmp_path / '(((.csv'}: the file name '(((.csv' has no letters "
