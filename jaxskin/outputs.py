@@ -4,9 +4,9 @@ The rules every command follows, all checked before any work:
 
 - The output folder exists or can be created, is a folder (not a file) and is writable.
 - An output name is one safe path component: no separator, no `..`, no leading dot, no
-  control character, at most 200 characters and 240 bytes in UTF-8. A scene name that breaks this is refused
-  (exit 2), never silently changed; the parts jaxskin adds itself (override and sweep
-  suffixes) are sanitised by `slug`.
+  control character, at most 200 characters and 240 bytes in UTF-8. A scene name that
+  breaks this is refused (exit 2), never silently changed; the parts jaxskin adds itself
+  (override and sweep suffixes) are sanitised by `slug`.
 - Every output path lies directly inside the output folder (checked on resolved paths).
 - No output is the same file as an input of the run (`os.path.samefile`, links resolved).
 """

@@ -372,7 +372,11 @@ class Scene:
                                       v["skin.melanin_image"],
                                       v["skin.melanin_fraction_image"],
                                       v["skin.haemoglobin_image"])
-        return SceneConfig(tex, v["material.model"], v["material.brdf"], v["camera.projection"],
+        # The BRDF file only where the Lafortune model reads it: another model's config
+        # (its jit key) does not change with it, and `-D material.brdf=...` on a Blinn
+        # scene is reported as changing nothing (`checks.unused_overrides`).
+        brdf = v["material.brdf"] if v["material.model"] == "lafortune" else "skin"
+        return SceneConfig(tex, v["material.model"], brdf, v["camera.projection"],
                            v["camera.size"], v["camera.supersample"], v["camera.fov"],
                            tuple(v["camera.rotate"]), v["view.mode"], spectral,
                            v["camera.height"],

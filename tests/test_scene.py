@@ -3,6 +3,7 @@ static/param split; stages a scene does not use are not run; the render command.
 
 import subprocess
 import sys
+from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
@@ -197,6 +198,8 @@ def test_an_override_the_scene_does_not_use_is_found():
     assert unused("face", "skin.subject=50", "material.melanin=0.5") == ["material.melanin=0.5"]
     assert unused("hand", "material.melanin=0.2", "name=x") == []  # the scene's own value
     assert unused("makeup", "layer.blush.thickness_mm=0.02", "camera.size=64") == []
+    brdf = str(Path(__file__).resolve().parents[1] / "data" / "brdf" / "skin_samples.csv")
+    assert unused("hand", f"material.brdf={brdf}") == [f"material.brdf={brdf}"]
 
 
 def test_a_layers_material_is_set_with_D(tmp_path, monkeypatch):
