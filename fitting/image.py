@@ -181,7 +181,7 @@ def fit_keys(scene: Scene, text: str, where: str = "--fit") -> tuple[FitKey, ...
                 why = "is not a map of this scene"
             else:
                 near = difflib.get_close_matches(key, fittable, n=1, cutoff=0.5)
-                why = "is unknown" + (f"; did you mean '{near[0]}'?" if near else "")
+                why = "is unknown" + (f" (did you mean '{near[0]}'?)" if near else "")
             raise InputError(f"{why}; this scene's fittable keys: {', '.join(fittable)}",
                              where, key=key)
         if spec.kind == "vec3":

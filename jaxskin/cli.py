@@ -518,6 +518,19 @@ def _print_written(outputs: Outputs) -> None:
         print(f"  {path}")
 
 
+def _warn_repeated(overrides) -> None:
+    """A warning per key given with -D more than once with different values: the last one
+    is used, and the output names list each."""
+    seen: dict[str, list[str]] = {}
+    for item in overrides:
+        key, value = (s.strip() for s in item.partition("=")[::2])
+        seen.setdefault(key, []).append(value)
+    for key, values in seen.items():
+        if len(set(values)) > 1:
+            _say(f"jaxskin: warning: -D {key} is given {len(values)} times ("
+                 f"{', '.join(values)}): the last, {values[-1]}, is used")
+
+
 def _parse_sweep(text: str, sc):
     """`key=start:stop:count` over a scalar parameter of scene `sc` → (key, values); the
     ends are checked like `-D` values (finite, in the key's range)."""
@@ -583,7 +596,7 @@ def _render(args, run: _Run) -> int:
     import numpy as np
 
     from . import maps
-    from .scene import load_scene
+    from .scene import _parse_override, load_scene
 
     if args.format == "exr" and not maps.exr_available():
         raise InputError("--format exr needs the OpenEXR bindings: pip install 'jaxskin[exr]'")
@@ -598,9 +611,16 @@ def _render(args, run: _Run) -> int:
     for name in args.scenes:
         with reading(name):
             scenes.append(load_scene(name, args.overrides))
+    _warn_repeated(args.overrides)
     plans = []
     for sc in scenes:
         sweep = [_parse_sweep(text, sc) for text in args.sweep]
+        for (key, _), text in zip(sweep, args.sweep, strict=True):
+            for item in args.overrides:
+                if _parse_override(item)[0] == key:
+                    raise InputError(f"--sweep {text} sets {key}, so -D {item} would be "
+                                     "ignored (and named in every file); give one of them",
+                                     key=key)
         count = cluster.SWEEP_BATCH if sweep else 1  # per batch: every batch is padded
         outputs.inputs += [Path(p) for p in check_scene(sc, count)]
         plans.append((sc, sweep, _base_name(sc, args.overrides)))

@@ -194,6 +194,8 @@ CASES = {
     "sweep-unknown-key": lambda t: hand(t, "--sweep", "nosuch=0:1:3"),
     "sweep-static-key": lambda t: hand(t, "--sweep", "texture.size=16:64:3"),
     "sweep-malformed": lambda t: hand(t, "--sweep", "material.melanin=0:1"),
+    "sweep-and-D-same-key": lambda t: hand(t, "--sweep", "material.melanin=0:1:3", "-D",
+                                           "material.melanin=0.5"),
     "sweep-two": lambda t: hand(t, "--sweep", "material.melanin=0:1:2", "--sweep",
                                 "material.blood=0:1:2"),
     # --- meshes

@@ -309,3 +309,14 @@ def test_list_shows_each_scene_description_whole(capsys):
     rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("scene")]
     assert [r.split()[1] for r in rows] == list(BUILTIN_SCENES)
     assert all(not r.endswith("…") and r.endswith(".") for r in rows), rows
+
+
+def test_a_key_given_twice_with_D_is_warned_about(capsys):
+    """`-D camera.size=64 -D camera.size=32` used the last silently, and the file name
+    listed both; the same value twice is no conflict."""
+    from jaxskin.cli import _warn_repeated
+
+    _warn_repeated(["camera.size=64", "material.melanin=0.3", "camera.size = 32",
+                    "material.melanin=0.3"])
+    assert capsys.readouterr().err.splitlines() == [
+        "jaxskin: warning: -D camera.size is given 2 times (64, 32): the last, 32, is used"]
