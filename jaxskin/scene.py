@@ -714,15 +714,21 @@ def _layer(i, e, path, values, materials=None) -> LayerSpec:
                          "by jaxskin calibrate", source, key=f"{where}.material")
     file = cosmetics.material_path(material, base)
     if not file.is_file():
-        names = ", ".join(cosmetics.shipped_materials())
-        raise InputError(f"no material file {file} (shipped materials: {names})", source,
-                         key=f"{where}.material")
+        shipped = cosmetics.shipped_materials()
+        near = difflib.get_close_matches(material, shipped, n=1, cutoff=0.75)
+        hint = f"did you mean '{near[0]}'? " if near else ""
+        raise InputError(f"no material file {file} ({hint}shipped materials: "
+                         f"{', '.join(shipped)})", source, key=f"{where}.material")
     cosmetics.check_material(file)  # readable and covering the render grid, before any work
     material = str(file)
     image = e.get("image")
     if image is not None:
-        if not isinstance(image, str) or not (path.parent / image).is_file():
+        if not isinstance(image, str):
             raise InputError(f"expected a greyscale image file, got {image!r}", path,
+                             key=f"{where}.image")
+        if not (path.parent / image).is_file():
+            raise InputError(f"no such file {(path.parent / image).resolve()} (expected a "
+                             "greyscale image file, taken from the scene file's folder)", path,
                              key=f"{where}.image")
         image = str((path.parent / image).resolve())
     ellipses, polygons = [], []

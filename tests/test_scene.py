@@ -231,6 +231,7 @@ def test_a_layers_material_is_set_with_D(tmp_path, monkeypatch):
     assert material(last, "blush") == str(tmp_path / "mine" / "red.json")
     bad = [("layer.blush.material=nope", "-D layer.blush.material=nope: key "
             "'layer.blush.material': no material file"),
+           ("layer.blush.material=foundation_biege", "did you mean 'foundation_beige'"),
            ("layer.blush.material=1", "-D layer.blush.material=1: key 'layer.blush.material': "
             "expected a material"),
            ("layer.cheek.material=blush_rose", "scene makeup.toml has no layer named 'cheek'"),
