@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import sys
 
 import jax
 import jax.numpy as jnp
@@ -33,6 +34,8 @@ from jaxskin import biophysical as bp
 from jaxskin.formats import haemoglobin_table
 from jaxskin.io import FitError, InputError, atomic_write
 from jaxskin.spectral import Grid
+
+from .measurements import _THIN
 
 __all__ = ["FIT_RANGE", "LOG_PARAMS", "SkinFit", "delta_e2000", "fit", "from_z", "to_z",
            "write_csv", "write_report"]
@@ -363,6 +366,10 @@ def command(args, run) -> int:
     outputs = Outputs(args.output, [args.file])
     fixed = _fixed(args.fix)
     names, wavelengths, R = read_spectra(args.file, percent=args.percent)
+    if any(_THIN.match(n) for n in names) and {"R_inf", "R_g"} & set(names):
+        raise InputError("a cosmetic's measurement (columns R_<X>mm, R_inf, R_g), not skin "
+                         f"spectra: calibrate it with 'jaxskin calibrate {args.file} -o DIR'",
+                         args.file)
     if wavelengths[0] > NEEDED[0] or wavelengths[-1] < NEEDED[1]:
         raise InputError(f"the spectra cover {wavelengths[0]:g}-{wavelengths[-1]:g} nm; the "
                          f"fit needs at least {NEEDED[0]:g}-{NEEDED[1]:g} nm", args.file)
@@ -393,7 +400,42 @@ def command(args, run) -> int:
     print(f"{len(names)} spectra, {args.starts} starts each, {seconds:.1f} s: ΔE2000 median "
           f"{np.median(de):.2f}, max {de.max():.2f} ({result.names[int(np.argmax(de))]}); RMS "
           f"reflectance error median {np.median(rms):.4f}, max {rms.max():.4f}")
+    for line in fit_warnings(result, fixed):
+        print(f"jaxskin: warning: {line}", file=sys.stderr)
     print(f"wrote {len(outputs.written)} file(s) to {outputs.folder}/:")
     for p in outputs.written:
         print(f"  {p}")
     return 0
+
+
+def fit_warnings(result: SkinFit, fixed=()) -> list[str]:
+    """Lines for the spectra whose fit is not to be trusted as it is: those that did not
+    converge, and a parameter that ends at an end of the literature's range it is held to
+    (within 0.5 % of the range, in the fitted log scale: melanin, haemoglobin, epidermis,
+    scattering; the fractions eumelanin and oxygenation end at 0 or 1 naturally), where the
+    best fit may lie outside the model's range; at most five names each."""
+    def names(mask):
+        picked = [n for n, m in zip(result.names, mask, strict=True) if m]
+        more = f" and {len(picked) - 5} more" if len(picked) > 5 else ""
+        return ", ".join(picked[:5]) + more
+
+    out = []
+    stuck = ~np.asarray(result.converged, bool)
+    if stuck.any():
+        out.append(f"{int(stuck.sum())} of {len(stuck)} spectra did not converge "
+                   f"({names(stuck)}): their rows say converged=false; more --starts may help")
+    for p in LOG_PARAMS:
+        if p in dict(fixed) or p not in result.params:
+            continue
+        lo, hi = _bounds(p)
+        z = np.log(np.maximum(np.asarray(result.params[p], np.float64), 1e-300))
+        tol = 0.005 * (hi - lo)
+        for end, at in (("lower", z <= lo + tol), ("upper", z >= hi - tol)):
+            if at.any():
+                bound = bp.RANGES[p][0 if end == "lower" else 1]
+                k = int(at.sum())
+                out.append(f"{p} ends at the {end} end of its range ({bound:g}) for {k} "
+                           f"{'spectrum' if k == 1 else 'spectra'} ({names(at)}): the best "
+                           "fit may lie "
+                           "outside the model's range; check their rms and dE2000")
+    return out

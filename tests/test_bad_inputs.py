@@ -280,6 +280,7 @@ CASES = {
         t, "long.csv", (ROOT / "data" / "measurements" / "blush_rose.csv").read_text()
         .replace("# name: blush_rose", f"# name: {'é' * 150}")),
         "-o", str(t / "out")],
+    "fit-skin-given-a-cosmetic": lambda t: ["fit-skin", measurement(t), "-o", str(t / "out")],
     "calibrate-out-is-file": lambda t: ["calibrate", measurement(t), "-o", write(t, "afile", "x")],
     # --- command lines
     "cli-unknown-option": lambda t: hand(t, "--mapz"),

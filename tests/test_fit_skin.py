@@ -230,3 +230,39 @@ class _nothing:
 
     def __exit__(self, *exc):
         return False
+
+
+def test_fits_at_the_ends_of_the_range_or_not_converged_are_named():
+    """`fit-skin` said nothing of rows with converged=false or a parameter pinned at its
+    range's end (the NIST file: melanin at 0.5 for two subjects, scattering at 6 for
+    three); now a warning line each, naming up to five spectra. The fractions eumelanin and
+    oxygenation end at 0 or 1 naturally, and fixed parameters are not fitted: no line."""
+    from jaxskin import biophysical as bp
+    from jaxskin.fitting.skin import SkinFit, fit_warnings
+
+    m = 7
+    params = {p: np.full(m, getattr(bp.DEFAULT, p), np.float64) for p in bp.PARAMS}
+    params["melanin"][[1, 2]] = 0.5 * (1 - 1e-4)  # at the top (log scale, within 0.5 %)
+    params["scattering"][3] = 0.5  # at the bottom
+    params["haemoglobin"][4] = 0.1  # fixed below: no line
+    params["eumelanin"][:] = 0.0  # a natural end
+    names = [f"s{i}" for i in range(m)]
+    converged = np.ones(m, bool)
+    converged[[0, 6]] = False
+    zeros = np.zeros(m)
+    result = SkinFit(names, np.zeros(3), np.zeros((m, 3)), np.zeros((m, 3)), params, zeros,
+                     zeros, converged, zeros, {}, zeros)
+    assert fit_warnings(result, {"haemoglobin": 0.1}) == [
+        "2 of 7 spectra did not converge (s0, s6): their rows say converged=false; more "
+        "--starts may help",
+        "melanin ends at the upper end of its range (0.5) for 2 spectra (s1, s2): the best "
+        "fit may lie outside the model's range; check their rms and dE2000",
+        "scattering ends at the lower end of its range (0.5) for 1 spectrum (s3): the best "
+        "fit may lie outside the model's range; check their rms and dE2000"]
+    params["melanin"][:] = 0.2
+    assert len(fit_warnings(result, {"haemoglobin": 0.1})) == 2
+    converged[:] = True
+    params["scattering"][:] = 2.0
+    assert fit_warnings(result) == ["haemoglobin ends at the upper end of its range (0.1) "
+                                    "for 1 spectrum (s4): the best fit may lie outside the "
+                                    "model's range; check their rms and dE2000"]
