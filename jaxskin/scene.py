@@ -737,8 +737,12 @@ def _layer(i, e, path, values, materials=None) -> LayerSpec:
         _known(r, ELLIPSE_KEYS, path, w)
         center = _numbers(r.get("center"), 2, path, f"{w}.center")
         radii = _numbers(r.get("radii"), 2, path, f"{w}.radii", positive=True)
+        feather = _number(r.get("feather", 0.0), path, f"{w}.feather", lo=0.0)
+        reach = max(radii) + feather
+        _on_texture([(center[0] - reach, center[1] - reach),
+                     (center[0] + reach, center[1] + reach)], path, w)
         ellipses.append((center, radii, _number(r.get("angle", 0.0), path, f"{w}.angle"),
-                         _number(r.get("feather", 0.0), path, f"{w}.feather", lo=0.0)))
+                         feather))
     for j, r in enumerate(_tables(e.get("polygon", []), path, f"{where}.polygon")):
         w = f"{where}.polygon[{j}]"
         _known(r, POLYGON_KEYS, path, w)
@@ -752,6 +756,10 @@ def _layer(i, e, path, values, materials=None) -> LayerSpec:
                 raise InputError("expected at least three [u, v] points", path,
                                  key=f"{w}.points")
             points = tuple(_numbers(q, 2, path, f"{w}.points") for q in pts)
+            reach = _number(r.get("feather", 0.0), path, f"{w}.feather", lo=0.0)
+            _on_texture([(min(q[0] for q in points) - reach, min(q[1] for q in points) - reach),
+                         (max(q[0] for q in points) + reach, max(q[1] for q in points) + reach)],
+                        path, w)
         else:
             vs = r["vertices"]
             if not (isinstance(vs, list) and len(vs) >= 3 and all(
@@ -765,6 +773,16 @@ def _layer(i, e, path, values, materials=None) -> LayerSpec:
         raise InputError("give an image or regions (ellipse, polygon), not both", path,
                          key=where)
     return LayerSpec(name, material, image, tuple(ellipses), tuple(polygons))
+
+
+def _on_texture(box, path, where) -> None:
+    """`InputError` when a region's bounding box `((u0, v0), (u1, v1))`, feather included,
+    lies wholly outside the texture (u and v from 0 to 1): it would paint nothing (say, a
+    centre given in pixels)."""
+    (u0, v0), (u1, v1) = box
+    if u1 < 0 or v1 < 0 or u0 > 1 or v0 > 1:
+        raise InputError("lies wholly outside the texture, so it would paint nothing: u and v "
+                         "are fractions of the texture, from 0 to 1", path, key=where)
 
 
 def _known(table, keys, path, where):

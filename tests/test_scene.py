@@ -259,3 +259,24 @@ def test_a_scene_saved_with_a_byte_order_mark_and_crlf_reads_as_without(tmp_path
     (tmp_path / "image.toml").write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00")
     with pytest.raises(InputError, match=r"image.toml: is not UTF-8 text \(byte 0\)"):
         load_scene(tmp_path / "image.toml")
+
+
+@pytest.mark.parametrize("region", [
+    "[[layer.ellipse]]\ncenter = [5.0, 5.0]\nradii = [0.1, 0.1]\n",
+    "[[layer.ellipse]]\ncenter = [256.0, 300.0]\nradii = [40.0, 30.0]\n",
+    "[[layer.ellipse]]\ncenter = [-0.35, 0.5]\nradii = [0.1, 0.2]\nfeather = 0.1\n",
+    "[[layer.polygon]]\npoints = [[1.2, 0.1], [1.5, 0.1], [1.3, 0.4]]\n",
+], ids=["far", "pixels", "left", "polygon"])
+def test_a_region_wholly_off_the_texture_is_refused(tmp_path, region):
+    """An ellipse centred at uv (5, 5) (or in pixels) painted nothing, without a word."""
+    text = ('name = "m"\n[mesh]\nfile = "face"\n[texture]\nsize = 32\n[material]\n'
+            'model = "spectral"\n[[layer]]\nname = "blush"\nmaterial = "blush_rose"\n' + region)
+    (tmp_path / "s.toml").write_text(text)
+    with pytest.raises(InputError, match=r"layer\.blush\.(ellipse|polygon)\[0\]'?: lies "
+                       "wholly outside the texture"):
+        load_scene(tmp_path / "s.toml")
+    near = text.replace("5.0, 5.0", "1.05, 0.5").replace("-0.35", "-0.25").replace(
+        "256.0, 300.0", "0.5, 0.5").replace("40.0, 30.0", "0.1, 0.1").replace("1.2", "0.95")
+    (tmp_path / "t.toml").write_text(near)
+    load_scene(tmp_path / "t.toml")  # reaching into the texture: kept
+
