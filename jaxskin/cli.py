@@ -491,6 +491,10 @@ def _calibrate(args, run: _Run) -> int:
             if png_path is not None:
                 write_report(m, result, png_path)
                 outputs.done(png_path)
+            elif json_path.with_suffix(".png").exists():
+                mismatched.append(f"{json_path.with_suffix('.png')} is an earlier run's report "
+                                  f"(--no-report): it does not show this fit of {m.name}; "
+                                  "left as it is")
             rows.append((m.name, result, dt + time.perf_counter() - t0))
             if result.rmse > fit_km.NOISE_SIGMAS * noise:
                 mismatched.append(

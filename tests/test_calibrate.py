@@ -562,3 +562,20 @@ def test_render_refuses_a_material_that_does_not_cover_the_grid(tmp_path, capsys
     from jaxskin.scene import load_scene
 
     load_scene(str(tmp_path / "s.toml"))  # accepted now
+
+
+def test_no_report_warns_of_an_earlier_runs_report_beside_the_new_fit(tmp_path, capsys):
+    """`--no-report` into a folder that holds an earlier run's report left a picture that
+    no longer matched the JSON beside it, without a word; now a warning names it (it is
+    not removed: nothing the user did not ask for is deleted)."""
+    src = _without_name(tmp_path, "f.csv")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "f.png").write_bytes(b"an earlier report")
+    assert main(["calibrate", str(src), "-o", str(out), "--no-report"]) == 0
+    err = capsys.readouterr().err
+    assert f"jaxskin: warning: {out / 'f.png'} is an earlier run's report (--no-report)" in err
+    assert (out / "f.png").read_bytes() == b"an earlier report"
+    (out / "f.png").unlink()
+    assert main(["calibrate", str(src), "-o", str(out), "--no-report"]) == 0
+    assert "earlier run's report" not in capsys.readouterr().err
