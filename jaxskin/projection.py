@@ -54,6 +54,9 @@ class TextureMap:
     keep_magnitude: bool = False
     texel: float = 1.0  # the nominal texel size on the surface, mesh units
     jacobian: np.ndarray | None = None  # (V, 2, 3) ∂(pixel x, y)/∂P; None: vector_map
+    # With `wrap_x`, the faces that straddle the cut `(F,)` (a UV map's seam faces); None:
+    # every face wider than half the texture (the cylindrical projection's rule).
+    seam: np.ndarray | None = None
 
     def gradients(self) -> np.ndarray:
         """Per vertex `(V, 2, 3)`: the surface gradients ∇s, ∇t of the texture coordinates
@@ -65,7 +68,7 @@ class TextureMap:
     def raster(self) -> Raster:
         """The texture's `Raster` (triangle and barycentrics per texel), made once."""
         return rasterize(self.xy, self.mesh.faces, self.height, self.width, self.depth,
-                         self.wrap_x)
+                         self.wrap_x, self.seam)
 
     def vectors(self, d: np.ndarray) -> np.ndarray:
         """Texture-space vectors `(V, 2)` of tangent vectors `d (V, 3)`."""
@@ -80,7 +83,7 @@ class TextureMap:
         """Triangle corners `(F, 3, 2)` in pixels, unwrapped across a cylinder's seam (x may
         exceed the width there; texture lookups wrap)."""
         corners = self.xy[self.mesh.faces]
-        return unwrap_seam(corners, self.width) if self.wrap_x else corners
+        return unwrap_seam(corners, self.width, self.seam) if self.wrap_x else corners
 
     def texel_size(self) -> float:
         """The mean size of a texel on the surface, in mesh units: sqrt(surface area /
@@ -189,7 +192,7 @@ def _uv(mesh: Mesh, size: int) -> TextureMap:
         warnings.warn(f"mesh '{mesh.name}': {int(seam[:, 0].sum())} triangles span more "
                       "than half the texture in u: read as a seam where u wraps from 1 back "
                       "to 0 (the texture wraps in u)", stacklevel=3)
-        corners = unwrap_seam(corners, size)
+        corners = unwrap_seam(corners, size, seam[:, 0])
     if seam[:, 1].any():
         warnings.warn(f"mesh '{mesh.name}': {int(seam[:, 1].sum())} triangles span more "
                       "than half the texture in v (a seam with shared vertices?): they "
@@ -208,5 +211,6 @@ def _uv(mesh: Mesh, size: int) -> TextureMap:
         np.add.at(M, f[:, i], M_face * area[:, None, None])
         np.add.at(weight, f[:, i], area)
     M /= np.maximum(weight, 1e-300)[:, None, None]
-    tmap = TextureMap("uv", mesh, size, size, xy, None, wrap, M, keep_magnitude=True)
+    tmap = TextureMap("uv", mesh, size, size, xy, None, wrap, M, keep_magnitude=True,
+                      seam=seam[:, 0] if wrap else None)
     return dataclasses.replace(tmap, texel=tmap.texel_size())

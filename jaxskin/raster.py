@@ -34,7 +34,8 @@ class Raster(NamedTuple):
         return self.tri >= 0
 
 
-def rasterize(xy, faces, height: int, width: int, depth=None, wrap_x: bool = False) -> Raster:
+def rasterize(xy, faces, height: int, width: int, depth=None, wrap_x: bool = False,
+              seam=None) -> Raster:
     """Rasterize triangles given in pixel coordinates.
 
     **Arguments:**
@@ -46,6 +47,8 @@ def rasterize(xy, faces, height: int, width: int, depth=None, wrap_x: bool = Fal
     - `depth (V,)`: optional; where triangles overlap, the smaller interpolated depth wins.
     - `wrap_x`: x is periodic with period `width` (a cylinder cut open): a triangle that
       straddles the cut is drawn across it instead of across the whole image.
+    - `seam (F,)`: with `wrap_x`, the triangles that straddle the cut (`unwrap_seam`);
+      None: every one wider than half the image.
 
     **Returns:** a `Raster`.
     """
@@ -53,7 +56,7 @@ def rasterize(xy, faces, height: int, width: int, depth=None, wrap_x: bool = Fal
     faces = np.asarray(faces, np.int64)
     corners = xy[faces]  # (F, 3, 2)
     if wrap_x and len(faces):
-        corners = unwrap_seam(corners, width)
+        corners = unwrap_seam(corners, width, seam)
     x0 = np.ceil(corners[..., 0].min(axis=1) - 0.5).astype(np.int64)
     x1 = np.floor(corners[..., 0].max(axis=1) - 0.5).astype(np.int64)
     y0 = np.maximum(np.ceil(corners[..., 1].min(axis=1) - 0.5).astype(np.int64), 0)
@@ -97,14 +100,17 @@ def rasterize(xy, faces, height: int, width: int, depth=None, wrap_x: bool = Fal
     return Raster(tri, bary)
 
 
-def unwrap_seam(corners, width: int) -> np.ndarray:
+def unwrap_seam(corners, width: int, seam=None) -> np.ndarray:
     """Triangle corners `(F, 3, 2)` in pixels whose x is periodic with period `width` (a
-    cylinder cut open): a triangle spanning more than half the width straddles the cut, and
-    its corners left of the middle move right by `width`. The one rule the rasterizer, the
-    centroids, the camera view and the glTF UVs all use."""
+    cylinder cut open): a triangle that straddles the cut has its corners left of the middle
+    moved right by `width`. Which triangles straddle it: `seam (F,)` where given (a UV
+    map's seam faces: its other faces may span more than half the texture), else every one
+    spanning more than half the width (a cylindrical projection's). The one rule the
+    rasterizer, the centroids, the camera view and the glTF UVs all use."""
     corners = np.array(corners, np.float64)
     x = corners[..., 0]
-    straddle = (x.max(axis=1) - x.min(axis=1)) > width / 2
+    straddle = ((x.max(axis=1) - x.min(axis=1)) > width / 2 if seam is None else
+                np.asarray(seam, bool))
     corners[..., 0] = np.where(straddle[:, None] & (x < width / 2), x + width, x)
     return corners
 

@@ -228,3 +228,39 @@ def test_a_low_poly_tube_seam_wraps_too(tmp_path, around):
     split = project("uv", load_mesh(_tube(tmp_path / "t.obj", around)), 48)
     assert shared.wrap_x and not split.wrap_x
     assert np.array_equal(shared.raster.mask, split.raster.mask)
+
+
+def test_a_uv_seam_does_not_wrap_a_wide_face_that_is_no_seam(tmp_path):
+    """A UV map with a seam (a tube whose seam vertices are shared, v in [0, 0.45]) and a
+    flat panel mapped across u 0.05-0.95 (v 0.55-0.95) at the tube's texels per unit: the
+    panel's two triangles span more than half the texture but are no seam. Once the seam
+    turned wrapping on, every face that wide was drawn the short way round, across the cut:
+    the panel's middle was left empty."""
+    path = _tube(tmp_path / "t.obj", split_seam=False)
+    lines = path.read_text().splitlines()
+    nv = sum(line.startswith("v ") for line in lines)
+    scale = 2 * math.pi  # the tube: u 1 over 2π units; the panel at the same texels per unit
+    panel = [(-0.45 * scale, 1.0, 3.0, 0.05, 0.55), (0.45 * scale, 1.0, 3.0, 0.95, 0.55),
+             (0.45 * scale, 1.0 + 0.4 * scale, 3.0, 0.95, 0.95),
+             (-0.45 * scale, 1.0 + 0.4 * scale, 3.0, 0.05, 0.95)]
+    verts = [line for line in lines if line.startswith("v ")]
+    verts += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z, _, _ in panel]
+    uvs = [f"vt {float(u):.6f} {float(v) * 0.45:.6f}"  # the tube in v 0-0.45
+           for _, u, v in (line.split() for line in lines if line.startswith("vt "))]
+    uvs += [f"vt {u:.6f} {v:.6f}" for *_, u, v in panel]
+    faces = [line for line in lines if line.startswith("f ")]
+    a, b, c, d = (nv + k for k in (1, 2, 3, 4))
+    faces += [f"f {a}/{a} {b}/{b} {c}/{c}", f"f {a}/{a} {c}/{c} {d}/{d}"]
+    (tmp_path / "both.obj").write_text("\n".join(verts + uvs + faces) + "\n")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        tmap = project("uv", load_mesh(tmp_path / "both.obj"), 48)
+    said = [str(w.message) for w in caught if "span more than half" in str(w.message)]
+    assert len(said) == 1 and "16 triangles" in said[0], said  # the tube's seam column only
+    assert tmap.wrap_x
+    F = len(tmap.mesh.faces)
+    tri = tmap.raster.tri
+    rows, cols = slice(round(0.1 * 48), round(0.4 * 48)), slice(round(0.1 * 48), round(0.9 * 48))
+    assert np.all(tri[rows, cols] >= F - 2)  # the panel's middle: its own two triangles
+    corners = tmap.face_corners()[F - 2:]
+    assert corners[..., 0].min() >= 0.05 * 48 - 1e-9 and corners[..., 0].max() <= 0.95 * 48
