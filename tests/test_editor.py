@@ -475,19 +475,35 @@ def test_toml_writer_round_trips_scene_documents():
 
 
 def test_the_command_line_serves_where_asked(monkeypatch, capsys, tmp_path):
+    import socket
+
     from aiohttp import web
 
     served = []
-    monkeypatch.setattr(web, "run_app", lambda app, **kw: served.append(kw))
+
+    def run_app(app, sock, **kw):  # where the server would listen; the socket closed
+        served.append(sock.getsockname()[:2])
+        sock.close()
+
+    monkeypatch.setattr(web, "run_app", run_app)
     assert cli.main(["edit", "hand", "--no-browser", "-o", str(tmp_path)]) == 0
-    assert served[-1]["host"] == "127.0.0.1" and served[-1]["port"] > 0  # a free port
+    assert served[-1][0] == "127.0.0.1" and served[-1][1] > 0  # a free port
     out, err = capsys.readouterr()
-    assert f"http://127.0.0.1:{served[-1]['port']}/" in out and "warning" not in err
+    assert f"http://127.0.0.1:{served[-1][1]}/" in out and "warning" not in err
+    with socket.socket() as probe:  # a port free just now
+        probe.bind(("0.0.0.0", 0))
+        free = probe.getsockname()[1]
     assert cli.main(["edit", "hand", "--no-browser", "--host", "0.0.0.0", "--port",
-                     "8123"]) == 0
-    assert served[-1] == {**served[-1], "host": "0.0.0.0", "port": 8123}
+                     str(free)]) == 0
+    assert served[-1] == ("0.0.0.0", free)
     assert "jaxskin: warning: serving on 0.0.0.0: anyone who can reach" in (
         capsys.readouterr().err)
+    # a port in use: the error before the address is printed (or a browser opened on it)
+    with socket.create_server(("127.0.0.1", 0)) as taken:
+        port = taken.getsockname()[1]
+        assert cli.main(["edit", "hand", "--no-browser", "--port", str(port)]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and f"cannot serve on 127.0.0.1:{port}" in err
     assert cli.main(["edit", "hand", "--no-browser", "-D", "material.melanin=0.6"]) == 0
     assert cli.main(["edit", "hand", "--no-browser", "-D", "material.melanin=6"]) == 2
     assert "jaxskin: error: -D: key 'material.melanin': must be in [0, 1], got 6.0" in (
@@ -796,3 +812,76 @@ def test_saved_paint_is_not_modified_until_painted_again(tmp_path):
     assert s.state()["modified"] is False and s.state()["painted"] == ["blush"]
     s.paint = {"blush": np.zeros((t.height, t.width), np.uint16)}  # a stroke: a new array
     assert s.state()["modified"] is True
+
+
+def test_a_scene_the_page_uploads_or_opens_may_not_name_files_outside(tmp_path):
+    """The page could read any file: upload a scene whose layer image (or mesh) names it,
+    open that scene, render (a newcomer's trial rendered an outside photo as the blush).
+    Scenes the page uploads or opens are held to the session's folders and the shipped
+    data, as /api/set is; the scene the editor was started on keeps the files it names."""
+    import imageio.v3 as iio
+
+    from jaxskin.editor.state import EditorError
+
+    (tmp_path / "private").mkdir()
+    photo = tmp_path / "private" / "photo.png"
+    iio.imwrite(photo, np.full((8, 8), 200, np.uint8))
+    (tmp_path / "scenes").mkdir()
+    ellipse = SCENE[SCENE.index("[[layer.ellipse]]"):SCENE.index("[[fields.edit]]")]
+    outside = SCENE.replace(ellipse, f'image = "{photo}"\n')
+    (tmp_path / "scenes" / "start.toml").write_text(SCENE)
+    s = Session(str(tmp_path / "scenes" / "start.toml"), tmp_path / "out")
+    for name, text in (("leak.toml", outside),
+                       ("mesh.toml", SCENE.replace('file = "face"', 'file = "../private/m.obj"'))):
+        if name == "mesh.toml":
+            (tmp_path / "private" / "m.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+        with pytest.raises(EditorError) as info:
+            s.upload(name, text.encode())
+        assert info.value.status == 403 and "outside the folders" in info.value.message, name
+        assert not (tmp_path / "out" / name).exists()
+        (tmp_path / "scenes" / name).write_text(text)  # put there by other means
+        with pytest.raises(EditorError) as info:
+            s.open(str(tmp_path / "scenes" / name))
+        assert info.value.status == 403, name
+    assert s.scene.name == "tiny"  # the scene open before is kept
+    s.open("makeup")  # shipped files: allowed
+    # what the page wrote is in the last line after a signal ("no file was written" was)
+    run = cli._Run()
+    run.outputs.append(s)
+    assert run.finished() == "no file was written"
+    s.upload("ok.toml", SCENE.encode())
+    assert run.finished().startswith(f"1 file(s) complete in {tmp_path / 'out'}: ok.toml")
+    # the command line's own scene may name what it likes, and the page may reopen it
+    (tmp_path / "scenes" / "mine.toml").write_text(outside)
+    mine = Session(str(tmp_path / "scenes" / "mine.toml"), tmp_path / "out")
+    assert mine.scene.layers[0].image == str(photo)
+    mine.open("hand")
+    mine.open(str(tmp_path / "scenes" / "mine.toml"))
+
+
+def test_a_stroke_that_leaves_the_image_paints_what_lies_inside(tmp_path):
+    """A drag past the view's edge (the page captures the pointer) sent a point outside the
+    image: the request was refused, its in-image dabs unpainted, every later request of the
+    stroke refused too, and a refused first request left an empty undo step. Now points
+    outside are skipped like points off the mesh."""
+    (tmp_path / "tiny.toml").write_text(SCENE)
+    s = Session(str(tmp_path / "tiny.toml"), tmp_path / "out")
+    config, view = s._view()
+    W = view.mask.shape[1] // config.supersample
+    y = 32.0  # across the face's middle
+
+    before = np.round(s._layer_map(config, "blush") * 65535)
+
+    def painted():  # texels the strokes raised
+        return int(np.count_nonzero(s.paint["blush"] > before)) if "blush" in s.paint else 0
+
+    s.paint_stroke("out", "blush", [[-3.0, y]], 3.0, 1.0)  # begins outside: nothing to paint
+    assert painted() == 0
+    s.paint_stroke("out", "blush", [[W / 2, y], [W + 40.0, y]], 3.0, 1.0)
+    inside = painted()
+    assert inside > 0
+    s.paint_stroke("out", "blush", [[W / 2, y + 6]], 3.0, 1.0)  # the stroke goes on
+    assert painted() > inside
+    assert len(s.undo_stack) == 1  # one stroke, one step
+    s.undo()
+    assert painted() == 0

@@ -57,12 +57,16 @@ def command(args, run) -> int:
         raise InputError(e.message, key=e.key) from None
     if refused:
         raise InputError(refused[0]["error"], "-D", key=refused[0]["key"])
-    port = args.port
-    if port == 0:
-        with socket.socket() as s:  # a free port, known before the browser is opened
-            s.bind((host, 0))
-            port = s.getsockname()[1]
+    # Bound before the address is printed or a browser opened: a port in use is an error
+    # before either (the browser once opened on whatever else listened there).
+    try:
+        family = socket.getaddrinfo(host, args.port, type=socket.SOCK_STREAM)[0][0]
+        sock = socket.create_server((host, args.port), family=family)
+    except OSError as e:
+        raise InputError(f"cannot serve on {host}:{args.port} ({e.strerror or e})") from None
+    port = sock.getsockname()[1]
     url = f"http://{'[' + host + ']' if ':' in host else host}:{port}/"
+    run.outputs.append(session)  # what Save and uploads write, for the last line
     run.stage = "serving"
     print(f"jaxskin edit: {session.source} at {url} (Ctrl-C to stop); Save writes to "
           f"{session.output}", flush=True)
@@ -70,9 +74,6 @@ def command(args, run) -> int:
         import webbrowser
 
         webbrowser.open(url)
-    try:
-        web.run_app(make_app(session, log=lambda line: print(line, file=sys.stderr)),
-                    host=host, port=port, print=None, handle_signals=False)
-    except OSError as e:
-        raise InputError(f"cannot serve on {host}:{port} ({e.strerror or e})") from None
+    web.run_app(make_app(session, log=lambda line: print(line, file=sys.stderr)),
+                sock=sock, print=None, handle_signals=False)
     return 0

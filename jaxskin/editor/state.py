@@ -93,7 +93,10 @@ class Session:
         self._prepared: list[SceneConfig] = []  # configurations prepared, newest first
         self.version = 0  # bumped on every change of what the view shows
         self.timings: dict[str, float] = {}
+        self._trusted: set[Path] = set()  # the files the command line's scene names
+        self.written: list[Path] = []  # every file Save and uploads wrote (for the last line)
         self.open(str(scene), {})
+        self._trusted = set(_scene_files(self.scene).values())
 
     # --- opening and the document --------------------------------------------------------
 
@@ -111,6 +114,8 @@ class Session:
             raise EditorError(f"{path}: not valid TOML: {e}", 400) from None
         except InputError as e:
             raise EditorError(str(e), 400, e.key) from None
+        if hasattr(self, "scene"):  # a scene the page names (not the command line's)
+            self._confined_files(scene_obj, path.name)
         self._check(scene_obj)
         self.source = scene if scene in BUILTIN_SCENES else str(path)
         self.path, self.base = path, base
@@ -148,6 +153,18 @@ class Session:
                               f"{self._roots_text()}, or a built-in scene: "
                               f"{', '.join(BUILTIN_SCENES)})", 404)
         return path
+
+    def _confined_files(self, scene: Scene, name: str) -> None:
+        """`EditorError` (403) when a scene the page opens or uploads names a file (mesh,
+        BRDF, skin or layer image, material) outside the session's folders and the shipped
+        data: the page could otherwise read any file by uploading a scene that names it
+        (the files of the scene the editor was started on are allowed)."""
+        allowed = [*self.roots, data_dir()]
+        for key, file in _scene_files(scene).items():
+            if file in self._trusted or any(file.is_relative_to(r) for r in allowed):
+                continue
+            raise EditorError(f"{name}: {key} names a file outside the folders this editor "
+                              f"may read ({self._roots_text()})", 403, key)
 
     def _roots_text(self) -> str:
         return " or ".join(str(r) for r in self.roots)
@@ -518,10 +535,12 @@ class Session:
         dabs = brush.dabs(points, radius) if last is None else brush.dabs(
             [last, *points], radius)[1:]
         self._stroke.last = points[-1]
+        H, W = view.mask.shape
         for x, y in dabs:
-            i, j = self._sample(view, k, x, y)
-            if not view.mask[i, j]:
-                continue
+            i, j = math.floor(y * k), math.floor(x * k)
+            if not (0 <= i < H and 0 <= j < W and view.mask[i, j]):
+                continue  # off the image (a drag that left the view: the page captures the
+                # pointer) or off the mesh; a stroke may go out and come back
             t = view.tex[i, j].astype(np.float64)
             scale = brush.texels_per_pixel(view, i, j, k)
             brush.dab(mask, t[0], t[1], radius * scale, s.tmap.wrap_x)
@@ -581,8 +600,10 @@ class Session:
         for layer, p in pngs.items():
             with atomic_write(p, "wb") as fh:
                 fh.write(maps.png16_bytes(self.paint[layer]))
+            self.written.append(p)
         with atomic_write(toml_path, "w") as fh:
             fh.write(text)
+        self.written.append(toml_path)
         paint, version = self.paint, self.version
         self.open(str(toml_path), {})
         self.paint, self.saved_as = paint, str(toml_path)
@@ -618,7 +639,7 @@ class Session:
                     cosmetics.check_material(probe)
                 else:
                     doc = tomllib.loads(toml_text(data, name))
-                    parse_scene(doc, target)
+                    self._confined_files(parse_scene(doc, target), name)
             except InputError as e:
                 raise EditorError(f"{name}: {e.message}", 400, e.key) from None
             except (UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
@@ -626,6 +647,7 @@ class Session:
         self.output.mkdir(parents=True, exist_ok=True)
         with atomic_write(target, "wb") as fh:
             fh.write(data)
+        self.written.append(target)
         return str(target)
 
     # --- what the page shows -------------------------------------------------------------
@@ -668,6 +690,25 @@ class Session:
 
         painted = [[PAINTED, ",".join(sorted(self.paint))]] if self.paint else []
         return [[k, value_text(v)] for k, v in self.changes.items()] + painted
+
+
+def _scene_files(scene: Scene) -> dict:
+    """`{key: resolved path}` of every file a parsed scene names (built-in meshes and the
+    preset BRDF are none)."""
+    v = scene.values
+    out = {}
+    if v["mesh.file"] not in BUILTIN_MESHES:
+        out["mesh.file"] = v["mesh.file"]
+    if v["material.brdf"] != "skin":
+        out["material.brdf"] = v["material.brdf"]
+    for key in PATH_KEYS[2:]:
+        if v.get(key):
+            out[key] = v[key]
+    for layer in scene.layers:
+        out[f"layer.{layer.name}.material"] = layer.material
+        if layer.image:
+            out[f"layer.{layer.name}.image"] = layer.image
+    return {k: Path(f).resolve() for k, f in out.items()}
 
 
 def _texture_key(config: SceneConfig) -> tuple:
