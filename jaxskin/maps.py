@@ -76,6 +76,23 @@ def png16_bytes(image) -> bytes:
             + chunk(b"IEND", b""))
 
 
+def png16_colour(data: bytes) -> np.ndarray | None:
+    """The samples `(H, W, 3 or 4)` uint16 of a 16-bit RGB or RGBA PNG (`data`: the file's
+    bytes), or None for any other file: Pillow, under imageio, reads these as 8 bits (the
+    low byte dropped), so they are decoded by pypng (pure Python: about 3 s for 1024² of
+    Paeth-filtered rows; a NumPy decoder written here took 14 s)."""
+    if data[:8] != b"\x89PNG\r\n\x1a\n" or data[12:16] != b"IHDR" or len(data) < 29:
+        return None
+    depth, colour = data[24], data[25]
+    if depth != 16 or colour not in (2, 6):
+        return None
+    import png
+
+    W, H, rows, info = png.Reader(bytes=data).asDirect()
+    C = info["planes"]
+    return np.vstack([np.asarray(r, np.uint16) for r in rows]).reshape(H, W, C)
+
+
 def exr_available() -> bool:
     """Whether the OpenEXR bindings (the `exr` extra) are installed."""
     try:
@@ -132,7 +149,9 @@ def read_image(path, what: str = "image", key=None):
     if Path(path).is_dir():
         raise InputError(f"is a folder (expected {_a(what)} file)", path, key=key)
     try:
-        img = np.asarray(iio.imread(path))
+        with open(path, "rb") as fh:
+            img = png16_colour(fh.read())
+        img = np.asarray(iio.imread(path)) if img is None else img
     except Exception as e:  # noqa: BLE001  (imageio raises many kinds; all mean unreadable)
         why = (e.strerror if isinstance(e, OSError) and e.strerror else
                "not a file format imageio decodes, or a truncated or damaged one")

@@ -247,3 +247,32 @@ def test_a_name_is_limited_in_bytes_as_the_file_system_is():
                 check_name(name)
         else:
             assert check_name(name) == name
+
+
+@pytest.mark.parametrize("channels", [3, 4])
+def test_a_16_bit_colour_png_is_read_at_full_depth(tmp_path, channels):
+    """Pillow (under imageio) reads 16-bit RGB(A) PNGs as 8 bits, the low byte dropped:
+    `render --format png16` given back as a fit-image target lost its precision (RMS 0.0012,
+    the 8-bit floor). Read at 16 bits now, by jaxskin's own writer and by pypng's."""
+    import png
+
+    from jaxskin.maps import png16_bytes, read_image
+
+    rng = np.random.default_rng(3)
+    samples = rng.integers(0, 65536, (9, 13, channels)).astype(np.uint16)
+    samples[0, 0, :3] = 257  # 1/255 in 16 bits: 8 bits would give 257 // 256 = 1 → 1/255
+    samples[0, 1, :3] = 255  # below one 8-bit level: 0 in 8 bits
+    ours = tmp_path / "ours.png"
+    ours.write_bytes(png16_bytes(samples))
+    theirs = tmp_path / "theirs.png"
+    with theirs.open("wb") as fh:
+        png.Writer(13, 9, bitdepth=16, greyscale=False, alpha=channels == 4).write(
+            fh, samples.reshape(9, -1).tolist())
+    for path in (ours, theirs):
+        rgb, alpha = read_image(path)
+        np.testing.assert_array_equal(rgb, samples[..., :3] / 65535.0)
+        if channels == 4:
+            np.testing.assert_array_equal(alpha, samples[..., 3] / 65535.0)
+        else:
+            assert alpha is None
+        assert rgb[0, 1, 0] == 255 / 65535
