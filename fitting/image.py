@@ -937,9 +937,12 @@ def run_command(args, run) -> int:
     params = scene.params
     w = weights(config, params, target_alpha, mask)
     if w.sum() <= 0:
-        raise InputError("no pixel to fit: the mesh covers no pixel fully"
-                         + (" inside the mask" if mask is not None else ""),
-                         args.mask or args.target)
+        opaque = target_alpha is None or bool(np.any(np.asarray(target_alpha) > 0))
+        raise InputError("no pixel to fit: " + (
+            "the target's alpha is 0 everywhere (a fully transparent image)" if not opaque else
+            "the mesh covers no pixel fully" + (" inside the mask" if mask is not None else "")
+            + (" where the target's alpha is above 0" if target_alpha is not None else "")),
+            args.mask or args.target)
     run.outputs.append(outputs)
     run.stage = "fitting"
     print(f"fitting {', '.join(k.key for k in keys)} to {args.target} "

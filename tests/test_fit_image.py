@@ -260,6 +260,8 @@ BAD = {
                                 "not a map of this scene"),
     "gn-without-maps": (["hand", "t.png", "--fit", "light.ambient", "--solver", "gn"],
                         "for maps"),
+    "transparent-target": (["hand", "clear.png", "--fit", "material.melanin"],
+                           "the target's alpha is 0 everywhere"),
 }
 
 
@@ -270,6 +272,7 @@ def test_bad_inputs_exit_2_with_one_line(tmp_path, case, capsys, monkeypatch):
     iio.imwrite(tmp_path / "t.png", small)
     iio.imwrite(tmp_path / "T", np.zeros((20, 16, 3), np.uint8), extension=".png")
     iio.imwrite(tmp_path / "f.png", small)
+    iio.imwrite(tmp_path / "clear.png", np.zeros((16, 16, 4), np.uint8))
     (tmp_path / "bad.png").write_text("not a png")
     (tmp_path / "out").mkdir()
     iio.imwrite(tmp_path / "out" / "hand_fit.png", small)

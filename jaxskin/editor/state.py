@@ -167,7 +167,7 @@ class Session:
                               f"may read ({self._roots_text()})", 403, key)
 
     def _roots_text(self) -> str:
-        return " or ".join(str(r) for r in self.roots)
+        return " or ".join(dict.fromkeys(str(r) for r in self.roots))  # each folder once
 
     def confine(self, text: str, what: str, base: Path | None = None) -> Path:
         """`text` as a path inside one of the session's folders (the scene's, the output
