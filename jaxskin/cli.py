@@ -729,6 +729,9 @@ def _fit_brdf(args, run: _Run) -> int:
     if out.is_dir():
         raise InputError("-o: expected the file to write (OUT.json), but this is a folder",
                          out)
+    if out.suffix.lower() != ".json":
+        raise InputError(f"-o: expected a .json file name (the fitted lobes; the report is "
+                         f"written beside it as .png), got {out.name!r}", out)
     outputs = Outputs(out.parent, [args.file])
     out = outputs.plan(out.name, "the fit")
     report = None if args.no_report else outputs.plan(out.with_suffix(".png").name,

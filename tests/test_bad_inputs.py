@@ -272,7 +272,10 @@ CASES = {
     "fit-brdf-memory": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "f.json"), "--lobes",
                                   "16", "--starts", "1024"],
     "fit-brdf-out-folder": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t)],
-    "fit-brdf-out-is-input": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "samples.csv")],
+    "fit-brdf-out-is-input": lambda t: [  # samples named .json, -o the same file
+        "fit-brdf", write(t, "samples.json", (ROOT / "data" / "brdf" / "skin_samples.csv")
+                          .read_text()), "-o", str(t / "samples.json")],
+    "fit-brdf-out-not-json": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "r.png")],
     "fit-brdf-out-newline": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "a\nb.json")],
     "fit-brdf-out-under-file": lambda t: ["fit-brdf", brdf_csv(t), "-o",
                                           str(Path(write(t, "afile", "x")) / "fit.json")],
