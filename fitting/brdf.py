@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -25,7 +26,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
-from jaxskin.formats import read_table
+from jaxskin.formats import _is_measurement_table, read_table
 from jaxskin.io import FitError, InputError, atomic_write
 from jaxskin.shading import lafortune
 
@@ -59,7 +60,14 @@ def _direction(theta_deg, phi_deg):
 
 def read_samples(path) -> BRDFSamples:
     """Read and check a BRDF sample CSV; `InputError` names the file, line and column."""
-    t = read_table(path, lambda cell: cell in (*ANGLES, *VECTORS), _EXPECTED)
+    try:
+        t = read_table(path, lambda cell: cell in (*ANGLES, *VECTORS), _EXPECTED)
+    except InputError:
+        if Path(path).is_file() and _is_measurement_table(Path(path)):
+            raise InputError("a table of spectra (a wavelength column), not BRDF samples: a "
+                             "cosmetic's measurement goes to 'jaxskin calibrate', skin "
+                             "spectra to 'jaxskin fit-skin'", path) from None
+        raise
     names = set(t.header)
     unknown = [c for c in t.header if c not in {*ANGLES, *VECTORS, *RGB, "weight"}]
     if unknown:

@@ -275,6 +275,7 @@ CASES = {
     "fit-brdf-out-is-input": lambda t: [  # samples named .json, -o the same file
         "fit-brdf", write(t, "samples.json", (ROOT / "data" / "brdf" / "skin_samples.csv")
                           .read_text()), "-o", str(t / "samples.json")],
+    "fit-brdf-given-a-cosmetic": lambda t: ["fit-brdf", measurement(t), "-o", str(t / "f.json")],
     "fit-brdf-out-not-json": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "r.png")],
     "fit-brdf-out-newline": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "a\nb.json")],
     "fit-brdf-out-under-file": lambda t: ["fit-brdf", brdf_csv(t), "-o",
