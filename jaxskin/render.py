@@ -40,7 +40,18 @@ from .precision import matmul
 from .raster import interpolate
 from .scene import BIOPHYSICAL_KEYS, LAYER_SCHEMA, SCHEMA, SKIN_MAPS, SceneConfig
 from .shading import blinn, lafortune, layered
-from .view import View, coverage, downsample, make_view, pad_index, sample_padded, transpose_table
+from .view import (
+    PIXEL_TABLE,
+    View,
+    coverage,
+    downsample,
+    make_view,
+    pad_index,
+    pixel_table,
+    sample_padded,
+    transpose_table,
+    view_pixels,
+)
 
 __all__ = ["OUTPUTS", "Prepared", "albedo", "decode_srgb", "encode_srgb", "expose", "map_cover",
            "prepare", "render", "render_prepared", "skin_reflectance", "texel_map",
@@ -49,6 +60,9 @@ __all__ = ["OUTPUTS", "Prepared", "albedo", "decode_srgb", "encode_srgb", "expos
 OUTPUTS = ("display", "rgba", "linear_rgba")
 SHADOW_MAX = 2048  # texels across the shadow map, at most
 VIEW_TABLE = ("view_rows", "view_weights", "view_dest")  # `view.transpose_table`
+# The cosmetics model's view: `view.pixel_table` (sampling and supersample averaging in one
+# linear map, a table each way); a scene without it samples, then averages.
+VIEWS = (*VIEW_TABLE, *PIXEL_TABLE)  # every view table (the editor drops them: see there)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -91,8 +105,16 @@ def _prepare(config: SceneConfig) -> Prepared:
               "view_mask": jnp.asarray(view.mask),
               "pad": jnp.asarray(pad_index(s.tmap.raster.mask, s.tmap.wrap_x), jnp.int32)}
     # The view sampling's transpose as a table: reverse mode reads it instead of scattering.
-    arrays.update({k: jnp.asarray(v) for k, v in transpose_table(
-        view.tex, view.mask, arrays["pad"], s.mask.shape, view.wrap_x).items()})
+    # The cosmetics model samples a colour that is linear all the way to the pixels: the
+    # sampling and the averaging over supersamples as one map, a table each way (measured
+    # at 1280x720: the forward 41 → 36 ms prototype; see benchmarks/RESULTS.md, issue 19).
+    if config.spectral is not None and config.mode != "height":
+        tables = pixel_table(view.tex, view.mask, arrays["pad"], s.mask.shape, view.wrap_x,
+                             config.supersample)
+    else:
+        tables = transpose_table(view.tex, view.mask, arrays["pad"], s.mask.shape,
+                                 view.wrap_x)
+    arrays.update({k: jnp.asarray(v) for k, v in tables.items()})
     if config.needs_furrows:
         arrays["h0"] = texture.furrows(config.texture)[0]
         arrays["noise"] = texture.noise(config.texture)
@@ -293,7 +315,12 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
     if config.mode == "height":
         colour = jnp.repeat(to_view(height[..., None]), 3, axis=-1)
     elif config.spectral is not None:
-        colour = to_view(_cosmetics_texture(config, p, params, arrays, normals))
+        colour = _cosmetics_texture(config, p, params, arrays, normals)
+        if all(key in arrays for key in PIXEL_TABLE):  # sampled and averaged in one map
+            mean = view_pixels(colour, [arrays[key] for key in PIXEL_TABLE],
+                               (view_mask.shape[0] // k, view_mask.shape[1] // k))
+            return _finish(None, view_mask, k, output, params["camera.exposure"], mean)
+        colour = to_view(colour)
     else:
         # Shade where the camera looks: the bumped normal map sampled into the view (fewer
         # samples than texels), in the object's frame.
@@ -340,10 +367,13 @@ def texture_to_view(config: SceneConfig, arrays: dict, texture_image):
     """A texture-space image `(Ht, Wt, C)` seen from the camera, linear in it: bilinear
     samples of the padded texture, averaged over each pixel's supersamples, `(H, W, C)`
     (0 where no sample sees the mesh)."""
-    table = _view_table(arrays)
-    samples = sample_padded(texture_image, arrays["pad"], arrays["tex"], arrays["view_mask"],
-                            prepare(config).view.wrap_x, table)
-    return downsample(samples, config.supersample)
+    vm, k = arrays["view_mask"], config.supersample
+    if all(key in arrays for key in PIXEL_TABLE):
+        return view_pixels(texture_image, [arrays[key] for key in PIXEL_TABLE],
+                           (vm.shape[0] // k, vm.shape[1] // k))
+    samples = sample_padded(texture_image, arrays["pad"], arrays["tex"], vm,
+                            prepare(config).view.wrap_x, _view_table(arrays))
+    return downsample(samples, k)
 
 
 def _light_and_view(arrays: dict, direction, dtype, positions):
@@ -364,25 +394,29 @@ def expose(linear, stops):
     return linear * jnp.exp2(jnp.asarray(stops, jnp.result_type(linear)))
 
 
-def _finish(samples, view_mask, k: int, output: str, stops):
+def _finish(samples, view_mask, k: int, output: str, stops, averaged=None):
     """Samples `(k H, k W, 3)` (black off the mesh) → the pixels `render` returns. With
     `stops` (the exposure) the samples are linear light: averaged, exposed and encoded;
     `None` (the height mode): display values, averaged as they are (decoded for a linear
-    output)."""
+    output). `averaged`: the linear samples already averaged (`view_pixels`), for
+    `samples`."""
     linear = stops is not None
+
+    def average(samples):  # the samples' average per pixel, or the one given
+        return downsample(samples, k) if averaged is None else averaged
 
     def exposed(image):
         return expose(image, stops) if linear else image
 
     if output == "display":
-        mean = exposed(downsample(samples, k))
+        mean = exposed(average(samples))
         return encode_srgb(mean) if linear else mean
     alpha = coverage(view_mask, k)[..., None]
     if output == "linear_rgba":
-        mean = exposed(downsample(samples, k)) if linear else downsample(
+        mean = exposed(average(samples)) if linear else downsample(
             decode_srgb(samples), k)
         return jnp.concatenate([mean, alpha], axis=-1)
-    mean = exposed(downsample(samples, k))
+    mean = exposed(average(samples))
     covered = alpha > 0
     straight = jnp.where(covered, mean / jnp.where(covered, alpha, 1.0), 0.0)
     return jnp.concatenate([encode_srgb(straight) if linear else straight, alpha], axis=-1)

@@ -30,8 +30,9 @@ from .linear import linear_call
 from .projection import TextureMap
 from .raster import Raster, rasterize
 
-__all__ = ["View", "coverage", "downsample", "make_view", "pad_index", "rotation", "sample",
-           "sample_padded", "transpose_table"]
+__all__ = ["PIXEL_TABLE", "View", "coverage", "downsample", "make_view", "pad_index",
+           "pixel_table", "rotation", "sample", "sample_padded", "transpose_table",
+           "view_pixels"]
 
 MARGIN = 0.05
 PAD = 3  # texels of padding around the mesh's texels (bilinear reads reach one)
@@ -252,24 +253,115 @@ def transpose_table(tex, mask, pad, shape, wrap_x: bool, width: int = 16) -> dic
         samples.append(4 * where + corner)
         weights.append(w)
     texels, samples, weights = (np.concatenate(a) for a in (texels, samples, weights))
-    order = np.argsort(texels, kind="stable")
-    texels, samples, weights = texels[order], samples[order], weights[order]
-    width = max(1, min(width, int(np.bincount(texels).max()) if texels.size else 1))
-    starts = np.flatnonzero(np.r_[True, texels[1:] != texels[:-1]]) if texels.size else \
+    rows, w, dest = _grouped(texels, samples, weights, width)
+    return {"view_rows": rows, "view_weights": w, "view_dest": dest}
+
+
+def _grouped(dest, src, weights, width: int):
+    """Entries `(dest, src, weight)` as a table for gathers: rows of up to `width` (src,
+    weight) pairs of one dest, `(R, width)` int32 and float32 (empty slots weigh 0), and
+    each row's dest `(R,)`, sorted; a dest with more entries gets more rows."""
+    order = np.argsort(dest, kind="stable")
+    dest, src, weights = dest[order], src[order], weights[order]
+    width = max(1, min(width, int(np.bincount(dest).max()) if dest.size else 1))
+    starts = np.flatnonzero(np.r_[True, dest[1:] != dest[:-1]]) if dest.size else \
         np.zeros(0, np.int64)
-    counts = np.diff(np.r_[starts, texels.size])
+    counts = np.diff(np.r_[starts, dest.size])
     rows_per = -(-counts // width)
     first_row = np.r_[0, np.cumsum(rows_per)[:-1]]
     group = np.repeat(np.arange(starts.size), counts)
-    pos = np.arange(texels.size) - starts[group]
+    pos = np.arange(dest.size) - starts[group]
     row = first_row[group] + pos // width
     R = int(rows_per.sum())
     rows = np.zeros((R, width), np.int32)
     w = np.zeros((R, width), np.float32)
-    rows[row, pos % width] = samples
+    rows[row, pos % width] = src
     w[row, pos % width] = weights
-    dest = np.repeat(texels[starts], rows_per).astype(np.int32)
-    return {"view_rows": rows, "view_weights": w, "view_dest": dest}
+    return rows, w, np.repeat(dest[starts], rows_per).astype(np.int32)
+
+
+def pixel_table(tex, mask, pad, shape, wrap_x: bool, k: int) -> dict:
+    """The view's colour per pixel as one linear map of the texture image: the padded
+    texture's bilinear samples (`sample_padded`) averaged over each pixel's k × k
+    supersamples (`downsample`), with the entries of one pixel that land on one texel
+    merged (at 1280×720, supersample 2: 4.5 M sample corners, 1.6 M entries). Two tables
+    (`_grouped`): by pixel for the forward pass (`"pix_src"` texels, `"pix_w"`,
+    `"pix_dest"` flat pixels; rows of 8) and by texel for its transpose (`"pix_t_src"`
+    pixels, `"pix_t_w"`, `"pix_t_dest"` texels; rows of 16): both passes read, neither
+    scatters. Weights in float32 (the forward and its transpose use the same ones). Made
+    once per view (numpy) from what `transpose_table` takes and the supersampling `k`."""
+    Ht, Wt = shape
+    tex = np.asarray(tex, np.float64)
+    mask = np.asarray(mask, bool)
+    H, W = mask.shape
+    where = np.flatnonzero(mask)
+    pixel = (where // W // k) * (W // k) + (where % W) // k
+    x = tex[..., 0].reshape(-1)[where] - 0.5
+    y = tex[..., 1].reshape(-1)[where] - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = x - x0, y - y0
+    texels, weights = [], []
+    for dx, dy, w in [(0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)), (0, 1, (1 - fx) * fy),
+                      (1, 1, fx * fy)]:
+        xi = np.mod(x0 + dx, Wt) if wrap_x else np.clip(x0 + dx, 0, Wt - 1)
+        yi = np.clip(y0 + dy, 0, Ht - 1)
+        texels.append(np.asarray(pad).reshape(-1)[yi.astype(np.int64) * Wt + xi.astype(np.int64)])
+        weights.append(w / (k * k))
+    key = np.tile(pixel, 4).astype(np.int64) * (Ht * Wt) + np.concatenate(texels)
+    key, inverse = np.unique(key, return_inverse=True)
+    merged = np.bincount(inverse.reshape(-1), np.concatenate(weights))
+    pix, tx = key // (Ht * Wt), key % (Ht * Wt)
+    src, w, dest = _grouped(pix, tx, merged, 8)
+    t_src, t_w, t_dest = _grouped(tx, pix, merged, 16)
+    return {"pix_src": src, "pix_w": w, "pix_dest": dest,
+            "pix_t_src": t_src, "pix_t_w": t_w, "pix_t_dest": t_dest}
+
+
+PIXEL_TABLE = ("pix_src", "pix_w", "pix_dest", "pix_t_src", "pix_t_w", "pix_t_dest")
+
+
+def view_pixels(image, table, pixels: tuple[int, int]):
+    """`downsample(sample_padded(image, ...), k)` through `pixel_table`'s arrays (in
+    `PIXEL_TABLE`'s order): the view's pixels `(H, W, C)` of a texture image `(Ht, Wt, C)`,
+    linear in it; reverse mode reads the transposed table. `pixels`: `(H, W)`."""
+    return _view_pixels(tuple(pixels), image, tuple(table))
+
+
+def _apply(src, w, dest, values, n: int):
+    """Rows of `(src, weight)` gathered from `values (N, C)` and summed into `dest`: `(n, C)`
+    (one gather per channel, as `_sample_rules`' transpose)."""
+    w = w.astype(values.dtype)
+    read = jnp.stack([jnp.sum(values[:, c][src] * w, axis=1) for c in range(values.shape[1])],
+                     axis=-1)
+    return jnp.zeros((n, values.shape[1]), values.dtype).at[dest].add(read,
+                                                                       indices_are_sorted=True)
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
+def _view_pixels(pixels, image, table):
+    return _pixel_rules(pixels, image.shape)[0](*table, image)
+
+
+@_view_pixels.defjvp
+def _view_pixels_jvp(pixels, primals, tangents):
+    image, table = primals
+    out = _view_pixels(pixels, image, table)
+    return out, linear_call(*_pixel_rules(pixels, image.shape), tuple(table), (tangents[0],))
+
+
+@functools.cache
+def _pixel_rules(pixels, shape):
+    def fun(src, w, dest, t_src, t_w, t_dest, image):
+        C = image.shape[-1]
+        return _apply(src, w, dest, image.reshape(-1, C), pixels[0] * pixels[1]).reshape(
+            *pixels, C)
+
+    def transpose(src, w, dest, t_src, t_w, t_dest, ct):
+        C = ct.shape[-1]
+        return (_apply(t_src, t_w, t_dest, ct.reshape(-1, C), shape[0] * shape[1])
+                .reshape(shape),)
+
+    return fun, transpose
 
 
 def sample_padded(image, pad, tex, mask, wrap_x: bool, table=None):

@@ -369,7 +369,7 @@ class Session:
         # Without the view's transpose table (reverse mode only; the editor takes no
         # gradients): its row count changes with every turn or zoom, and so would the
         # arrays' shapes and the compiled program.
-        arrays = {k: v for k, v in prepared.arrays.items() if k not in render.VIEW_TABLE}
+        arrays = {k: v for k, v in prepared.arrays.items() if k not in render.VIEWS}
         if config.needs_furrows:
             arrays["h0"] = texture.furrows(config.texture)[0]
         if self.paint and config.spectral is not None:
