@@ -106,8 +106,8 @@ def _prepare(config: SceneConfig) -> Prepared:
               "pad": jnp.asarray(pad_index(s.tmap.raster.mask, s.tmap.wrap_x), jnp.int32)}
     # The view sampling's transpose as a table: reverse mode reads it instead of scattering.
     # The cosmetics model samples a colour that is linear all the way to the pixels: the
-    # sampling and the averaging over supersamples as one map, a table each way (measured
-    # at 1280x720: the forward 41 → 36 ms prototype; see benchmarks/RESULTS.md, issue 19).
+    # sampling and the averaging over supersamples as one map, a table each way (at
+    # 1280x720 the render 152 → 146 ms, its gradient 384 → 344 ms: benchmarks/RESULTS.md).
     if config.spectral is not None and config.mode != "height":
         tables = pixel_table(view.tex, view.mask, arrays["pad"], s.mask.shape, view.wrap_x,
                              config.supersample)
@@ -315,12 +315,10 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
     if config.mode == "height":
         colour = jnp.repeat(to_view(height[..., None]), 3, axis=-1)
     elif config.spectral is not None:
-        colour = _cosmetics_texture(config, p, params, arrays, normals)
-        if all(key in arrays for key in PIXEL_TABLE):  # sampled and averaged in one map
-            mean = view_pixels(colour, [arrays[key] for key in PIXEL_TABLE],
-                               (view_mask.shape[0] // k, view_mask.shape[1] // k))
-            return _finish(None, view_mask, k, output, params["camera.exposure"], mean)
-        colour = to_view(colour)
+        # linear from texture space to the pixels: sampled and averaged in one map
+        mean = texture_to_view(config, arrays, _cosmetics_texture(config, p, params, arrays,
+                                                                  normals))
+        return _finish(None, view_mask, k, output, params["camera.exposure"], mean)
     else:
         # Shade where the camera looks: the bumped normal map sampled into the view (fewer
         # samples than texels), in the object's frame.
@@ -366,7 +364,8 @@ def texture_colour(config: SceneConfig, params: dict, arrays: dict, blur_gain=No
 def texture_to_view(config: SceneConfig, arrays: dict, texture_image):
     """A texture-space image `(Ht, Wt, C)` seen from the camera, linear in it: bilinear
     samples of the padded texture, averaged over each pixel's supersamples, `(H, W, C)`
-    (0 where no sample sees the mesh)."""
+    (0 where no sample sees the mesh); by `view.pixel_table` where `prepare` made one (the
+    cosmetics model), else sampled, then averaged."""
     vm, k = arrays["view_mask"], config.supersample
     if all(key in arrays for key in PIXEL_TABLE):
         return view_pixels(texture_image, [arrays[key] for key in PIXEL_TABLE],
