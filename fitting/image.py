@@ -56,6 +56,7 @@ import optimistix as optx
 from jaxskin import cluster, render
 from jaxskin.io import InputError, atomic_write
 from jaxskin.scene import LAYER_SCHEMA, SCHEMA, SKIN_MAPS, Scene
+from jaxskin.view import pixel_entries
 
 __all__ = ["DEGENERATE", "FitKey", "ImageFit", "MAP_SCALARS", "blur_gain", "fit", "fit_keys",
            "map_bounds", "noise_sigma", "pcg", "texel_blocks", "texel_jacobian", "view_diagonal",
@@ -478,32 +479,13 @@ def view_matrix(config) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     the padded texture's bilinear samples averaged over each pixel's supersamples) as a
     sparse matrix: `(pixel, texel, weight)` arrays, flat indices, duplicates summed (host
     NumPy, once per configuration)."""
-    arrays = render.prepare(config).arrays
-    view = render.prepare(config).view
-    tex = np.asarray(arrays["tex"], np.float64)
-    vm = np.asarray(arrays["view_mask"])
-    pad = np.asarray(arrays["pad"]).reshape(-1)
-    Ht, Wt = np.asarray(arrays["mask"]).shape
-    k = config.supersample
-    sy, sx = np.nonzero(vm)
-    x, y = tex[sy, sx, 0] - 0.5, tex[sy, sx, 1] - 0.5
-    x0, y0 = np.floor(x), np.floor(y)
-    fx, fy = x - x0, y - y0
-    pixel = (sy // k) * (vm.shape[1] // k) + sx // k
-    rows, cols, vals = [], [], []
-    for dx, dy, wgt in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)),
-                        (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):
-        xi = x0 + dx
-        xi = np.mod(xi, Wt) if view.wrap_x else np.clip(xi, 0, Wt - 1)
-        yi = np.clip(y0 + dy, 0, Ht - 1)
-        rows.append(pixel)
-        cols.append(pad[(yi * Wt + xi).astype(np.int64)])
-        vals.append(wgt / (k * k))
-    rows, cols, vals = (np.concatenate(v) for v in (rows, cols, vals))
-    key, inverse = np.unique(rows.astype(np.int64) * (Ht * Wt) + cols, return_inverse=True)
-    summed = np.bincount(inverse.reshape(-1), weights=vals, minlength=len(key))
+    p = render.prepare(config)
+    a = p.arrays
+    pixel, texel, summed = pixel_entries(a["tex"], a["view_mask"], a["pad"],
+                                         np.asarray(a["mask"]).shape, p.view.wrap_x,
+                                         config.supersample)
     keep = summed != 0
-    return ((key[keep] // (Ht * Wt)).astype(np.int32), (key[keep] % (Ht * Wt)).astype(np.int32),
+    return (pixel[keep].astype(np.int32), texel[keep].astype(np.int32),
             summed[keep].astype(np.float32))
 
 

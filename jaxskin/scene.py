@@ -499,13 +499,15 @@ def parse_scene(doc: dict, path, overrides=()) -> Scene:
     from_command_line = {}  # key → the -D item that set it last
     for item in overrides:
         k, v = _parse_override(item)
-        if k.startswith("layer.") and k.endswith(".material") and k.count(".") == 2 \
-                and k.split(".")[1] in names:
-            continue  # a layer's material: taken by _layer
-        if k.startswith("layer.") and len(k.split(".")) == 3 and k.split(".")[1] not in names:
-            raise InputError(f"scene {path.name} has no layer named {k.split('.')[1]!r} (its "
-                             f"layers: {', '.join(names) or 'none'}); -D applies to every "
-                             "scene of a command: render the others apart", f"-D {item}", key=k)
+        parts = k.split(".")
+        if len(parts) == 3 and parts[0] == "layer":
+            if parts[1] not in names:
+                raise InputError(f"scene {path.name} has no layer named {parts[1]!r} (its "
+                                 f"layers: {', '.join(names) or 'none'}); -D applies to every "
+                                 "scene of a command: render the others apart", f"-D {item}",
+                                 key=k)
+            if parts[2] == "material":
+                continue  # a layer's material: taken by _layer
         values[k] = _check(k, v, f"-D {item}", names)
         from_command_line[k] = f"-D {item}"
     if "camera.size" in from_command_line and "camera.height" not in from_command_line:

@@ -31,7 +31,7 @@ from .projection import TextureMap
 from .raster import Raster, rasterize
 
 __all__ = ["PIXEL_TABLE", "View", "coverage", "downsample", "make_view", "pad_index",
-           "pixel_table", "rotation", "sample", "sample_padded", "transpose_table",
+           "pixel_entries", "pixel_table", "rotation", "sample", "sample_padded", "transpose_table",
            "view_pixels"]
 
 MARGIN = 0.05
@@ -236,25 +236,47 @@ def transpose_table(tex, mask, pad, shape, wrap_x: bool, width: int = 16) -> dic
     float32; a float64 gradient recomputes them from the coordinates (exact). Made once per
     view (numpy), from the view's texture coordinates `tex (H, W, 2)`, its `mask (H, W)`,
     the padding `pad (Ht, Wt)` (`pad_index`) and the texture's `shape (Ht, Wt)`."""
+    where, texels, weights = _corners(tex, mask, pad, shape, wrap_x)
+    samples = (4 * where + np.arange(4)[:, None]).reshape(-1)  # corner-major, as the others
+    texels, weights = texels.reshape(-1), weights.reshape(-1)
+    rows, w, dest = _grouped(texels, samples, weights, width)
+    return {"view_rows": rows, "view_weights": w, "view_dest": dest}
+
+
+def _corners(tex, mask, pad, shape, wrap_x: bool):
+    """The bilinear reads of every sample that sees the mesh, as `sample` makes them: the
+    samples' flat indices `where (N,)`, and per corner (00, 10, 01, 11) the padded texel it
+    reads `(4, N)` and its weight `(4, N)` float64."""
     Ht, Wt = shape
     tex = np.asarray(tex, np.float64)
-    mask = np.asarray(mask, bool)
-    where = np.flatnonzero(mask)
+    where = np.flatnonzero(np.asarray(mask, bool))
     x = tex[..., 0].reshape(-1)[where] - 0.5
     y = tex[..., 1].reshape(-1)[where] - 0.5
     x0, y0 = np.floor(x), np.floor(y)
     fx, fy = x - x0, y - y0
-    samples, texels, weights = [], [], []
-    for corner, (dx, dy, w) in enumerate([(0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)),
-                                          (0, 1, (1 - fx) * fy), (1, 1, fx * fy)]):
+    texels, weights = [], []
+    for dx, dy, w in [(0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)), (0, 1, (1 - fx) * fy),
+                      (1, 1, fx * fy)]:
         xi = np.mod(x0 + dx, Wt) if wrap_x else np.clip(x0 + dx, 0, Wt - 1)
         yi = np.clip(y0 + dy, 0, Ht - 1)
         texels.append(np.asarray(pad).reshape(-1)[yi.astype(np.int64) * Wt + xi.astype(np.int64)])
-        samples.append(4 * where + corner)
         weights.append(w)
-    texels, samples, weights = (np.concatenate(a) for a in (texels, samples, weights))
-    rows, w, dest = _grouped(texels, samples, weights, width)
-    return {"view_rows": rows, "view_weights": w, "view_dest": dest}
+    return where, np.stack(texels), np.stack(weights)
+
+
+def pixel_entries(tex, mask, pad, shape, wrap_x: bool, k: int):
+    """The view's pixels as a sparse map of the texture image (the padded texture's
+    bilinear samples averaged over each pixel's k × k supersamples): `(pixel, texel,
+    weight)` flat indices and float64 weights, the entries of one pixel on one texel summed,
+    sorted by pixel, then texel."""
+    Ht, Wt = shape
+    W = np.asarray(mask).shape[1]
+    where, texels, weights = _corners(tex, mask, pad, shape, wrap_x)
+    pixel = (where // W // k) * (W // k) + (where % W) // k
+    key = np.tile(pixel, 4).astype(np.int64) * (Ht * Wt) + texels.reshape(-1)
+    key, inverse = np.unique(key, return_inverse=True)
+    merged = np.bincount(inverse.reshape(-1), weights.reshape(-1) / (k * k))
+    return key // (Ht * Wt), key % (Ht * Wt), merged
 
 
 def _grouped(dest, src, weights, width: int):
@@ -289,28 +311,8 @@ def pixel_table(tex, mask, pad, shape, wrap_x: bool, k: int) -> dict:
     `"pix_dest"` flat pixels; rows of 8) and by texel for its transpose (`"pix_t_src"`
     pixels, `"pix_t_w"`, `"pix_t_dest"` texels; rows of 16): both passes read, neither
     scatters. Weights in float32 (the forward and its transpose use the same ones). Made
-    once per view (numpy) from what `transpose_table` takes and the supersampling `k`."""
-    Ht, Wt = shape
-    tex = np.asarray(tex, np.float64)
-    mask = np.asarray(mask, bool)
-    H, W = mask.shape
-    where = np.flatnonzero(mask)
-    pixel = (where // W // k) * (W // k) + (where % W) // k
-    x = tex[..., 0].reshape(-1)[where] - 0.5
-    y = tex[..., 1].reshape(-1)[where] - 0.5
-    x0, y0 = np.floor(x), np.floor(y)
-    fx, fy = x - x0, y - y0
-    texels, weights = [], []
-    for dx, dy, w in [(0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)), (0, 1, (1 - fx) * fy),
-                      (1, 1, fx * fy)]:
-        xi = np.mod(x0 + dx, Wt) if wrap_x else np.clip(x0 + dx, 0, Wt - 1)
-        yi = np.clip(y0 + dy, 0, Ht - 1)
-        texels.append(np.asarray(pad).reshape(-1)[yi.astype(np.int64) * Wt + xi.astype(np.int64)])
-        weights.append(w / (k * k))
-    key = np.tile(pixel, 4).astype(np.int64) * (Ht * Wt) + np.concatenate(texels)
-    key, inverse = np.unique(key, return_inverse=True)
-    merged = np.bincount(inverse.reshape(-1), np.concatenate(weights))
-    pix, tx = key // (Ht * Wt), key % (Ht * Wt)
+    once per view (numpy) from `pixel_entries`."""
+    pix, tx, merged = pixel_entries(tex, mask, pad, shape, wrap_x, k)
     src, w, dest = _grouped(pix, tx, merged, 8)
     t_src, t_w, t_dest = _grouped(tx, pix, merged, 16)
     return {"pix_src": src, "pix_w": w, "pix_dest": dest,
