@@ -502,10 +502,11 @@ def parse_scene(doc: dict, path, overrides=()) -> Scene:
         parts = k.split(".")
         if len(parts) == 3 and parts[0] == "layer":
             if parts[1] not in names:
-                raise InputError(f"scene {path.name} has no layer named {parts[1]!r} (its "
-                                 f"layers: {', '.join(names) or 'none'}); -D applies to every "
-                                 "scene of a command: render the others apart", f"-D {item}",
-                                 key=k)
+                near = difflib.get_close_matches(parts[1], names, n=1, cutoff=0.5)
+                hint = f"did you mean '{near[0]}'? " if near else ""
+                raise InputError(f"scene {path.name} has no layer named {parts[1]!r} ({hint}its "
+                                 f"layers: {', '.join(names) or 'none'}; -D applies to every "
+                                 "scene a command renders)", f"-D {item}", key=k)
             if parts[2] == "material":
                 continue  # a layer's material: taken by _layer
         values[k] = _check(k, v, f"-D {item}", names)

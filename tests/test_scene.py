@@ -235,6 +235,7 @@ def test_a_layers_material_is_set_with_D(tmp_path, monkeypatch):
            ("layer.blush.material=1", "-D layer.blush.material=1: key 'layer.blush.material': "
             "expected a material"),
            ("layer.cheek.material=blush_rose", "scene makeup.toml has no layer named 'cheek'"),
+           ("layer.lips.thickness_mm=0.01", "no layer named 'lips' \\(did you mean 'lipstick'"),
            ("layer.blush.colour=red", "one of thickness_mm, .*, material")]
     for item, words in bad:
         with pytest.raises(InputError, match=words):
