@@ -925,6 +925,12 @@ def run_command(args, run) -> int:
             "the mesh covers no pixel fully" + (" inside the mask" if mask is not None else "")
             + (" where the target's alpha is above 0" if target_alpha is not None else "")),
             args.mask or args.target)
+    fitted = np.asarray(target)[w > 0]
+    if np.all(fitted.max(axis=-1) == fitted.min(axis=-1)):
+        warnings.warn(f"{args.target}: the target is greyscale (R = G = B at every fitted "
+                      "pixel) and the render is in colour: the fit can only match its "
+                      "brightness, so skin and cosmetic colour keys come out wrong; fit a "
+                      "colour photograph", stacklevel=1)
     run.outputs.append(outputs)
     run.stage = "fitting"
     print(f"fitting {', '.join(k.key for k in keys)} to {args.target} "
@@ -945,6 +951,9 @@ def run_command(args, run) -> int:
     run.stage = "writing"
     tmask = np.asarray(render.prepare(config).arrays["mask"])
     values = dict(result.values)
+    if "light.direction" in values:  # free while fitting (the renderer normalises it)
+        d = np.asarray(values["light.direction"], np.float64)
+        values["light.direction"] = d / np.linalg.norm(d)
     if brdf_path is not None:
         from jaxskin.formats import write_lafortune
 

@@ -618,3 +618,26 @@ def test_fit_image_warns_when_it_ends_far_above_the_noise(tmp_path, capsys):
         assert len(said) == (1 if warned else 0), (key, said)
         if warned:
             assert said[0].startswith("the fit ends at RMS 0.18"), said
+
+
+def test_fit_image_writes_a_unit_light_direction_and_warns_of_a_grey_target(tmp_path):
+    """The fitted `light.direction` (free while fitting) is written as a unit vector, the
+    printed value too; a greyscale target (R = G = B) gets one warning naming the file, a
+    colour one none."""
+    ov = ["camera.size=32", "texture.size=32", "wrinkles.enabled=false"]
+    sc = load_scene("hand", ov + ["light.direction=[0.6, 0.7, 2.0]"])
+    image = np.clip(np.asarray(render.render(sc.config, sc.params)), 0, 1)
+    maps.write_image(image, tmp_path / "colour.png")
+    maps.write_image(np.repeat(image.mean(-1, keepdims=True), 3, -1), tmp_path / "grey.png")
+    for target, grey in (("colour.png", False), ("grey.png", True)):
+        out = tmp_path / target.removesuffix(".png")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            code = main(["fit-image", "hand", str(tmp_path / target), "--fit",
+                         "light.direction", *[a for o in ov for a in ("-D", o)],
+                         "-o", str(out), "--steps", "8"])
+        assert code == 0
+        said = [str(w.message) for w in caught if "greyscale" in str(w.message)]
+        assert len(said) == grey and all(str(tmp_path / target) in s for s in said), said
+        d = np.asarray(load_scene(out / "hand.toml").values["light.direction"])
+        assert abs(np.linalg.norm(d) - 1.0) < 1e-6, d
