@@ -761,6 +761,19 @@ def test_a_save_keeps_the_scene_files_comments(tmp_path):
     edits["fields"]["edit"] = edits["fields"]["edit"][:1]
     shrunk = keep_comments(src, edits)
     assert "# forehead" in shrunk and "# cheek" not in shrunk and tomllib.loads(shrunk) == edits
+    # the first edit deleted: the cheek's comment stays on the cheek's table, and a comment
+    # goes with its table when the layers are reordered (matched by content, then by name)
+    edits["fields"]["edit"] = tomllib.loads(src)["fields"]["edit"][1:]
+    first_gone = keep_comments(src, edits)
+    assert "# forehead" not in first_gone and "# cheek\nvertex = 2" in first_gone, first_gone
+    layers = ('[[layer]]  # the red one\nname = "lips"\nthickness_mm = 0.01\n'
+              '[[layer]]  # pale\nname = "cheeks"\nthickness_mm = 0.02\n')
+    doc = {"layer": [{"name": "cheeks", "thickness_mm": 0.03}, {"name": "lips",
+                                                                "thickness_mm": 0.01}]}
+    swapped = keep_comments(layers, doc)
+    assert tomllib.loads(swapped) == doc
+    assert swapped.index("# pale") < swapped.index('"cheeks"') < swapped.index("# the red"), \
+        swapped
     # a document the styled route cannot reproduce falls back to the plain text
     assert keep_comments("not [ toml", {"a": 1}) == dumps({"a": 1})
 

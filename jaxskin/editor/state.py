@@ -771,6 +771,36 @@ def keep_comments(source: str, doc: dict) -> str:
     return plain
 
 
+def _match_tables(have, value: list) -> None:
+    def plain(h):
+        return h.unwrap() if hasattr(h, "unwrap") else h
+
+    free = list(range(len(have)))
+    match: list = [None] * len(value)
+    tests = [lambda h, v: plain(h) == v,
+             lambda h, v: "name" in v and plain(h).get("name") == v["name"]]
+    for same in tests:
+        for i, v in enumerate(value):
+            j = next((j for j in free if match[i] is None and same(have[j], v)), None)
+            if j is not None:
+                match[i] = j
+                free.remove(j)
+    if len(have) == len(value):
+        for i in range(len(value)):
+            if match[i] is None and i in free:
+                match[i] = i
+                free.remove(i)
+    kept = list(have.body) if hasattr(have, "body") else list(have)
+    while len(have):  # emptied and refilled in place: the array's layout stays
+        del have[-1]
+    for i, v in enumerate(value):
+        if match[i] is None:
+            have.append(v)
+        else:
+            _sync(kept[match[i]], v)
+            have.append(kept[match[i]])
+
+
 def _sync(table, want: dict) -> None:
     """Make the tomlkit `table` equal to `want` in place, touching only what differs."""
     for key in [k for k in table if k not in want]:
@@ -781,14 +811,12 @@ def _sync(table, want: dict) -> None:
             _sync(have, value)
         elif (isinstance(value, list) and value and all(isinstance(v, dict) for v in value)
               and isinstance(have, list) and have and all(isinstance(h, dict) for h in have)):
-            # an array of tables (field edits, layers): the common part kept table by
-            # table with its comments, the rest appended or dropped at the end
-            for h, v in zip(have, value, strict=False):
-                _sync(h, v)
-            while len(have) > len(value):
-                del have[-1]
-            for v in value[len(have):]:
-                have.append(v)
+            # an array of tables (field edits, layers): each wanted table is matched to a
+            # source table, which keeps its comments, by equal content, then by equal
+            # `name` (layers), then by position when no table was added or removed;
+            # unmatched ones are new, without comments (a deleted edit's comment must not
+            # move onto the next one)
+            _match_tables(have, value)
         elif have is None or have != value or type(have.unwrap() if hasattr(have, "unwrap")
                                                  else have) is not type(value):
             table[key] = value
