@@ -898,3 +898,20 @@ def test_a_stroke_that_leaves_the_image_paints_what_lies_inside(tmp_path):
     assert len(s.undo_stack) == 1  # one stroke, one step
     s.undo()
     assert painted() == 0
+
+
+def test_the_stroke_reports_the_brush_size_it_paints(tmp_path):
+    """Where a texel spans several image pixels (a 16² texture seen at 64 px), a brush of
+    half a pixel paints a dab of MIN_RADIUS texels: the reply gives that radius in image
+    pixels (the page draws its circle so): 5.0 px measured at the face's middle, where a
+    texel spans 6.7 px (the uv layout gives the middle more than the face's 100 px / 16
+    texels); a brush larger than the texels is reported as it is; one off the mesh none."""
+    (tmp_path / "tiny.toml").write_text(SCENE.replace("size = 64\n[wrinkles]",
+                                                      "size = 16\n[wrinkles]"))
+    s = Session(str(tmp_path / "tiny.toml"), tmp_path / "out")
+    config, view = s._view()
+    W = view.mask.shape[1] // config.supersample
+    small = s.paint_stroke("a", "blush", [[W / 2, 32.0]], 0.5, 1.0)["radius_px"]
+    assert 3.0 < small < 8.0, small  # the half-pixel brush was drawn as half a pixel
+    assert s.paint_stroke("b", "blush", [[W / 2, 32.0]], 12.0, 1.0)["radius_px"] == 12.0
+    assert s.paint_stroke("c", "blush", [[1.0, 1.0]], 3.0, 1.0)["radius_px"] is None

@@ -12,7 +12,9 @@ import math
 
 import numpy as np
 
-__all__ = ["dab", "dabs", "texels_per_pixel"]
+__all__ = ["MIN_RADIUS", "dab", "dabs", "texels_per_pixel"]
+
+MIN_RADIUS = 0.75  # texels: a smaller dab could fall between texel centres and paint nothing
 
 
 def dabs(points: list, radius: float) -> list:
@@ -42,9 +44,9 @@ def texels_per_pixel(view, i: int, j: int, k: int) -> float:
 
 def dab(mask: np.ndarray, cx: float, cy: float, r: float, wrap: bool) -> None:
     """The union (max) of `mask` and a soft round dab at texel coordinates `(cx, cy)`,
-    radius `r` texels: (1 − (d/r)²)² inside, 0 outside."""
+    radius `r` texels (at least `MIN_RADIUS`): (1 − (d/r)²)² inside, 0 outside."""
     H, W = mask.shape
-    r = max(r, 0.75)
+    r = max(r, MIN_RADIUS)
     y0, y1 = max(int(cy - r - 1), 0), min(int(cy + r + 1) + 1, H)
     x0, x1 = int(cx - r - 1), int(cx + r + 1) + 1
     if not wrap:

@@ -507,7 +507,11 @@ class Session:
         """Paint (or erase) `layer`'s thickness map along `points` (image pixels), a soft
         brush of `radius` image pixels: each point's texel from the view's texture lookup,
         the radius in texels from the lookup's local scale. Repeated calls with the same
-        `stroke` id extend one stroke (one undo step; dabs do not pile up within it)."""
+        `stroke` id extend one stroke (one undo step; dabs do not pile up within it).
+        Returns `{"dabs": n, "radius_px": r}`: r is the last dab's radius in image pixels
+        (None if no dab landed on the mesh), above `radius` where the texels are larger
+        than the brush (a close view of a coarse texture), so the page can draw the brush
+        circle as large as what it paints."""
         config, view = self._view()
         if config.spectral is None or layer not in [s.name for s in config.spectral.layers]:
             names = [s.name for s in config.spectral.layers] if config.spectral else []
@@ -536,6 +540,7 @@ class Session:
             [last, *points], radius)[1:]
         self._stroke.last = points[-1]
         H, W = view.mask.shape
+        shown = None
         for x, y in dabs:
             i, j = math.floor(y * k), math.floor(x * k)
             if not (0 <= i < H and 0 <= j < W and view.mask[i, j]):
@@ -543,7 +548,9 @@ class Session:
                 # pointer) or off the mesh; a stroke may go out and come back
             t = view.tex[i, j].astype(np.float64)
             scale = brush.texels_per_pixel(view, i, j, k)
-            brush.dab(mask, t[0], t[1], radius * scale, s.tmap.wrap_x)
+            r = max(radius * scale, brush.MIN_RADIUS)
+            brush.dab(mask, t[0], t[1], r, s.tmap.wrap_x)
+            shown = r / scale
         target = 0.0 if erase else 1.0
         before = self._stroke.before
         value = before + (target - before) * float(strength) * mask
@@ -553,7 +560,7 @@ class Session:
         if first:  # the layer's regions or image give way to its map
             self.scene = self._build(self.changes, self.paint)
         self.version += 1
-        return {"dabs": len(dabs)}
+        return {"dabs": len(dabs), "radius_px": shown}
 
     def _layer_map(self, config: SceneConfig, layer: str) -> np.ndarray:
         """A layer's thickness map `(H, W)` in [0, 1] as the render has it now."""

@@ -144,6 +144,7 @@ const C = {inFlight: false, pending: null, render: null};
 
 function change(values, preview) {
   document.body.dataset.idle = "0";
+  P.shownPx = 0;  // the view or the scene changes: the texels' size on screen may too
   C.pending = Object.assign(C.pending || {}, values);
   C.render = preview === "progressive" || C.render === "progressive" ? "progressive" :
     (C.render === false || preview === false) ? false : true;
@@ -490,10 +491,11 @@ async function sendPaint() {
   P.inFlight = true;
   const alt = drag && drag.alt;
   try {
-    await api("POST", "/api/paint", {
+    const res = await api("POST", "/api/paint", {
       stroke: P.stroke, layer: $("paint-layer").value, points,
       radius: parseFloat($("brush-radius").value), strength: parseFloat($("brush-strength").value),
       erase: $("brush-erase").checked || !!alt});
+    if (res.radius_px) P.shownPx = res.radius_px;  // what a dab paints here, in image pixels
     if (final) adopt(await api("GET", "/api/state"));
     requestRender(!final);
   } catch (e) { fail(e); }
@@ -607,7 +609,9 @@ function draw() {
     g.fillText(`rotate x ${rx.toFixed(0)}°, y ${ry.toFixed(0)}°`, 8, 20 / k * 1.5);
   }
   if (tool === "paint" && cursor) {
-    const r = parseFloat($("brush-radius").value);
+    // the brush as large as it paints: at least a texel or so where the texels are larger
+    // than the brush (the server's last dab, `P.shownPx`, until the brush or the view changes)
+    const r = Math.max(parseFloat($("brush-radius").value), P.shownPx || 0);
     g.beginPath(); g.arc(cursor[0], cursor[1], r, 0, 7);
     g.lineWidth = lw; g.strokeStyle = "rgba(255,255,255,.9)"; g.stroke();
     g.beginPath(); g.arc(cursor[0], cursor[1], r * 0.5, 0, 7);
@@ -798,7 +802,7 @@ function wire() {
   };
   $("edit-delete").onclick = deleteEdit;
   for (const id of ["brush-radius", "brush-strength"]) {
-    const f = () => { $(id + "-out").textContent = $(id).value; };
+    const f = () => { $(id + "-out").textContent = $(id).value; P.shownPx = 0; };
     $(id).addEventListener("input", f); f();
   }
   $("paint-layer").onchange = () => { $("paint-layer").dataset.want = $("paint-layer").value; buildLayers(); };
