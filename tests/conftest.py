@@ -5,12 +5,29 @@
 rendering is never changed globally.
 """
 
+import atexit
 import gc
 import os
+import shutil
+import tempfile
 
 import jax
 import numpy as np
 import pytest
+
+# One persistent compilation cache for the whole run, in a temporary folder: the xdist
+# workers, the modules (whose in-memory programs `_free_compiled_programs` drops) and the
+# commands tests run as subprocesses (JAXSKIN_CACHE_DIR) load a program another one already
+# compiled instead of compiling it again, and nothing is written into the user's home. The
+# process that makes the folder (the xdist controller, or the one process with -n 0)
+# removes it at exit; its workers inherit the variable.
+if "JAXSKIN_TEST_CACHE" not in os.environ:
+    os.environ["JAXSKIN_TEST_CACHE"] = tempfile.mkdtemp(prefix="jaxskin-test-cache-")
+    atexit.register(shutil.rmtree, os.environ["JAXSKIN_TEST_CACHE"], ignore_errors=True)
+os.environ["JAXSKIN_CACHE_DIR"] = os.environ["JAXSKIN_TEST_CACHE"]
+jax.config.update("jax_compilation_cache_dir", os.environ["JAXSKIN_TEST_CACHE"])
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.1)
+jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
 
 # pyproject's addopts run the suite as `-n auto --dist loadfile` (pytest-xdist): one worker
 # process per core, a module's tests in one worker. Two workers on 2 cores peaked at 7.7 GB
@@ -56,12 +73,12 @@ def _free_compiled_programs():
     gc.collect()
 
 
-_CACHE_DIR = jax.config.jax_compilation_cache_dir  # as the environment set it (usually None)
+_CACHE_DIR = jax.config.jax_compilation_cache_dir  # the run's folder, set above
 
 
 @pytest.fixture(autouse=True)
 def _cache_stays_off():
-    # Tests run in-process do not write JAX's persistent cache into the user's home.
+    # Tests run in-process keep to the run's cache folder (never the user's home).
     yield
     changed = jax.config.jax_compilation_cache_dir != _CACHE_DIR
     jax.config.update("jax_compilation_cache_dir", _CACHE_DIR)  # later tests start clean
