@@ -50,7 +50,7 @@ def material_path(name_or_path, base=None) -> Path:
     relative to `base` (default: the working directory)."""
     key = str(name_or_path)
     shipped = data_dir() / "materials" / f"{key}.json"
-    if not Path(key).suffix and shipped.is_file():
+    if not Path(key).suffix and Path(key).name == key and shipped.is_file():  # a bare name
         return shipped
     return Path(key) if base is None else (Path(base) / key).resolve()
 

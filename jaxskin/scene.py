@@ -469,12 +469,16 @@ def toml_text(raw: bytes, path) -> str:
                          "saved as UTF-8", path) from None
 
 
-def parse_scene(doc: dict, path, overrides=()) -> Scene:
+def parse_scene(doc: dict, path, overrides=(), allow=None) -> Scene:
     """A scene from its parsed TOML document `doc` (as `tomllib` gives it; not changed), read
     as if from the file `path` (relative paths are taken from its folder), with `-D`
     `overrides`: what `load_scene` does after reading the file (the editor builds scenes
-    from documents it holds)."""
+    from documents it holds). `allow(key, path)`, if given, is called with every file the
+    scene names (resolved) before that file is looked at or read, and raises to refuse it:
+    the editor confines a scene from the page to its folders so, and no error then tells
+    whether a file outside them exists."""
     path = Path(path)
+    allow = allow or (lambda key, file: None)
     doc = copy.deepcopy(doc)
     edits_raw = doc.get("fields", {}).pop("edit", []) if isinstance(doc.get("fields"), dict) \
         else []
@@ -487,7 +491,8 @@ def parse_scene(doc: dict, path, overrides=()) -> Scene:
         raise InputError("expected [[layer]] tables (an array of tables)", path, key="layer")
     values = {k: spec.default for k, spec in SCHEMA.items()}
     materials = _material_overrides(overrides)
-    layers = tuple(_layer(i, e, path, values, materials) for i, e in enumerate(layers_raw))
+    layers = tuple(_layer(i, e, path, values, materials, allow)
+                   for i, e in enumerate(layers_raw))
     names = [layer.name for layer in layers]
     for name in names:
         if names.count(name) > 1:
@@ -528,12 +533,15 @@ def parse_scene(doc: dict, path, overrides=()) -> Scene:
     if values["name"] is None:
         values["name"] = path.stem
     mesh = values["mesh.file"]
-    if mesh not in BUILTIN_MESHES and not Path(mesh).is_absolute():
-        values["mesh.file"] = str((base("mesh.file") / mesh).resolve())
+    if mesh not in BUILTIN_MESHES:
+        if not Path(mesh).is_absolute():
+            values["mesh.file"] = str((base("mesh.file") / mesh).resolve())
+        allow("mesh.file", Path(values["mesh.file"]).resolve())
     brdf = values["material.brdf"]
     if brdf != "skin":
         brdf_path = Path(brdf) if Path(brdf).is_absolute() else (
             base("material.brdf") / brdf).resolve()
+        allow("material.brdf", brdf_path.resolve())
         if not brdf_path.is_file():
             raise InputError("expected 'skin' (the preset) or a Lafortune JSON file (as "
                              f"written by jaxskin fit-brdf); no file {brdf_path}",
@@ -545,6 +553,7 @@ def parse_scene(doc: dict, path, overrides=()) -> Scene:
             continue
         image_path = Path(image) if Path(image).is_absolute() else (
             base(image_key) / image).resolve()
+        allow(image_key, image_path.resolve())
         if not image_path.is_file():
             raise InputError(f"expected a greyscale image file, got {image!r}",
                              source(image_key), key=image_key)
@@ -692,7 +701,7 @@ def _material_overrides(overrides) -> dict:
     return out
 
 
-def _layer(i, e, path, values, materials=None) -> LayerSpec:
+def _layer(i, e, path, values, materials=None, allow=lambda key, file: None) -> LayerSpec:
     """One [[layer]] table: its static spec; its parameters go into `values`. `materials`:
     `_material_overrides`, which replace the table's material (a path taken from the
     working directory, as any path given with -D)."""
@@ -716,6 +725,7 @@ def _layer(i, e, path, values, materials=None) -> LayerSpec:
         raise InputError("expected a material: a shipped one's name or a JSON file written "
                          "by jaxskin calibrate", source, key=f"{where}.material")
     file = cosmetics.material_path(material, base)
+    allow(f"{where}.material", file.resolve())
     if not file.is_file():
         shipped = cosmetics.shipped_materials()
         near = difflib.get_close_matches(material, shipped, n=1, cutoff=0.75)
@@ -729,6 +739,7 @@ def _layer(i, e, path, values, materials=None) -> LayerSpec:
         if not isinstance(image, str):
             raise InputError(f"expected a greyscale image file, got {image!r}", path,
                              key=f"{where}.image")
+        allow(f"{where}.image", (path.parent / image).resolve())
         if not (path.parent / image).is_file():
             raise InputError(f"no such file {(path.parent / image).resolve()} (expected a "
                              "greyscale image file, taken from the scene file's folder)", path,

@@ -2,6 +2,7 @@
 specular, materials, thickness maps, layer stacks."""
 
 import json
+import os
 
 import imageio.v3 as iio
 import jax
@@ -283,3 +284,18 @@ def test_a_precomputed_mask_norm_gives_the_same_blur():
     norm = sss.mask_norm(mask.astype(jnp.float32), 0.3)
     assert norm.shape == (3, 40, 30)
     np.testing.assert_array_equal(sss.blur(E, 0.3, mask, norm=norm), sss.blur(E, 0.3, mask))
+
+
+def test_a_material_name_is_a_shipped_one_only_when_it_is_a_bare_name(tmp_path):
+    """`material_path`: a bare name finds the shipped JSON; a name with folders in it is a
+    path from `base`, never a lookup under data/materials (where `../..` climbed out and
+    told whether some `.json` elsewhere existed)."""
+    from jaxskin.cosmetics import material_path
+    from jaxskin.io import data_dir
+
+    assert material_path("blush_rose") == data_dir() / "materials" / "blush_rose.json"
+    assert material_path("x/../blush_rose", tmp_path) == (tmp_path / "blush_rose").resolve()
+    leak = tmp_path / "leak.json"
+    leak.write_text("{}")
+    climb = os.path.relpath(tmp_path / "leak", data_dir() / "materials")
+    assert material_path(climb, tmp_path) == (tmp_path / climb).resolve() != leak

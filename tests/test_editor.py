@@ -857,6 +857,25 @@ def test_a_scene_the_page_uploads_or_opens_may_not_name_files_outside(tmp_path):
             s.open(str(tmp_path / "scenes" / name))
         assert info.value.status == 403, name
     assert s.scene.name == "tiny"  # the scene open before is kept
+    # No file outside is looked at: the same 403 whether it exists, is a folder, is missing
+    # or is not a JSON (errors said "no such file", "no material file" or "not a JSON
+    # material file (Expecting value)", telling the page what is there), for every key
+    # that names a file; and a material's bare-name lookup does not climb out of data/.
+    layer = SCENE[SCENE.index("[[layer]]"):SCENE.index("[[fields.edit]]")]
+    for target in (str(photo), str(tmp_path / "private" / "none.png"), str(tmp_path),
+                   "../private/photo.png", "../../../../../etc/passwd"):
+        for key, text in (
+                ("layer.blush.image", SCENE.replace(ellipse, f'image = "{target}"\n')),
+                ("layer.blush.material", SCENE.replace('material = "blush_rose"',
+                                                       f'material = "{target}"')),
+                ("skin.melanin_image", SCENE.replace(layer, "")
+                 + f'[skin]\nmelanin_image = "{target}"\n'),
+                ("mesh.file", SCENE.replace('file = "face"', f'file = "{target}"'))):
+            with pytest.raises(EditorError) as info:
+                s.upload("probe.toml", text.encode())
+            assert (info.value.status, info.value.key) == (403, key), (target, key)
+            assert info.value.message == (f"probe.toml: {key} names a file outside the "
+                                          f"folders this editor may read ({s._roots_text()})")
     s.open("makeup")  # shipped files: allowed
     # what the page wrote is in the last line after a signal ("no file was written" was)
     run = cli._Run()

@@ -107,15 +107,16 @@ class Session:
         try:
             text = toml_text(path.read_bytes(), path)
             base = tomllib.loads(text)
-            scene_obj = parse_scene(base, path)
+            # a scene the page names (not the command line's) may name files only in the
+            # session's folders and the shipped data
+            scene_obj = parse_scene(base, path, allow=(
+                lambda k, f: self._allow(k, f, path.name)) if hasattr(self, "scene") else None)
         except OSError as e:
             raise EditorError(f"{path}: cannot read ({e.__class__.__name__})", 400) from None
         except tomllib.TOMLDecodeError as e:
             raise EditorError(f"{path}: not valid TOML: {e}", 400) from None
         except InputError as e:
             raise EditorError(str(e), 400, e.key) from None
-        if hasattr(self, "scene"):  # a scene the page names (not the command line's)
-            self._confined_files(scene_obj, path.name)
         self._check(scene_obj)
         self.source = scene if scene in BUILTIN_SCENES else str(path)
         self.path, self.base = path, base
@@ -154,17 +155,17 @@ class Session:
                               f"{', '.join(BUILTIN_SCENES)})", 404)
         return path
 
-    def _confined_files(self, scene: Scene, name: str) -> None:
-        """`EditorError` (403) when a scene the page opens or uploads names a file (mesh,
-        BRDF, skin or layer image, material) outside the session's folders and the shipped
-        data: the page could otherwise read any file by uploading a scene that names it
-        (the files of the scene the editor was started on are allowed)."""
-        allowed = [*self.roots, data_dir()]
-        for key, file in _scene_files(scene).items():
-            if file in self._trusted or any(file.is_relative_to(r) for r in allowed):
-                continue
-            raise EditorError(f"{name}: {key} names a file outside the folders this editor "
-                              f"may read ({self._roots_text()})", 403, key)
+    def _allow(self, key: str, file: Path, name: str) -> None:
+        """`parse_scene`'s `allow` for a scene the page opens or uploads: `EditorError`
+        (403) when it names a file (mesh, BRDF, skin or layer image, material) outside the
+        session's folders and the shipped data, raised before that file is looked at, so
+        the page can neither read a file outside by naming it in a scene nor learn whether
+        one exists. The files of the scene the editor was started on are allowed."""
+        allowed = [*self.roots, data_dir().resolve()]
+        if file in self._trusted or any(file.is_relative_to(r) for r in allowed):
+            return
+        raise EditorError(f"{name}: {key} names a file outside the folders "
+                          f"this editor may read ({self._roots_text()})", 403, key)
 
     def _roots_text(self) -> str:
         return " or ".join(dict.fromkeys(str(r) for r in self.roots))  # each folder once
@@ -646,7 +647,7 @@ class Session:
                     cosmetics.check_material(probe)
                 else:
                     doc = tomllib.loads(toml_text(data, name))
-                    self._confined_files(parse_scene(doc, target), name)
+                    parse_scene(doc, target, allow=lambda k, f: self._allow(k, f, name))
             except InputError as e:
                 raise EditorError(f"{name}: {e.message}", 400, e.key) from None
             except (UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
