@@ -495,7 +495,7 @@ async function sendPaint() {
       stroke: P.stroke, layer: $("paint-layer").value, points,
       radius: parseFloat($("brush-radius").value), strength: parseFloat($("brush-strength").value),
       erase: $("brush-erase").checked || !!alt});
-    if (res.radius_px) P.shownPx = res.radius_px;  // what a dab paints here, in image pixels
+    if (res && res.radius_px) P.shownPx = res.radius_px;  // what a dab paints here, in image pixels
     if (final) adopt(await api("GET", "/api/state"));
     requestRender(!final);
   } catch (e) { fail(e); }
