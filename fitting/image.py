@@ -998,12 +998,15 @@ def run_command(args, run) -> int:
     print(f"RMS difference {result.rms:.4g} (display values) after {result.steps} steps "
           f"({result.seconds:.1f} s)"
           + ("" if sigma is None else f"; the target's noise estimate {sigma:.2g}"))
-    if sigma is not None and result.rms > ABOVE_NOISE * max(sigma, 0.5 / 255):
+    floor = None if sigma is None else max(sigma, 0.5 / 255)  # 8-bit rounding at least
+    if floor is not None and result.rms > ABOVE_NOISE * floor:
         limit = (f"; it stopped at the --steps limit ({args.steps})"
                  if result.steps >= args.steps else "")
-        warnings.warn(f"the fit ends at RMS {result.rms:.3g}, {result.rms / sigma:.0f}x the "
-                      f"target's noise estimate ({sigma:.2g}, from its pixel-to-pixel "
-                      "variation, texture included)"
+        noise = (f"the target's noise estimate ({sigma:.2g}, from its pixel-to-pixel "
+                 "variation, texture included)" if sigma >= floor else
+                 f"half an 8-bit step ({floor:.2g}; the target varies less than that from "
+                 "pixel to pixel, a flat colour?)")
+        warnings.warn(f"the fit ends at RMS {result.rms:.3g}, {result.rms / floor:.0f}x {noise}"
                       f"{limit}: the fitted keys do not explain the image; fit more keys, "
                       "start closer (-D KEY=VALUE) or allow more --steps, and see the "
                       "residual in the report", stacklevel=1)

@@ -641,3 +641,19 @@ def test_fit_image_writes_a_unit_light_direction_and_warns_of_a_grey_target(tmp_
         assert len(said) == grey and all(str(tmp_path / target) in s for s in said), said
         d = np.asarray(load_scene(out / "hand.toml").values["light.direction"])
         assert abs(np.linalg.norm(d) - 1.0) < 1e-6, d
+
+
+def test_a_flat_colour_target_ends_with_a_warning_not_a_crash(tmp_path, capsys):
+    """A flat swatch has a noise estimate of 0: the summary divided the RMS by it
+    (ZeroDivisionError, exit 1, after the files were written). Now: exit 0, the warning
+    measured against half an 8-bit step, saying why."""
+    iio.imwrite(tmp_path / "flat.png", np.full((32, 32, 3), (200, 150, 120), np.uint8))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        code = main(["fit-image", "hand", str(tmp_path / "flat.png"), "--fit",
+                     "material.melanin", "-D", "camera.size=32", "-D", "texture.size=32",
+                     "-o", str(tmp_path / "out"), "--steps", "3"])
+    assert code == 0, capsys.readouterr().err
+    said = [str(w.message) for w in caught if "fit ends at RMS" in str(w.message)]
+    assert len(said) == 1 and "half an 8-bit step (0.002; " in said[0], said
+    assert "the target's noise estimate 0" in capsys.readouterr().out
