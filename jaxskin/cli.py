@@ -149,6 +149,11 @@ def _warning_line(message, category, filename, lineno, line=None) -> str:
     return f"jaxskin: warning: {' '.join(str(message).split())}\n"
 
 
+# The last line after a failure or a signal names at most this many of the files written
+# (the last ones); a 400-image sweep stopped halfway once printed a line of 19 KB.
+SHOWN_NAMES = 8
+
+
 class _Run:
     """What a command has written so far: for the last line after a failure or a signal."""
 
@@ -172,7 +177,10 @@ class _Run:
         if not written:
             return "no file was written"
         folders = sorted({str(p.parent) for p in written})
-        names = ", ".join(p.name for p in written)
+        shown = SHOWN_NAMES if len(written) > SHOWN_NAMES + 1 else len(written)
+        names = ", ".join(p.name for p in written[-shown:])  # the last ones: where it stopped
+        if shown < len(written):
+            names = f"… ({len(written) - shown} more), {names}"
         return (f"{len(written)} file(s) complete in {', '.join(folders)}: {names}; no partial "
                 "file is left")
 

@@ -320,3 +320,20 @@ def test_a_key_given_twice_with_D_is_warned_about(capsys):
                     "material.melanin=0.3"])
     assert capsys.readouterr().err.splitlines() == [
         "jaxskin: warning: -D camera.size is given 2 times (64, 32): the last, 32, is used"]
+
+
+def test_the_last_line_after_a_stop_names_only_the_last_files():
+    """A long sweep stopped halfway: the last line counts every file written and names the
+    last 8 (it listed all, a line of 19 KB for 190 renders); 9 or fewer are all named."""
+    from types import SimpleNamespace
+
+    from jaxskin import cli
+
+    run = cli._Run()
+    run.outputs.append(SimpleNamespace(written=[Path(f"/o/r_{i:03d}.png") for i in range(190)]))
+    line = run.finished()
+    assert line == ("190 file(s) complete in /o: … (182 more), "
+                    + ", ".join(f"r_{i:03d}.png" for i in range(182, 190))
+                    + "; no partial file is left"), line
+    run.outputs[0].written = run.outputs[0].written[:9]
+    assert run.finished().count(".png") == 9 and "more" not in run.finished()
