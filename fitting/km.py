@@ -401,8 +401,9 @@ def fit(m: Measurement, smooth: float = 0.0, noise: float = DEFAULT_NOISE,
                 jnp.asarray(ident))
         y, ok, steps = solve(f64(np.stack([logS0, logK0], -1)), (*data, f64(logS0)))
         if not ident.all():
-            # S where it is not identifiable: from the fitted neighbours (linear in log S),
-            # K/S kept; then fit again with S held there, so S, K and the fit agree.
+            # S where it is not identifiable: from the fitted neighbours (linear in log S
+            # between two, the end value held beyond the first or last), K/S kept; then fit
+            # again with S held there, so S, K and the fit agree.
             logS, logK = np.asarray(y).T
             logS_fill = np.interp(wl, wl[ident], logS[ident])
             y0 = np.stack([logS_fill, logS_fill + logK - logS], -1)
