@@ -77,7 +77,8 @@ roughness = 0.3                    # Kelemen m of the skin's own highlight
 specular = 0.18                    # Kelemen rho_s of the skin's own highlight
 [spectral]
 step = 10                          # nm: 1 | 5 | 10 | 20
-illuminant = "D65"                 # D65 | D55 | D50 | A
+illuminant = "D65"                 # D65 | D55 | D50 | A, adapted to D65 white (CAT02):
+                                   #   white stays white; colours shift only a little
 [sss]
 enabled = true                     # false: no subsurface scattering blur at all
 method = "fft"                     # fft (exact) | separable (3-sigma passes)
