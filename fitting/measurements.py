@@ -27,7 +27,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -280,9 +279,10 @@ def _reflectances(data, header, columns, path, numbers, percent, notes):
                              path, numbers[bad[0]], "E_white")
     plain = [index[n] for n in columns if not _is_radiance(n)]
     if plain and percent and np.max(data[:, plain]) <= 1.0:
-        warnings.warn(f"{path}: --percent, but every reflectance is at most 1 (median "
-                      f"{np.median(data[:, plain]):.3g}): if they are fractions (0-1), leave "
-                      "--percent out", stacklevel=2)
+        # every column below 1 % at every band: no film or background is that dark
+        raise InputError(f"--percent, but every reflectance is at most 1 (median "
+                         f"{np.median(data[:, plain]):.3g}): these are fractions (0-1); "
+                         "leave --percent out", path)
     if plain and not percent:
         values = data[:, plain]
         if np.median(values) > PERCENT_MEDIAN:  # then [0, 100] is checked below

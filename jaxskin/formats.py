@@ -31,7 +31,6 @@ import functools
 import json
 import math
 import re
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -75,11 +74,22 @@ class Table:
         return InputError(message, self.path, line, column)
 
 
-def read_text(path, fallback: str | None = None) -> str:
+# Files a table reader is given by mistake, by their first bytes: named in the error
+# (they were "a binary file (a NUL byte)" with the line of that byte).
+BINARY_KINDS = ((b"\x89PNG\r\n\x1a\n", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"),
+                (b"II*\0", "a TIFF image"), (b"MM\0*", "a TIFF image"),
+                (b"GIF8", "a GIF image"), (b"%PDF", "a PDF document"),
+                (b"PK\x03\x04", "a ZIP archive (an Excel .xlsx workbook?)"),
+                (b"\xd0\xcf\x11\xe0", "an Office document (an Excel .xls workbook?)"))
+
+
+def read_text(path, fallback: str | None = None, expected: str = "a CSV table (export it "
+              "as CSV)") -> str:
     """A text file's contents (UTF-8, or UTF-16 when it starts with UTF-16's byte-order mark;
     the mark dropped); `InputError` if it is not one: missing, unreadable, binary, not UTF-8
     (unless it decodes as the `fallback` encoding, e.g. "cp1252" for Windows exports such as
-    the NIST file) or larger than `MAX_BYTES`."""
+    the NIST file) or larger than `MAX_BYTES`. A file that starts like an image, a PDF or a
+    workbook is named as one (`BINARY_KINDS`), with `expected` saying what was wanted."""
     path = Path(path)
     try:
         size = path.stat().st_size
@@ -103,6 +113,9 @@ def read_text(path, fallback: str | None = None) -> str:
             raise InputError("a binary file (a NUL character), expected text", path,
                              text[:text.index("\0")].count("\n") + 1)
         return text
+    kind = next((k for sig, k in BINARY_KINDS if raw.startswith(sig)), None)
+    if kind is not None:  # a file of a kind users pick by mistake: say which
+        raise InputError(f"{kind}, not text: expected {expected}", path)
     if b"\0" in raw:
         line = raw[:raw.index(b"\0")].count(b"\n") + 1
         raise InputError("a binary file (a NUL byte), expected UTF-8 text", path, line)
@@ -250,7 +263,7 @@ def read_json(path, what: str):
     """A JSON document; `InputError` (with the line) if missing or malformed. `what` names
     the kind of file in the messages (e.g. 'material file')."""
     path = Path(path)
-    text = read_text(path)
+    text = read_text(path, expected=f"a JSON {what}")
     try:
         return json.loads(text, parse_constant=_no_constant)
     except json.JSONDecodeError as e:
@@ -486,10 +499,10 @@ def read_spectra(path, percent: bool = False) -> tuple[list[str], np.ndarray, np
         raise InputError("wavelengths must increase", path,
                          None if line_of is None else line_of[row], "wavelength")
     if percent:
-        if R.size and np.max(R) <= 1.0:
-            warnings.warn(f"{path}: --percent, but every reflectance is at most 1 (median "
-                          f"{np.median(R):.3g}): if they are fractions (0-1), leave --percent "
-                          "out", stacklevel=2)
+        if R.size and np.max(R) <= 1.0:  # below 1 % everywhere: no skin is that dark
+            raise InputError(f"--percent, but every reflectance is at most 1 (median "
+                             f"{np.median(R):.3g}): these are fractions (0-1); leave "
+                             "--percent out", path)
         R = R / 100.0
     top = 100.0 if percent else 1.0
     for k, name in enumerate(names):

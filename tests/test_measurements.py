@@ -247,20 +247,22 @@ def test_dark_percent_data_is_not_guessed(tmp_path):
     np.testing.assert_allclose(m.R_inf, [0.012, 0.013, 0.012])
 
 
-def test_percent_on_fractions_warns(tmp_path):
+def test_percent_on_fractions_is_refused(tmp_path):
     """`--percent` given to data already in 0-1 (a newcomer's slip: the fit then ran on
-    reflectances 100x too dark and said nothing): calibrate's and fit-skin's readers warn,
-    naming the file; percent data with the flag does not warn."""
+    reflectances 100x too dark and said nothing; then only a warning, and calibrate wrote a
+    material with 12 of 81 bands identifiable): calibrate's and fit-skin's readers refuse
+    it, naming the file; percent data with the flag is read without a word."""
     import warnings
 
     from jaxskin.formats import read_spectra
 
     src = data_dir() / "measurements" / "lipstick_red.csv"
     (tmp_path / "m.csv").write_text(src.read_text())
-    with pytest.warns(UserWarning, match=r"m\.csv: --percent, but every reflectance is at most 1"):
+    with pytest.raises(InputError, match=r"m\.csv: --percent, but every reflectance is at "
+                       r"most 1 \(median 0\.\d+\): these are fractions \(0-1\); leave"):
         read_measurement(tmp_path / "m.csv", percent=True)
     (tmp_path / "s.csv").write_text("wavelength_nm,a\n400,0.2\n500,0.3\n600,0.4\n")
-    with pytest.warns(UserWarning, match=r"s\.csv: --percent, but every reflectance"):
+    with pytest.raises(InputError, match=r"s\.csv: --percent, but every reflectance"):
         read_spectra(tmp_path / "s.csv", percent=True)
     (tmp_path / "p.csv").write_text("wavelength_nm,a\n400,20\n500,30\n600,40\n")
     with warnings.catch_warnings():
