@@ -798,9 +798,9 @@ def main(argv=None) -> int:
     return its exit code (0 done, 2 bad input, 1 failure, 130 SIGINT, 143 SIGTERM)."""
     parser = _parser()
     args = parser.parse_args(argv)
-    if args.command is None:
-        parser.print_help()
-        return 0
+    if args.command is None:  # the help, on stderr, and the exit code of a usage error
+        parser.print_help(sys.stderr)
+        return 2
     if args.command == "list":
         return _list(args)
     _enable_compilation_cache()
