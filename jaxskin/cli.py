@@ -772,6 +772,8 @@ def _fit_brdf(args, run: _Run) -> int:
         print(f"{name:<8} {result.rel_rms[k]:>14.2%} {stats['failed_starts'][k]:>13} "
               f"{stats['steps_of_best'][k]:>6}")
     print(f"wrote {out}" + ("" if report is None else f" and {report}") + f" ({seconds:.1f} s)")
+    for line in brdf.fit_warnings(result):
+        warnings.warn(line, stacklevel=1)
     return 0
 
 
