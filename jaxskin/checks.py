@@ -84,6 +84,21 @@ def check_scene(sc, count: int) -> list:
     return inputs
 
 
+def idle_maps(sc) -> list[str]:
+    """Warnings for skin maps that change nothing in scene `sc`: a `skin.*_image` scales its
+    scalar (`skin.melanin_image` × `skin.melanin`, ...), so with that scalar at 0 (the
+    default of `skin.melanin`) the map is read and multiplied by 0: the render is the same
+    to the byte, and nothing said so."""
+    from .scene import SKIN_MAPS
+
+    out = []
+    for scalar, image in SKIN_MAPS.values():
+        if sc.values.get(image) and scalar in sc.params and float(sc.values[scalar]) == 0.0:
+            out.append(f"{image} scales {scalar}, which is 0 in scene {sc.name!r}: the map "
+                       f"changes nothing (set {scalar}, e.g. -D {scalar}=1)")
+    return out
+
+
 def unused_overrides(sc, overrides) -> list[str]:
     """The `-D` items of `overrides` that change nothing in scene `sc` (loaded with them):
     a value the scene's material model does not use (`skin.subject` on the Blinn hand,

@@ -35,7 +35,7 @@ import warnings
 from pathlib import Path
 
 from . import __version__, cluster
-from .checks import check_scene, reading, unused_overrides
+from .checks import check_scene, idle_maps, reading, unused_overrides
 from .io import FitError, InputError
 from .outputs import Outputs, check_name, slug
 
@@ -658,6 +658,8 @@ def _render(args, run: _Run) -> int:
         for item in unused_overrides(sc, args.overrides):
             _say(f"jaxskin: warning: -D {item} changes nothing in scene {sc.name!r} (its "
                  "material model or settings do not use it)")
+        for line in idle_maps(sc):
+            _say(f"jaxskin: warning: {line}")
     run.outputs.append(outputs)
     # The units of work: a scene's sweep in batches of cluster.SWEEP_BATCH values (one
     # compiled program per configuration), or the scene's one image; run here or on the

@@ -281,3 +281,26 @@ def test_a_region_wholly_off_the_texture_is_refused(tmp_path, region):
     (tmp_path / "t.toml").write_text(near)
     load_scene(tmp_path / "t.toml")  # reaching into the texture: kept
 
+
+
+def test_a_skin_map_whose_scalar_is_0_is_found(tmp_path, capsys):
+    """`skin.melanin_image` scales `skin.melanin`, 0 by default: the face rendered with a map
+    and without one were the same to the byte, and nothing said so. Now one warning naming
+    both keys; with `skin.melanin` set, or without a map, there is none."""
+    import imageio.v3 as iio
+
+    from jaxskin.checks import idle_maps
+    from jaxskin.cli import main
+
+    iio.imwrite(tmp_path / "m.png", np.tile(np.linspace(0, 255, 32, dtype=np.uint8), (32, 1)))
+    small = ["texture.size=32", "camera.size=32", "sss.enabled=false"]
+    img = f"skin.melanin_image={tmp_path / 'm.png'}"
+    assert idle_maps(load_scene("face", [*small, img])) == [
+        "skin.melanin_image scales skin.melanin, which is 0 in scene 'face': the map changes "
+        "nothing (set skin.melanin, e.g. -D skin.melanin=1)"]
+    assert idle_maps(load_scene("face", [*small, img, "skin.melanin=1"])) == []
+    assert idle_maps(load_scene("face", small)) == []
+    args = [a for o in [*small, img] for a in ("-D", o)]
+    assert main(["render", "face", "-o", str(tmp_path / "out"), *args]) == 0
+    assert "warning: skin.melanin_image scales skin.melanin, which is 0" in \
+        capsys.readouterr().err
