@@ -137,3 +137,23 @@ def test_the_site_builds_in_strict_mode(tmp_path):
                 broken.append(f"{page.relative_to(site)}: {target}")
     assert broken == []
     print(f"docs built in {seconds:.0f} s")
+
+
+def test_the_scene_page_says_which_skin_uses_a_skin_key():
+    """The scene page labelled skin.melanin_fraction & co. "(spectral, biophysical)", but a
+    spectral scene's measured skin ignores them (and the biophysical one skin.melanin): the
+    labels now name the skin, and they agree with `Scene.params` for every combination."""
+    from jaxskin.scene import BIOPHYSICAL_KEYS, load_scene
+
+    rows = {line.split("`")[1]: line for line in reference.scene_page()[0].splitlines()
+            if line.startswith("| `skin.")}
+    assert "(the measured skin: spectral with skin.model nist)" in rows["skin.melanin"]
+    for key in BIOPHYSICAL_KEYS.values():
+        assert "(the biophysical skin: biophysical, or spectral with skin.model biophysical)" \
+            in rows[key], key
+    for model, skin, biophysical in (("spectral", "nist", False),
+                                     ("spectral", "biophysical", True),
+                                     ("biophysical", "nist", True)):
+        params = load_scene("face", [f"material.model={model}", f"skin.model={skin}"]).params
+        assert ("skin.melanin" in params) is not biophysical, (model, skin)
+        assert all((k in params) is biophysical for k in BIOPHYSICAL_KEYS.values()), (model, skin)
