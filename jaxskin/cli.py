@@ -37,7 +37,7 @@ from pathlib import Path
 from . import __version__, cluster
 from .checks import check_scene, idle_maps, reading, unused_overrides
 from .io import FitError, InputError
-from .outputs import Outputs, check_name, slug
+from .outputs import MAX_NAME, MAX_NAME_BYTES, Outputs, check_name, slug
 
 EXIT_FAILURE, EXIT_INPUT, EXIT_SIGINT, EXIT_SIGTERM = 1, 2, 130, 143
 
@@ -588,8 +588,11 @@ def _parse_sweep(text: str, sc):
     return key, np.linspace(start, stop, count)
 
 
-def _base_name(sc, overrides) -> str:
-    """The scene's output name: its (checked) name, then `_<key>-<value>` per override."""
+def _base_name(sc, overrides, room: int = 16) -> str:
+    """The scene's output name: its (checked) name, then `_<key>-<value>` per override (a
+    digest of them when that is long); `room`: the most characters the outputs add after
+    it (an extension, `_normal.png`, a sweep's `_sweep-NN_KEY-VALUE.png`). `InputError`
+    naming the scene's `name` when even the digest leaves no room."""
     named = [item for item in overrides if item.partition("=")[0].strip() == "name"]
     base = check_name(sc.name, f"-D {named[-1]}" if named else sc.source, key="name")
     parts = []
@@ -598,9 +601,22 @@ def _base_name(sc, overrides) -> str:
         if key != "name":
             parts.append(f"{slug(key)}-{slug(value)}")
     suffix = "_".join(parts)
-    if len(suffix) > 120:  # many overrides: a digest keeps runs apart and names short
+
+    def too_long(text):  # with `room` added, in characters and in UTF-8 bytes
+        return (len(text) > MAX_NAME - room
+                or len(text.encode("utf-8", "surrogatepass")) > MAX_NAME_BYTES - room)
+
+    # many overrides, or a long name: a digest keeps runs apart and names short
+    if len(suffix) > 120 or (suffix and too_long(f"{base}_{suffix}")):
         suffix = "D-" + hashlib.sha1("\0".join(overrides).encode()).hexdigest()[:12]
-    return f"{base}_{suffix}" if suffix else base
+    full = f"{base}_{suffix}" if suffix else base
+    if too_long(full):
+        raise InputError(f"the scene's name is {len(base)} characters; with what this run "
+                         f"adds to it ({len(full) - len(base) + room} more: the -D values, "
+                         "the sweep's values, the extension) the output names would be over "
+                         f"{MAX_NAME} characters or {MAX_NAME_BYTES} bytes: shorten it (or "
+                         "-D name=...)", f"-D {named[-1]}" if named else sc.source, key="name")
+    return full
 
 
 def _render(args, run: _Run) -> int:
@@ -635,7 +651,14 @@ def _render(args, run: _Run) -> int:
                                      key=key)
         count = cluster.SWEEP_BATCH if sweep else 1  # per batch: every batch is padded
         outputs.inputs += [Path(p) for p in check_scene(sc, count)]
-        plans.append((sc, sweep, _base_name(sc, args.overrides)))
+        adds = [f".{ext}", ".glb" if args.glb else "", "_normal.png" if args.maps else ""]
+        if sweep:
+            (key, values), = sweep
+            width = max(2, len(str(len(values))))
+            adds += [f"_sweep-{len(values):0{width}d}_{slug(key)}-{slug(f'{v:g}')}.{ext}"
+                     for v in values]
+        room = max(len(a.encode("utf-8")) for a in adds)  # the longest the outputs add
+        plans.append((sc, sweep, _base_name(sc, args.overrides, room)))
     files = []
     for sc, sweep, base in plans:
         planned = {}

@@ -276,3 +276,24 @@ def test_a_16_bit_colour_png_is_read_at_full_depth(tmp_path, channels):
         else:
             assert alpha is None
         assert rgb[0, 1, 0] == 255 / 65535
+
+
+def test_a_long_scene_name_gives_way_to_the_digest_or_names_the_scene(tmp_path, capsys):
+    """A scene named with 170 letters rendered with two -D values: the name plus the -D part
+    was over 200 characters and the error named neither the file nor its key. Now the -D
+    part becomes its digest (the file is written); 199 letters leave no room at all: one
+    line naming the scene file and 'name', exit 2, nothing written."""
+    from jaxskin.cli import main
+
+    small = ["-D", "camera.size=32", "-D", "texture.size=32"]
+    (tmp_path / "mid.toml").write_text(f'name = "{"a" * 170}"\n')
+    assert main(["render", str(tmp_path / "mid.toml"), "-o", str(tmp_path / "o"), *small]) == 0
+    written = [p.name for p in (tmp_path / "o").iterdir()]
+    assert len(written) == 1 and written[0].startswith("a" * 170 + "_D-"), written
+    assert len(written[0]) == 170 + len("_D-") + 12 + len(".png")
+    (tmp_path / "long.toml").write_text(f'name = "{"a" * 199}"\n')
+    assert main(["render", str(tmp_path / "long.toml"), "-o", str(tmp_path / "p"), *small]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"jaxskin: error: {tmp_path / 'long.toml'}: key 'name': the scene's "
+                          "name is 199 characters; with what this run adds"), err
+    assert len(err.splitlines()) == 1 and not (tmp_path / "p").exists()
