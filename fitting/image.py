@@ -907,7 +907,7 @@ def run_command(args, run) -> int:
             raise InputError(f"the mask is {rgb.shape[1]}x{rgb.shape[0]} pixels, the target "
                              f"{width}x{height}", args.mask)
         mask = rgb.mean(axis=-1)
-    outputs.inputs += [Path(p) for p in check_scene(scene, 1)]
+    outputs.inputs += [Path(p) for p in check_scene(scene, 1, args.overrides)]
     outputs.inputs += [Path(p) for p in (args.target, args.mask) if p is not None]
     name = check_name(scene.name, scene.source)
     toml_path = outputs.plan(f"{name}.toml", "the fitted scene")

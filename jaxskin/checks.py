@@ -20,11 +20,25 @@ def reading(path, key=None):
         raise InputError("nested too deeply to read", path, key=key) from None
 
 
-def check_scene(sc, count: int) -> list:
+def check_scene(sc, count: int, overrides=()) -> list:
     """Everything a `scene.Scene` reads, checked before any render of `count` images at
     once: memory first (no allocation), then the mesh, edits, polygons, BRDF file,
     materials and images (`maps.read_grey`, the reader the render uses). Returns the
-    scene's input files."""
+    scene's input files. An error about a key that one of the `-D` `overrides` set names
+    that item, not the scene file (which may not mention the key at all)."""
+    from .scene import _parse_override
+
+    try:
+        return _check_scene(sc, count)
+    except InputError as e:
+        item = next((o for o in reversed(list(overrides))
+                     if e.key is not None and _parse_override(o)[0] == e.key), None)
+        if item is None:
+            raise
+        raise InputError(e.message, f"-D {item}", key=e.key) from None
+
+
+def _check_scene(sc, count: int) -> list:
     import numpy as np
 
     from . import cosmetics, maps, resources

@@ -650,7 +650,7 @@ def _render(args, run: _Run) -> int:
                                      "ignored (and named in every file); give one of them",
                                      key=key)
         count = cluster.SWEEP_BATCH if sweep else 1  # per batch: every batch is padded
-        outputs.inputs += [Path(p) for p in check_scene(sc, count)]
+        outputs.inputs += [Path(p) for p in check_scene(sc, count, args.overrides)]
         adds = [f".{ext}", ".glb" if args.glb else "", "_normal.png" if args.maps else ""]
         if sweep:
             (key, values), = sweep

@@ -304,3 +304,20 @@ def test_a_skin_map_whose_scalar_is_0_is_found(tmp_path, capsys):
     assert main(["render", "face", "-o", str(tmp_path / "out"), *args]) == 0
     assert "warning: skin.melanin_image scales skin.melanin, which is 0" in \
         capsys.readouterr().err
+
+
+def test_a_check_failing_on_a_D_value_names_the_D_item(tmp_path, capsys):
+    """`-D mesh.projection=uv` on the hand (no texture coordinates) was blamed on
+    data/scenes/hand.toml, which does not set it; now the -D item is named. An error about
+    a key no -D set still names the scene file."""
+    from jaxskin.cli import main
+
+    assert main(["render", "hand", "-o", str(tmp_path), "-D", "mesh.projection=uv"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "jaxskin: error: -D mesh.projection=uv: key 'mesh.projection': mesh 'hand' has no "
+        "texture coordinates; use planar or cylindrical projection")
+    (tmp_path / "uv.toml").write_text('[mesh]\nfile = "hand"\nprojection = "uv"\n')
+    assert main(["render", str(tmp_path / "uv.toml"), "-o", str(tmp_path / "o"),
+                 "-D", "camera.size=32"]) == 2
+    assert capsys.readouterr().err.startswith(f"jaxskin: error: {tmp_path / 'uv.toml'}: key "
+                                              "'mesh.projection'")
