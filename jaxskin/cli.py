@@ -619,6 +619,17 @@ def _base_name(sc, overrides, room: int = 16) -> str:
     return full
 
 
+def _sweep_suffixes(sweep, ext: str) -> list[str]:
+    """What a sweep's files add to the scene's output name: `_sweep-NN_KEY-VALUE.EXT` per
+    value (none without a sweep)."""
+    if not sweep:
+        return []
+    (key, values), = sweep
+    width = max(2, len(str(len(values))))
+    return [f"_sweep-{i + 1:0{width}d}_{slug(key)}-{slug(f'{v:g}')}.{ext}"
+            for i, v in enumerate(values)]
+
+
 def _render(args, run: _Run) -> int:
     import jax
     import numpy as np
@@ -651,24 +662,16 @@ def _render(args, run: _Run) -> int:
                                      key=key)
         count = cluster.SWEEP_BATCH if sweep else 1  # per batch: every batch is padded
         outputs.inputs += [Path(p) for p in check_scene(sc, count, args.overrides)]
-        adds = [f".{ext}", ".glb" if args.glb else "", "_normal.png" if args.maps else ""]
-        if sweep:
-            (key, values), = sweep
-            width = max(2, len(str(len(values))))
-            adds += [f"_sweep-{len(values):0{width}d}_{slug(key)}-{slug(f'{v:g}')}.{ext}"
-                     for v in values]
+        adds = [f".{ext}", ".glb" if args.glb else "", "_normal.png" if args.maps else "",
+                *_sweep_suffixes(sweep, ext)]
         room = max(len(a.encode("utf-8")) for a in adds)  # the longest the outputs add
         plans.append((sc, sweep, _base_name(sc, args.overrides, room)))
     files = []
     for sc, sweep, base in plans:
         planned = {}
         if sweep:
-            (key, values), = sweep
-            width = max(2, len(str(len(values))))
-            planned["sweep"] = [outputs.plan(
-                f"{base}_sweep-{i + 1:0{width}d}_{slug(key)}-{slug(f'{v:g}')}.{ext}",
-                sc.source)
-                for i, v in enumerate(values)]
+            planned["sweep"] = [outputs.plan(base + suffix, sc.source)
+                                for suffix in _sweep_suffixes(sweep, ext)]
         else:
             planned["image"] = outputs.plan(f"{base}.{ext}", sc.source)
         if args.glb:
