@@ -251,6 +251,15 @@ def _check_call(config, params) -> None:
                          + (f" (did you mean {near[0]!r}?)" if near else "")
                          + (f" and {len(unknown) - 1} more" if len(unknown) > 1 else "")
                          + f"; this scene's layers: {', '.join(layers) or 'none'}")
+    for key, value in params.items():  # a scalar of another shape failed deep inside
+        spec = SCHEMA.get(key) or (LAYER_SCHEMA.get(key.rsplit(".", 1)[1])
+                                   if key.startswith("layer.") else None)
+        want = None if spec is None else {float: (), "vec3": (3,)}.get(spec.kind)
+        if want is not None and tuple(jnp.shape(value)) != want:
+            what = "a number" if want == () else "a 3-vector"
+            raise ValueError(f"params[{key!r}]: expected {what} (shape {want}), got shape "
+                             f"{tuple(jnp.shape(value))}; for several values at once, "
+                             "jax.vmap over render (as --sweep does)")
 
 
 @functools.lru_cache(maxsize=32)

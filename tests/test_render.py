@@ -1,6 +1,7 @@
 """Shading (Blinn, Lafortune) and the render: analytic checks, gradients at grazing light
 and huge exponents, what a scene leaves out, sweeps."""
 
+import re
 import subprocess
 import sys
 
@@ -302,6 +303,17 @@ def test_render_refuses_what_it_would_otherwise_render_wrong():
         render.render(s, s.params)
     # a key that is known but unused by this model is no error (one dict, several scenes)
     render.render(s.config, s.params | {"material.melanin": 0.3})
+    # a scalar of another shape (several values at once) failed deep inside, "Incompatible
+    # shapes for broadcasting"; under vmap each call sees one value and renders
+    for key, value, what in (("layer.blush.thickness_mm", jnp.ones(2), "a number (shape ())"),
+                             ("light.direction", jnp.ones(2), "a 3-vector (shape (3,))"),
+                             ("camera.exposure", jnp.ones((1, 1)), "a number (shape ())")):
+        with pytest.raises(ValueError, match=rf"params\['{key}'\]: expected {re.escape(what)}, "
+                                             rf"got shape \({value.shape[0]},"):
+            render.render(s.config, s.params | {key: value})
+    images = jax.vmap(lambda t: render.render(
+        s.config, s.params | {"layer.blush.thickness_mm": t}))(jnp.asarray([0.0, 0.02]))
+    assert images.shape == (2, 16, 16, 3) and float(jnp.abs(images[1] - images[0]).max()) > 0
 
 
 def test_python_numbers_as_params_reuse_the_compiled_render(x64):
