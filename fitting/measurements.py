@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxskin.formats import WAVELENGTH_RANGE_NM, read_table
+from jaxskin.formats import WAVELENGTH_RANGE_NM, check_percent, read_table
 from jaxskin.io import InputError
 from jaxskin.outputs import MAX_NAME
 
@@ -278,11 +278,8 @@ def _reflectances(data, header, columns, path, numbers, percent, notes):
             raise InputError(f"the white standard must be > 0, got {white[bad[0]]:g}",
                              path, numbers[bad[0]], "E_white")
     plain = [index[n] for n in columns if not _is_radiance(n)]
-    if plain and percent and np.max(data[:, plain]) <= 1.0:
-        # every column below 1 % at every band: no film or background is that dark
-        raise InputError(f"--percent, but every reflectance is at most 1 (median "
-                         f"{np.median(data[:, plain]):.3g}): these are fractions (0-1); "
-                         "leave --percent out", path)
+    if plain and percent:
+        check_percent(data[:, plain], path)
     if plain and not percent:
         values = data[:, plain]
         if np.median(values) > PERCENT_MEDIAN:  # then [0, 100] is checked below

@@ -259,6 +259,17 @@ def _number(cell: str, path, line: int, column: str) -> float:
 # ---------------------------------------------------------------- JSON
 
 
+def check_percent(values, path) -> None:
+    """`InputError` naming `path` when readings given as percent (`--percent`) are all at
+    most 1: nothing measured (skin, a film, its background) is below 1 % at every band,
+    so they are fractions."""
+    values = np.asarray(values)
+    if values.size and np.max(values) <= 1.0:
+        raise InputError(f"--percent, but every reflectance is at most 1 (median "
+                         f"{np.median(values):.3g}): these are fractions (0-1); leave "
+                         "--percent out", path)
+
+
 def read_json(path, what: str):
     """A JSON document; `InputError` (with the line) if missing or malformed. `what` names
     the kind of file in the messages (e.g. 'material file')."""
@@ -499,10 +510,7 @@ def read_spectra(path, percent: bool = False) -> tuple[list[str], np.ndarray, np
         raise InputError("wavelengths must increase", path,
                          None if line_of is None else line_of[row], "wavelength")
     if percent:
-        if R.size and np.max(R) <= 1.0:  # below 1 % everywhere: no skin is that dark
-            raise InputError(f"--percent, but every reflectance is at most 1 (median "
-                             f"{np.median(R):.3g}): these are fractions (0-1); leave "
-                             "--percent out", path)
+        check_percent(R, path)
         R = R / 100.0
     top = 100.0 if percent else 1.0
     for k, name in enumerate(names):

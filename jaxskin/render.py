@@ -252,9 +252,7 @@ def _check_call(config, params) -> None:
                          + (f" and {len(unknown) - 1} more" if len(unknown) > 1 else "")
                          + f"; this scene's layers: {', '.join(layers) or 'none'}")
     for key, value in params.items():  # a scalar of another shape failed deep inside
-        spec = SCHEMA.get(key) or (LAYER_SCHEMA.get(key.rsplit(".", 1)[1])
-                                   if key.startswith("layer.") else None)
-        want = None if spec is None else {float: (), "vec3": (3,)}.get(spec.kind)
+        want = known[key]
         if want is not None and tuple(jnp.shape(value)) != want:
             what = "a number" if want == () else "a 3-vector"
             raise ValueError(f"params[{key!r}]: expected {what} (shape {want}), got shape "
@@ -263,13 +261,19 @@ def _check_call(config, params) -> None:
 
 
 @functools.lru_cache(maxsize=32)
-def _known_keys(config: SceneConfig) -> tuple[frozenset, list]:
+def _known_keys(config: SceneConfig) -> tuple[dict, list]:
     """The params keys `config` may take (every differentiable scene key, the maps, the
-    lobes, its layers' keys), and its layers' names: once per configuration."""
+    lobes, its layers' keys), each with the shape it must have (None: a map or the lobes,
+    checked elsewhere), and its layers' names: once per configuration."""
+    def shape(spec):
+        return {float: (), "vec3": (3,)}.get(spec.kind)
+
     layers = [] if config.spectral is None else [layer.name for layer in config.spectral.layers]
-    known = {k for k, spec in SCHEMA.items() if spec.param} | set(SKIN_MAPS) | {
-        "material.lafortune"} | {f"layer.{n}.{a}" for n in layers for a in (*LAYER_SCHEMA, "map")}
-    return frozenset(known), layers
+    known = {k: shape(spec) for k, spec in SCHEMA.items() if spec.param}
+    known |= dict.fromkeys([*SKIN_MAPS, "material.lafortune"]
+                           + [f"layer.{n}.map" for n in layers])
+    known |= {f"layer.{n}.{a}": shape(spec) for n in layers for a, spec in LAYER_SCHEMA.items()}
+    return known, layers
 
 
 def _check_maps(params, arrays) -> None:
