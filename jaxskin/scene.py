@@ -524,6 +524,14 @@ def parse_scene(doc: dict, path, overrides=(), allow=None) -> Scene:
         raise InputError("cosmetic layers need material.model = \"spectral\" or "
                          "\"biophysical\" (the Huang et al. model); this scene's is "
                          f"{values['material.model']!r}", path, key="layer")
+    given_skin = from_command_line.get("skin.model", path if "skin.model" in flat else None)
+    if (values["material.model"] == "biophysical" and values["skin.model"] == "nist"
+            and given_skin is not None):
+        # material.model = "biophysical" means a biophysical skin: an explicit nist skin
+        # beside it was silently ignored (a newcomer's trial)
+        raise InputError("material.model = \"biophysical\" renders the biophysical skin, so "
+                         "skin.model = \"nist\" cannot hold; for the measured skin use "
+                         "material.model = \"spectral\"", given_skin, key="skin.model")
 
     def base(key):  # a path in the file is relative to it; one given with -D, to the cwd
         return Path.cwd() if key in from_command_line else path.parent

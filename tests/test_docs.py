@@ -151,9 +151,9 @@ def test_the_scene_page_says_which_skin_uses_a_skin_key():
     for key in BIOPHYSICAL_KEYS.values():
         assert "(the biophysical skin: biophysical, or spectral with skin.model biophysical)" \
             in rows[key], key
-    for model, skin, biophysical in (("spectral", "nist", False),
-                                     ("spectral", "biophysical", True),
-                                     ("biophysical", "nist", True)):
-        params = load_scene("face", [f"material.model={model}", f"skin.model={skin}"]).params
+    for model, skin, biophysical in (("spectral", ["skin.model=nist"], False),
+                                     ("spectral", ["skin.model=biophysical"], True),
+                                     ("biophysical", [], True)):
+        params = load_scene("face", [f"material.model={model}", *skin]).params
         assert ("skin.melanin" in params) is not biophysical, (model, skin)
         assert all((k in params) is biophysical for k in BIOPHYSICAL_KEYS.values()), (model, skin)

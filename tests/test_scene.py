@@ -321,3 +321,19 @@ def test_a_check_failing_on_a_D_value_names_the_D_item(tmp_path, capsys):
                  "-D", "camera.size=32"]) == 2
     assert capsys.readouterr().err.startswith(f"jaxskin: error: {tmp_path / 'uv.toml'}: key "
                                               "'mesh.projection'")
+
+
+def test_a_biophysical_material_over_an_explicit_measured_skin_is_refused(tmp_path):
+    """`material.model = "biophysical"` renders the biophysical skin; an explicit
+    `skin.model = "nist"` beside it was silently ignored (a newcomer's trial). It is an
+    error naming where the nist skin came from; left at its default, nothing is said."""
+    with pytest.raises(InputError, match=r"^-D skin.model=nist: key 'skin.model': .*"
+                                         r"material.model = \"spectral\""):
+        load_scene("face", ["material.model=biophysical", "skin.model=nist"])
+    scene = tmp_path / "s.toml"
+    scene.write_text('[material]\nmodel = "biophysical"\n[skin]\nmodel = "nist"\n')
+    with pytest.raises(InputError, match=rf"^{scene}: key 'skin.model'"):
+        load_scene(scene)
+    assert load_scene("face", ["material.model=biophysical"]).skin_model == "biophysical"
+    assert load_scene(scene, ["skin.model=biophysical"]).skin_model == "biophysical"
+    assert load_scene(scene, ["material.model=spectral"]).skin_model == "nist"
