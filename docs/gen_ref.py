@@ -19,7 +19,7 @@ log = logging.getLogger("mkdocs.plugins.jaxskin_reference")
 
 pages, api_nav = reference.api_pages()
 scene_md, undescribed = reference.scene_page()
-pages["reference/scene.md"] = scene_md
+pages["reference/scene.md"] = scene_md  # kept in the repository too (reference.KEPT)
 pages["reference/cli.md"] = reference.cli_page()
 bench = reference.ROOT / "benchmarks"
 for png in sorted(bench.rglob("*.png")):  # the benchmarks' plots, as they are now

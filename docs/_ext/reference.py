@@ -221,8 +221,8 @@ def scene_page() -> tuple[str, list[str]]:
         "shapes. A scene gets only the parameters its material model uses (named in brackets); "
         "see [What a scene does not need](../explanations/traced.md).",
         "",
-        "This page is generated from `jaxskin.scene.SCHEMA` and `LAYER_SCHEMA` when the site "
-        "is built; the descriptions are the comments of the example in `jaxskin/scene.py`.",
+        "This page is generated from `jaxskin.scene.SCHEMA` and `LAYER_SCHEMA` (`python "
+        "docs/_ext/reference.py` rewrites it; the suite fails when it is stale); the descriptions are the comments of the example in `jaxskin/scene.py`.",
         "",
         "## Keys",
         "",
@@ -326,8 +326,9 @@ def cli_page() -> str:
         return out
 
     lines = ["# Command line", "",
-             "Generated from `jaxskin.cli._parser()`, the parser the `jaxskin` command uses, "
-             "when the site is built. `jaxskin COMMAND --help` prints the same text. "
+             "Generated from `jaxskin.cli._parser()`, the parser the `jaxskin` command uses "
+             "(`python docs/_ext/reference.py` rewrites this page; the suite fails when it is stale). "
+             "`jaxskin COMMAND --help` prints the same text. "
              "`python -m jaxskin` is the same command line. How outputs are named and the exit "
              "codes: [Outputs and exit codes](outputs.md).", ""]
     lines += section(parser, "jaxskin", "##")
@@ -336,3 +337,14 @@ def cli_page() -> str:
     return "\n".join(lines) + "\n"
 
 
+
+
+# The pages kept in the repository as well (so that links to them work where the Markdown is
+# read without building the site); tests/test_docs.py fails when they are stale.
+KEPT = {"reference/scene.md": lambda: scene_page()[0], "reference/cli.md": cli_page}
+
+
+if __name__ == "__main__":  # python docs/_ext/reference.py: rewrite the kept pages
+    for name, page in KEPT.items():
+        (ROOT / "docs" / name).write_text(page())
+        print(f"wrote docs/{name}")
