@@ -884,7 +884,7 @@ def run_command(args, run) -> int:
 
     outputs = Outputs(args.output)
     with reading(args.scene):
-        scene = load_scene(args.scene, args.overrides)
+        scene = load_scene(args.scene, args.overrides, flag="-D")
     keys = fit_keys(scene, args.fit)
     has_maps = any(fk.kind == "map" for fk in keys)
     solver = getattr(args, "solver", "auto")

@@ -140,7 +140,7 @@ def unused_overrides(sc, overrides) -> list[str]:
             continue
         rest = [o for o in overrides if _parse_override(o)[0] != key]
         try:
-            without = load_scene(sc.source, rest)
+            without = load_scene(sc.source, rest, flag="-D")
         except InputError:
             continue
         if without.values.get(key) == sc.values.get(key):

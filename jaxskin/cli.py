@@ -649,7 +649,7 @@ def _render(args, run: _Run) -> int:
     scenes = []
     for name in args.scenes:
         with reading(name):
-            scenes.append(load_scene(name, args.overrides))
+            scenes.append(load_scene(name, args.overrides, flag="-D"))
     _warn_repeated(args.overrides)
     plans = []
     for sc in scenes:

@@ -425,20 +425,23 @@ def builtin_scenes() -> dict[str, Path]:
     return {name: data_dir() / "scenes" / f"{name}.toml" for name in BUILTIN_SCENES}
 
 
-def scene_at_width(name_or_path, width: int, overrides=()) -> Scene:
+def scene_at_width(name_or_path, width: int, overrides=(), *, flag: str = "override") -> Scene:
     """The scene with its image `width` pixels wide; a scene that sets `camera.height` (a
     wide or tall frame) keeps its aspect, so small renders (tests, the gallery) frame it
     as its default view does."""
-    scene = load_scene(name_or_path, overrides)
+    scene = load_scene(name_or_path, overrides, flag=flag)
     size, height = scene.values["camera.size"], scene.values["camera.height"]
     extra = [f"camera.size={width}"]
     if height:
         extra.append(f"camera.height={max(16, round(height * width / size))}")
-    return load_scene(name_or_path, [*overrides, *extra])
+    return load_scene(name_or_path, [*overrides, *extra], flag=flag)
 
 
-def load_scene(name_or_path, overrides=()) -> Scene:
-    """A built-in scene by name or a TOML scene file, with `-D key=value` `overrides`."""
+def load_scene(name_or_path, overrides=(), *, flag: str = "override") -> Scene:
+    """A built-in scene by name or a TOML scene file, with `"key=value"` `overrides` (the
+    command line's `-D`). An error caused by an override names it as `flag` and the item
+    (`override texture.size=abc: key 'texture.size': ...`; the command line passes
+    `flag="-D"`)."""
     key = str(name_or_path)
     path = builtin_scenes().get(key, Path(key))
     if path.is_dir():
@@ -455,7 +458,7 @@ def load_scene(name_or_path, overrides=()) -> Scene:
         doc = tomllib.loads(toml_text(raw, path))
     except tomllib.TOMLDecodeError as e:
         raise InputError(f"not valid TOML: {e}", path) from None
-    return parse_scene(doc, path, overrides)
+    return parse_scene(doc, path, overrides, flag=flag)
 
 
 def toml_text(raw: bytes, path) -> str:
@@ -470,14 +473,14 @@ def toml_text(raw: bytes, path) -> str:
                          "saved as UTF-8", path) from None
 
 
-def parse_scene(doc: dict, path, overrides=(), allow=None) -> Scene:
+def parse_scene(doc: dict, path, overrides=(), allow=None, *, flag: str = "override") -> Scene:
     """A scene from its parsed TOML document `doc` (as `tomllib` gives it; not changed), read
     as if from the file `path` (relative paths are taken from its folder), with `-D`
     `overrides`: what `load_scene` does after reading the file (the editor builds scenes
     from documents it holds). `allow(key, path)`, if given, is called with every file the
     scene names (resolved) before that file is looked at or read, and raises to refuse it:
     the editor confines a scene from the page to its folders so, and no error then tells
-    whether a file outside them exists."""
+    whether a file outside them exists. `flag`: as in `load_scene`."""
     path = Path(path)
     allow = allow or (lambda key, file: None)
     doc = copy.deepcopy(doc)
@@ -491,7 +494,7 @@ def parse_scene(doc: dict, path, overrides=(), allow=None) -> Scene:
     if not isinstance(layers_raw, list):
         raise InputError("expected [[layer]] tables (an array of tables)", path, key="layer")
     values = {k: spec.default for k, spec in SCHEMA.items()}
-    materials = _material_overrides(overrides)
+    materials = _material_overrides(overrides, flag)
     layers = tuple(_layer(i, e, path, values, materials, allow)
                    for i, e in enumerate(layers_raw))
     names = [layer.name for layer in layers]
@@ -502,9 +505,9 @@ def parse_scene(doc: dict, path, overrides=(), allow=None) -> Scene:
     flat = _flatten(doc, path)
     for k, v in flat.items():
         values[k] = _check(k, v, path)
-    from_command_line = {}  # key → the -D item that set it last
+    from_command_line = {}  # key → the override that set it last, as errors name it
     for item in overrides:
-        k, v = _parse_override(item)
+        k, v = _parse_override(item, flag)
         parts = k.split(".")
         if len(parts) == 3 and parts[0] == "layer":
             if parts[1] not in names:
@@ -512,14 +515,15 @@ def parse_scene(doc: dict, path, overrides=(), allow=None) -> Scene:
                 hint = f"did you mean '{near[0]}'? " if near else ""
                 raise InputError(f"scene {path.name} has no layer named {parts[1]!r} ({hint}its "
                                  f"layers: {', '.join(names) or 'none'}; -D applies to every "
-                                 "scene a command renders)", f"-D {item}", key=k)
+                                 "scene a command renders)", f"{flag} {item}", key=k)
             if parts[2] == "material":
                 continue  # a layer's material: taken by _layer
-        values[k] = _check(k, v, f"-D {item}", names)
-        from_command_line[k] = f"-D {item}"
+        values[k] = _check(k, v, f"{flag} {item}", names)
+        from_command_line[k] = f"{flag} {item}"
     if "camera.size" in from_command_line and "camera.height" not in from_command_line:
         values["camera.height"] = _kept_aspect(values, flat.get("camera.size",
-                                                                SCHEMA["camera.size"].default))
+                                                                SCHEMA["camera.size"].default),
+                                               from_command_line["camera.size"])
     if layers and values["material.model"] not in SPECTRAL_MODELS:
         raise InputError("cosmetic layers need material.model = \"spectral\" or "
                          "\"biophysical\" (the Huang et al. model); this scene's is "
@@ -571,11 +575,11 @@ def parse_scene(doc: dict, path, overrides=(), allow=None) -> Scene:
     return Scene(values["name"], str(path), values, edits, layers)
 
 
-def _kept_aspect(values: dict, file_size: int) -> int:
+def _kept_aspect(values: dict, file_size: int, origin: str) -> int:
     """`camera.height` for a `-D camera.size` given alone: a scene file that sets
     `camera.height` (a wide or tall frame) keeps its aspect, the height scaled with the
     width (rounded, at least 1 pixel); `InputError` when that height is over the key's
-    maximum. A square scene (height 0) stays square."""
+    maximum, naming `origin` (the override). A square scene (height 0) stays square."""
     height, size = values["camera.height"], values["camera.size"]
     if not height:
         return 0
@@ -585,7 +589,7 @@ def _kept_aspect(values: dict, file_size: int) -> int:
         raise InputError(f"expected at most {top * file_size // height} for this scene's "
                          f"{file_size}x{height} frame (the height keeps its aspect: "
                          f"{size}x{scaled}, over {top}); give camera.height too (0: square)",
-                         f"-D camera.size={size}", key="camera.size")
+                         origin, key="camera.size")
     return scaled
 
 
@@ -645,9 +649,9 @@ def _check(key: str, value, where, layers=()):
     return value
 
 
-def _parse_override(item: str):
+def _parse_override(item: str, flag: str = "-D"):
     if "=" not in item:
-        raise InputError(f"expected -D key=value, got {item!r}")
+        raise InputError(f"expected {flag} key=value, got {item!r}")
     key, text = (s.strip() for s in item.split("=", 1))
     try:
         value = tomllib.loads(f"v = {text}")["v"]
@@ -698,15 +702,15 @@ def _edit(i, e, path) -> EditSpec:
                     _vector(e["d2"], f"{where}.d2", path, 2.0), float(weight))
 
 
-def _material_overrides(overrides) -> dict:
+def _material_overrides(overrides, flag: str) -> dict:
     """`-D layer.NAME.material=...` items: `{NAME: (value, item)}`, the last one given
     winning (a name that is no layer's is left for `_check` to report)."""
     out = {}
     for item in overrides:
-        k, v = _parse_override(item)
+        k, v = _parse_override(item, flag)
         parts = k.split(".")
         if len(parts) == 3 and parts[0] == "layer" and parts[2] == "material":
-            out[parts[1]] = (v, f"-D {item}")
+            out[parts[1]] = (v, f"{flag} {item}")
     return out
 
 

@@ -84,10 +84,16 @@ def test_overrides_are_checked_like_the_file(tmp_path):
     sc = load_scene(path, ["wrinkles.k_bump=0.8", "texture.size=32", "mesh.projection=uv"])
     assert sc.values["wrinkles.k_bump"] == 0.8 and sc.config.texture.size == 32
     assert sc.config.texture.projection == "uv"
-    with pytest.raises(InputError, match="-D wrinkles.k_bump=7: key 'wrinkles.k_bump'"):
+    with pytest.raises(InputError, match="^override wrinkles.k_bump=7: key 'wrinkles.k_bump'"):
         load_scene(path, ["wrinkles.k_bump=7"])
     with pytest.raises(InputError, match="did you mean 'texture.size'"):
         load_scene(path, ["texture.sise=32"])
+    # the command line names its own flag: API errors said "-D", which Python users never
+    # typed (a newcomer's trial)
+    with pytest.raises(InputError, match="^-D wrinkles.k_bump=7: key 'wrinkles.k_bump'"):
+        load_scene(path, ["wrinkles.k_bump=7"], flag="-D")
+    with pytest.raises(InputError, match="^expected override key=value, got 'k_bump'"):
+        load_scene(path, ["k_bump"])
 
 
 def test_a_camera_size_alone_keeps_the_frames_aspect(tmp_path):
@@ -105,7 +111,7 @@ def test_a_camera_size_alone_keeps_the_frames_aspect(tmp_path):
     tall = tmp_path / "tall.toml"
     tall.write_text(GOOD + "[camera]\nsize = 320\nheight = 1024\n")
     assert load_scene(tall, ["camera.size=160"]).config.image_height == 512
-    with pytest.raises(InputError, match=r"-D camera.size=4096: key 'camera.size': expected "
+    with pytest.raises(InputError, match=r"^override camera.size=4096: key 'camera.size': expected "
                                          r"at most 2560 .* give camera.height too"):
         load_scene(tall, ["camera.size=4096"])
 
@@ -229,10 +235,10 @@ def test_a_layers_material_is_set_with_D(tmp_path, monkeypatch):
     last = load_scene("makeup", ["layer.blush.material=foundation_dark",
                                  "layer.blush.material=mine/red.json"])
     assert material(last, "blush") == str(tmp_path / "mine" / "red.json")
-    bad = [("layer.blush.material=nope", "-D layer.blush.material=nope: key "
+    bad = [("layer.blush.material=nope", "override layer.blush.material=nope: key "
             "'layer.blush.material': no material file"),
            ("layer.blush.material=foundation_biege", "did you mean 'foundation_beige'"),
-           ("layer.blush.material=1", "-D layer.blush.material=1: key 'layer.blush.material': "
+           ("layer.blush.material=1", "override layer.blush.material=1: key 'layer.blush.material': "
             "expected a material"),
            ("layer.cheek.material=blush_rose", "scene makeup.toml has no layer named 'cheek'"),
            ("layer.lips.thickness_mm=0.01", "no layer named 'lips' \\(did you mean 'lipstick'"),
@@ -327,7 +333,7 @@ def test_a_biophysical_material_over_an_explicit_measured_skin_is_refused(tmp_pa
     """`material.model = "biophysical"` renders the biophysical skin; an explicit
     `skin.model = "nist"` beside it was silently ignored (a newcomer's trial). It is an
     error naming where the nist skin came from; left at its default, nothing is said."""
-    with pytest.raises(InputError, match=r"^-D skin.model=nist: key 'skin.model': .*"
+    with pytest.raises(InputError, match=r"^override skin.model=nist: key 'skin.model': .*"
                                          r"material.model = \"spectral\""):
         load_scene("face", ["material.model=biophysical", "skin.model=nist"])
     scene = tmp_path / "s.toml"

@@ -85,7 +85,8 @@ def keep_aspect(doc: dict, base: dict) -> None:
     new = doc["camera"]
     try:
         new["height"] = _kept_aspect({"camera.height": height, "camera.size": new["size"]},
-                                     camera.get("size", SCHEMA["camera.size"].default))
+                                     camera.get("size", SCHEMA["camera.size"].default),
+                                     "camera.size")
     except InputError as e:
         raise EditorError(e.message, 400, "camera.size") from None
 
