@@ -222,7 +222,8 @@ def scene_page() -> tuple[str, list[str]]:
         "see [What a scene does not need](../explanations/traced.md).",
         "",
         "This page is generated from `jaxskin.scene.SCHEMA` and `LAYER_SCHEMA` (`python "
-        "docs/_ext/reference.py` rewrites it; the suite fails when it is stale); the descriptions are the comments of the example in `jaxskin/scene.py`.",
+        "docs/_ext/reference.py` rewrites it; the suite fails when it is stale); the "
+        "descriptions are the comments of the example in `jaxskin/scene.py`.",
         "",
         "## Keys",
         "",
@@ -327,7 +328,8 @@ def cli_page() -> str:
 
     lines = ["# Command line", "",
              "Generated from `jaxskin.cli._parser()`, the parser the `jaxskin` command uses "
-             "(`python docs/_ext/reference.py` rewrites this page; the suite fails when it is stale). "
+             "(`python docs/_ext/reference.py` rewrites this page; the suite fails when it "
+             "is stale). "
              "`jaxskin COMMAND --help` prints the same text. "
              "`python -m jaxskin` is the same command line. How outputs are named and the exit "
              "codes: [Outputs and exit codes](outputs.md).", ""]
