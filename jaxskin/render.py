@@ -38,7 +38,7 @@ import numpy as np
 from . import biophysical, cosmetics, formats, maps, shadow, skin, sss, texture
 from .precision import matmul
 from .raster import interpolate
-from .scene import BIOPHYSICAL_KEYS, LAYER_SCHEMA, SCHEMA, SKIN_MAPS, SceneConfig
+from .scene import BIOPHYSICAL_KEYS, LAYER_SCHEMA, SCHEMA, SKIN_MAPS, SceneConfig, param_keys
 from .shading import blinn, lafortune, layered
 from .view import (
     PIXEL_TABLE,
@@ -190,7 +190,9 @@ def render(config: SceneConfig, params: dict, output: str = "display"):
     `light.direction (3,)`, `layer.NAME.thickness_mm ()`; per-texel maps such as
     `layer.NAME.map` are `(H, W)` in texture space, the texture's size). A misspelt key, a
     key of a layer the scene has not, or a map of another shape is a `ValueError`; a key the
-    scene's model does not use is ignored. `output`: `"display"` `(H, W, 3)` display values
+    scene's model does not use is ignored. A concrete value outside its scene key's range
+    (or NaN, or a zero `light.direction`) is a `ValueError` too; traced values (inside your
+    jit, grad or vmap) are not checked. `output`: `"display"` `(H, W, 3)` display values
     (clip to [0, 1]) over a black background: the linear image of any material model ×
     2^`camera.exposure`, sRGB-encoded (the height mode: the height itself); `"rgba"`
     `(H, W, 4)` display colour with straight alpha = the mesh's coverage of each pixel
@@ -202,6 +204,7 @@ def render(config: SceneConfig, params: dict, output: str = "display"):
     uses the configuration's (see `jaxskin.shadow`). Calling it inside your own `jit` folds
     the prepared arrays in as constants: use `render_prepared` there."""
     _check_call(config, params)
+    _check_ranges(params)
     params = _strong(params)
     config = _shadow_config(config, params)
     arrays = prepare(config).arrays
@@ -220,17 +223,27 @@ def render_prepared(config: SceneConfig, params: dict, arrays: dict,
 
 
 def _strong(params: dict) -> dict:
-    """Python numbers among the params as arrays of the others' float dtype (float32 when
-    there are none): a Python float traces as a weakly typed value, a second program for
-    `_render` (0.7-0.8 s on the 32² hand) where a new array value reuses the first."""
-    numbers = [k for k, v in params.items()
-               if isinstance(v, (int, float)) and not isinstance(v, bool)]
-    if not numbers:
-        return params
-    floats = [jnp.result_type(v) for k, v in params.items() if k not in numbers
-              and jnp.issubdtype(jnp.result_type(v), jnp.floating)]
+    """The params as arrays of one float dtype, the widest among the arrays' (float32 when
+    there are none). Python numbers and lists become arrays: a Python float traces as a
+    weakly typed value, a second program for `_render` (0.7-0.8 s on the 32² hand) where a
+    new array value reuses the first, and a list failed inside (`light.direction`). One
+    dtype: a single float64 value among float32 ones made the cosmetics model's branches
+    disagree (a TypeError from `lax.switch`, a newcomer's trial)."""
+    def plain(v):
+        return type(v) in (list, tuple) or (isinstance(v, (int, float))
+                                            and not isinstance(v, bool))
+
+    leaves = [leaf for k, v in params.items() if not plain(v)
+              for leaf in jax.tree_util.tree_leaves(v)]
+    floats = [jnp.result_type(leaf) for leaf in leaves
+              if jnp.issubdtype(jnp.result_type(leaf), jnp.floating)]
     dtype = jnp.result_type(*floats) if floats else jnp.float32
-    return {**params, **{k: jnp.asarray(params[k], dtype) for k in numbers}}
+
+    def cast(leaf):
+        return leaf if jnp.result_type(leaf) == dtype else jnp.asarray(leaf, dtype)
+
+    return {k: jnp.asarray(v, dtype) if plain(v) else jax.tree_util.tree_map(cast, v)
+            for k, v in params.items()}
 
 
 def _check_call(config, params) -> None:
@@ -241,7 +254,7 @@ def _check_call(config, params) -> None:
         raise TypeError(f"expected a SceneConfig{hint}, got {type(config).__name__}")
     if not isinstance(params, dict):
         raise TypeError(f"expected the params dict (scene.params), got {type(params).__name__}")
-    known, layers = _known_keys(config)
+    known, layers, required = _known_keys(config)
     unknown = sorted(k for k in params if k not in known)
     if unknown:
         import difflib
@@ -251,20 +264,48 @@ def _check_call(config, params) -> None:
                          + (f" (did you mean {near[0]!r}?)" if near else "")
                          + (f" and {len(unknown) - 1} more" if len(unknown) > 1 else "")
                          + f"; this scene's layers: {', '.join(layers) or 'none'}")
+    missing = [k for k in required if k not in params]
+    if missing:  # a bare KeyError from deep inside before
+        raise ValueError(f"params: missing key{'s' * (len(missing) > 1)} "
+                         f"{', '.join(map(repr, missing[:4]))}"
+                         + (f" and {len(missing) - 4} more" if len(missing) > 4 else "")
+                         + "; the scene's model needs every key of scene.params: start from "
+                         "it, e.g. scene.params | {key: value}")
     for key, value in params.items():  # a scalar of another shape failed deep inside
         want = known[key]
-        if want is not None and tuple(jnp.shape(value)) != want:
+        if want is not None and tuple(np.shape(value)) != want:
             what = "a number" if want == () else "a 3-vector"
             raise ValueError(f"params[{key!r}]: expected {what} (shape {want}), got shape "
-                             f"{tuple(jnp.shape(value))}; for several values at once, "
+                             f"{tuple(np.shape(value))}; for several values at once, "
                              "jax.vmap over render (as --sweep does)")
 
 
+def _check_ranges(params: dict) -> None:
+    """Concrete scalars and `light.direction` in `params` checked against their scene keys'
+    ranges, as `load_scene` checks them: out of range the models give unphysical numbers
+    without an error (a negative thickness: pixels of −2e19; a zero light direction: NaN),
+    a newcomer's trial. Traced values (inside jit, grad, vmap) cannot be checked here."""
+    for key, value in params.items():
+        name = key.rsplit(".", 1)[-1] if key.startswith("layer.") else key
+        spec = (LAYER_SCHEMA if key.startswith("layer.") else SCHEMA).get(name)
+        if spec is None or isinstance(value, jax.core.Tracer) or not spec.param:
+            continue
+        v = np.asarray(value, np.float64)
+        if spec.kind == "vec3":
+            if not (np.all(np.isfinite(v)) and np.any(v != 0)):
+                raise ValueError(f"params[{key!r}]: expected a finite, non-zero 3-vector, got "
+                                 f"{v.tolist()}")
+        elif not (spec.lo <= v <= spec.hi):  # NaN fails too
+            raise ValueError(f"params[{key!r}]: must be in [{spec.lo:g}, {spec.hi:g}] (the "
+                             f"scene key's range), got {float(v):.6g}")
+
+
 @functools.lru_cache(maxsize=32)
-def _known_keys(config: SceneConfig) -> tuple[dict, list]:
+def _known_keys(config: SceneConfig) -> tuple[dict, list, list]:
     """The params keys `config` may take (every differentiable scene key, the maps, the
     lobes, its layers' keys), each with the shape it must have (None: a map or the lobes,
-    checked elsewhere), and its layers' names: once per configuration."""
+    checked elsewhere), its layers' names, and the keys it needs (`scene.param_keys`):
+    once per configuration."""
     def shape(spec):
         return {float: (), "vec3": (3,)}.get(spec.kind)
 
@@ -273,7 +314,8 @@ def _known_keys(config: SceneConfig) -> tuple[dict, list]:
     known |= dict.fromkeys([*SKIN_MAPS, "material.lafortune"]
                            + [f"layer.{n}.map" for n in layers])
     known |= {f"layer.{n}.{a}": shape(spec) for n in layers for a, spec in LAYER_SCHEMA.items()}
-    return known, layers
+    skin = "nist" if config.spectral is None else config.spectral.skin
+    return known, layers, param_keys(config.material, skin, layers)
 
 
 def _check_maps(params, arrays) -> None:

@@ -132,7 +132,7 @@ from .projection import KINDS
 from .spectral import ILLUMINANTS, STEPS, Grid
 
 __all__ = ["BUILTIN_SCENES", "Scene", "SceneConfig", "TextureConfig", "builtin_scenes",
-           "load_scene", "parse_scene", "scene_at_width"]
+           "load_scene", "param_keys", "parse_scene", "scene_at_width"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -396,17 +396,9 @@ class Scene:
         """Differentiable values as float32 arrays, keyed by their dotted names; only those
         the scene uses (no Blinn parameters in a Lafortune scene, no lobes in a Blinn one)."""
         model = self.values["material.model"]
-        unused = set().union(*(p for m, p in _MODEL_PARAMS.items() if m != model))
-        unused -= _MODEL_PARAMS[model]
-        if model in SPECTRAL_MODELS:  # one skin: the measured one's or the biophysical's
-            unused |= ({"skin.melanin"} if self.skin_model == "biophysical" else
-                       set(BIOPHYSICAL_KEYS.values()))
-        out = {k: jnp.asarray(self.values[k], jnp.float32) for k, spec in SCHEMA.items()
-               if spec.param and k not in unused}
-        for layer in self.layers:
-            for k in LAYER_SCHEMA:
-                key = f"layer.{layer.name}.{k}"
-                out[key] = jnp.asarray(self.values[key], jnp.float32)
+        keys = param_keys(model, self.skin_model, [layer.name for layer in self.layers])
+        out = {k: jnp.asarray(self.values[k], jnp.float32) for k in keys
+               if k != "material.lafortune"}
         if model == "lafortune":
             from .formats import read_lafortune
             from .shading import lafortune
@@ -415,6 +407,22 @@ class Scene:
             out["material.lafortune"] = (lafortune.skin() if brdf == "skin" else
                                          read_lafortune(brdf))
         return out
+
+
+def param_keys(model: str, skin: str, layers) -> list[str]:
+    """The keys of `Scene.params` for material `model`, skin model `skin` ("nist" or
+    "biophysical"; read by the spectral models only) and cosmetic layers named `layers`:
+    every differentiable scene key the model uses (no Blinn parameters in a Lafortune
+    scene, no lobes in a Blinn one, one skin's keys), the layers' keys, and
+    `material.lafortune` for the Lafortune model; not the optional per-texel maps."""
+    unused = set().union(*(p for m, p in _MODEL_PARAMS.items() if m != model))
+    unused -= _MODEL_PARAMS[model]
+    if model in SPECTRAL_MODELS:  # one skin: the measured one's or the biophysical's
+        unused |= ({"skin.melanin"} if skin == "biophysical" else
+                   set(BIOPHYSICAL_KEYS.values()))
+    keys = [k for k, spec in SCHEMA.items() if spec.param and k not in unused]
+    keys += [f"layer.{name}.{k}" for name in layers for k in LAYER_SCHEMA]
+    return keys + (["material.lafortune"] if model == "lafortune" else [])
 
 
 BUILTIN_SCENES = ("hand", "foot", "arm", "face", "makeup")

@@ -334,3 +334,39 @@ def test_python_numbers_as_params_reuse_the_compiled_render(x64):
     a = render.render(s.config, {**s.params, "material.melanin": 0.45})
     b = render.render(s.config, {**s.params, "material.melanin": jnp.float32(0.45)})
     assert bool(jnp.all(a == b))
+
+
+def test_render_checks_missing_keys_ranges_lists_and_mixed_dtypes(x64):
+    """A newcomer's trial through the Python API: a missing key was a bare KeyError from
+    deep inside; out-of-range values rendered unphysical pixels without a word (a negative
+    thickness: −2e19); a list for light.direction failed in jnp.linalg.norm; one float64
+    value among float32 ones crashed the makeup scene in lax.switch (mismatched branch
+    types) while the hand promoted. Each is now an error naming the key, or works."""
+    s = load_scene("makeup", ["texture.size=32", "camera.size=16"])
+    h = load_scene("hand", ["texture.size=32", "camera.size=16"])
+    without = {k: v for k, v in h.params.items() if k != "material.melanin"}
+    with pytest.raises(ValueError, match=r"^params: missing key 'material.melanin'; .*"
+                                         r"start from it, e.g. scene.params \| \{key: value\}"):
+        render.render(h.config, without)
+    with pytest.raises(ValueError, match=r"^params: missing keys 'skin.melanin', "
+                                         r"'skin.roughness', .* and \d+ more"):
+        render.render(s.config, h.params)
+    for sc, key, value, words in (
+            (s, "layer.blush.thickness_mm", -0.05, r"must be in \[0, 10\] .*got -0.05$"),
+            (h, "light.intensity", -1.0, r"must be in \[0, 10\]"),
+            (h, "material.melanin", float("nan"), r"must be in \[0, 1\] .*got nan"),
+            (h, "light.direction", [0.0, 0.0, 0.0], "expected a finite, non-zero 3-vector")):
+        with pytest.raises(ValueError, match=rf"^params\['{re.escape(key)}'\]: {words}"):
+            render.render(sc.config, sc.params | {key: jnp.asarray(value, jnp.float32)})
+    # at the ends of the range, and traced (unchecked): renders
+    render.render(s.config, s.params | {"layer.blush.thickness_mm": 0.0})
+    g = jax.grad(lambda t: render.render(s.config, s.params | {
+        "layer.blush.thickness_mm": t}).sum())(jnp.float32(0.02))
+    assert np.isfinite(float(g))
+    listed = render.render(h.config, h.params | {"light.direction": [0.0, 0.0, 1.0]})
+    assert bool(jnp.all(listed == render.render(h.config, h.params)))
+    for key in ("light.intensity", "skin.melanin", "camera.exposure"):
+        image = render.render(s.config, s.params | {key: jnp.asarray(s.params[key],
+                                                                     jnp.float64)})
+        assert image.dtype == jnp.float64, key
+        assert float(jnp.abs(image - render.render(s.config, s.params)).max()) < 1e-5, key
