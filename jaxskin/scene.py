@@ -490,6 +490,11 @@ def parse_scene(doc: dict, path, overrides=(), allow=None, *, flag: str = "overr
     the editor confines a scene from the page to its folders so, and no error then tells
     whether a file outside them exists. `flag`: as in `load_scene`."""
     path = Path(path)
+    if isinstance(overrides, (str, bytes, dict)) or not all(
+            isinstance(item, str) for item in overrides):
+        # a string was read character by character ("expected key=value, got 't'")
+        raise TypeError(f"overrides: expected a list of 'key=value' strings, got "
+                        f"{type(overrides).__name__} {overrides!r:.60}")
     allow = allow or (lambda key, file: None)
     doc = copy.deepcopy(doc)
     edits_raw = doc.get("fields", {}).pop("edit", []) if isinstance(doc.get("fields"), dict) \
@@ -625,6 +630,17 @@ def _check(key: str, value, where, layers=()):
         if spec is None:
             raise InputError("a layer's value to set must be one of "
                              f"{', '.join([*LAYER_SCHEMA, 'material'])}", where, key=key)
+    if key in ("fields.edit", "layer"):  # "unknown key; did you mean 'fields.edit'?" before
+        table = "[[fields.edit]]" if key == "fields.edit" else "[[layer]]"
+        raise InputError(f"{table} tables are written in a scene file; they cannot be set as "
+                         "one value", where, key=key)
+    sections = {k.split(".")[0] for k in SCHEMA if "." in k} | {"fields", "layer"}
+    if spec is None and len(parts) > 1 and parts[0] not in sections:
+        near = difflib.get_close_matches(parts[0], sorted(sections), n=1, cutoff=0.5)
+        fixed = ".".join([*near[:1], *parts[1:]])
+        hint = (f"did you mean '{fixed}'?" if fixed in SCHEMA else f"did you mean [{near[0]}]?"
+                if near else f"the tables are {', '.join(f'[{t}]' for t in sorted(sections))}")
+        raise InputError(f"unknown table [{parts[0]}]; {hint}", where, key=key)
     if spec is None:
         near = difflib.get_close_matches(key, [*SCHEMA, "fields.edit", "layer"], n=1,
                                          cutoff=0.5)

@@ -1,6 +1,7 @@
 """Scene files: every bad value gets a one-line error naming the key; -D overrides; the
 static/param split; stages a scene does not use are not run; the render command."""
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -30,7 +31,8 @@ d2 = [-0.6, 0.8, 0.0]
 
 BAD = [
     ("unknown key", GOOD.replace("k_bump", "k_bumb"), "wrinkles.k_bumb", "did you mean 'wrinkles.k_bump'"),
-    ("unknown table", GOOD + "\n[camra]\nfov = 3\n", "camra.fov", "unknown key"),
+    ("unknown table", GOOD + "\n[camra]\nfov = 3\n", "camra.fov", "unknown table [camra]; did you mean 'camera.fov'?"),
+    ("unknown table, no such key", GOOD + "\n[lights]\nx = 1\n", "lights.x", "unknown table [lights]; did you mean [light]?"),
     ("out of range", GOOD.replace("k_scale = 1.0", "k_scale = 3.0"), "wrinkles.k_scale", "[0.5, 2]"),
     ("wrong type", GOOD.replace("size = 64", 'size = "big"'), "texture.size", "expected int"),
     ("bool for int", GOOD.replace("size = 64", "size = true"), "texture.size", "expected int"),
@@ -94,6 +96,16 @@ def test_overrides_are_checked_like_the_file(tmp_path):
         load_scene(path, ["wrinkles.k_bump=7"], flag="-D")
     with pytest.raises(InputError, match="^expected override key=value, got 'k_bump'"):
         load_scene(path, ["k_bump"])
+    # "unknown key; did you mean 'fields.edit'?" for fields.edit itself (a newcomer's trial)
+    for item, table in (("fields.edit=[]", "[[fields.edit]]"), ("layer=1", "[[layer]]")):
+        with pytest.raises(InputError, match=re.escape(f"{table} tables are written in a scene "
+                                                       "file; they cannot be set as one value")):
+            load_scene(path, [item])
+    # a string was read character by character: "expected -D key=value, got 't'"
+    for overrides in ("texture.size=32", {"texture.size": 32}, [("texture.size", 32)]):
+        with pytest.raises(TypeError, match="^overrides: expected a list of 'key=value' "
+                                            "strings, got "):
+            load_scene(path, overrides)
 
 
 def test_a_camera_size_alone_keeps_the_frames_aspect(tmp_path):
