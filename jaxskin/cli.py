@@ -706,7 +706,7 @@ def _render(args, run: _Run) -> int:
             units.append(("maps", sc.config, params, args.glb))
             targets.append((i, None))
     seconds, n0 = [0.0] * len(plans), [0] * len(plans)
-    rows = []
+    rows, empty = [], set()
     with cluster.pool(args.cluster) as pool:
         run.stage = f"rendering {plans[0][0].name}"
         results = pool.map(cluster.render_unit, units, desc="render", unit="task")
@@ -721,6 +721,10 @@ def _render(args, run: _Run) -> int:
                 for image, path in zip(result if sweep else [result], paths, strict=False):
                     maps.write_render(image, path, args.format)
                     outputs.done(path)
+                    if not np.any(image) and i not in empty:  # once per scene
+                        empty.add(i)
+                        _say(f"jaxskin: warning: {path.name}: the mesh is not in view (every "
+                             f"pixel is background); check camera.zoom and camera.center")
             seconds[i] += dt + time.perf_counter() - t0
             if k + 1 == len(targets) or targets[k + 1][0] != i:  # the scene's last unit
                 config = sc.config

@@ -37,6 +37,8 @@ def check_name(name: str, where=None, key: str | None = "name") -> str:
         why = "is empty"
     elif any(ord(c) < 32 or ord(c) == 127 for c in name):
         why = "contains a control character"
+    elif name != name.strip():  # " " wrote " _texture.size-64.png"
+        why = "starts or ends with a space"
     elif "/" in name or "\\" in name or (os.altsep and os.altsep in name):
         why = "contains a path separator"
     elif name in (".", "..") or name.startswith("."):
@@ -49,7 +51,8 @@ def check_name(name: str, where=None, key: str | None = "name") -> str:
                "most CJK 3)")
     if why is not None:
         raise InputError(f"an output name must be one plain file name (no '/', '..', leading "
-                         f"dot or control characters); {name!r} {why}", where, key=key)
+                         f"dot, control characters or spaces at the ends); {name!r} {why}",
+                         where, key=key)
     return name
 
 
@@ -78,6 +81,10 @@ def check_folder(path, option: str = "-o") -> Path:
         probe = probe.parent
     if not probe.is_dir():
         raise InputError(f"{option}: cannot create the folder: {probe} is a file", path)
+    new = path.relative_to(probe) if probe != path else Path()
+    if any(ord(c) < 32 or ord(c) == 127 for c in str(new)):  # a newline made a folder
+        raise InputError(f"{option}: a folder to create must not contain control characters "
+                         f"(a newline?); got {str(path)!r}")
     try:
         if probe == path:
             fd, tmp = tempfile.mkstemp(dir=path, prefix=".jaxskin-probe-")

@@ -170,6 +170,11 @@ CASES = {
     "name-nul": lambda t: scene(t, 'name = "a\\u0000b"\n'),
     "name-leading-dot": lambda t: scene(t, 'name = ".hidden"\n'),
     "name-empty": lambda t: scene(t, 'name = ""\n'),
+    # a blank name wrote " _texture.size-64_camera.size-32.png" (a newcomer's trial)
+    "name-blank": lambda t: scene(t, 'name = " "\n'),
+    "name-trailing-space": lambda t: scene(t, 'name = "hand "\n'),
+    # made a folder whose name held a newline (a newcomer's trial)
+    "out-newline": lambda t: ["render", "hand", "-o", str(t / "new\nline"), *SMALL],
     # 120 two-byte letters: 200 characters allowed, but with the suffixes over 255 bytes
     # (the file system's limit): failed with exit 1 after the render
     "name-too-many-bytes": lambda t: hand(t, "-D", "name=" + "é" * 120, "-D",
@@ -406,6 +411,8 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
     ("material-is-a-tab-measurement-as-dat", "blush.dat: a measurement table"),
     ("material-is-prose", "notes.txt:1: not a JSON material file"),
     ("cli-noise-zero", "argument --noise: expected a finite number > 0"),
+    ("name-blank", "' ' starts or ends with a space"),
+    ("out-newline", "-o: a folder to create must not contain control characters"),
 ])
 def test_what_the_line_says(case, words, tmp_path, capsys, monkeypatch):
     """The line names the mistake: '[fields.edit]' said "expected a table with at…" of what

@@ -337,3 +337,20 @@ def test_the_last_line_after_a_stop_names_only_the_last_files():
                     + "; no partial file is left"), line
     run.outputs[0].written = run.outputs[0].written[:9]
     assert run.finished().count(".png") == 9 and "more" not in run.finished()
+
+
+def test_a_render_that_sees_no_mesh_is_warned_about(tmp_path, capsys):
+    """Zoomed into an empty corner of the frame, render wrote an all-black image and said
+    nothing (a newcomer's trial); the framed hand gets no warning."""
+    import imageio.v3 as iio
+
+    aside = ["-D", "camera.zoom=64", "-D", "camera.center=[0.5, 0.5]"]
+    assert main(["render", "hand", "-o", str(tmp_path), *SMALL, *aside]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("jaxskin: warning: hand_") and err[0].endswith(
+        ": the mesh is not in view (every pixel is background); check camera.zoom and "
+        "camera.center"), err
+    (png,) = tmp_path.glob("*zoom*.png")
+    assert not iio.imread(png).any()
+    assert main(["render", "hand", "-o", str(tmp_path), *SMALL]) == 0
+    assert "not in view" not in capsys.readouterr().err
