@@ -123,6 +123,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+import jax
 import jax.numpy as jnp
 
 from . import biophysical, cosmetics
@@ -397,15 +398,18 @@ class Scene:
         the scene uses (no Blinn parameters in a Lafortune scene, no lobes in a Blinn one)."""
         model = self.values["material.model"]
         keys = param_keys(model, self.skin_model, [layer.name for layer in self.layers])
-        out = {k: jnp.asarray(self.values[k], jnp.float32) for k in keys
-               if k != "material.lafortune"}
-        if model == "lafortune":
-            from .formats import read_lafortune
-            from .shading import lafortune
+        # Concrete arrays even when first read inside a jit: there jnp.asarray of a list is
+        # a tracer, which this cache kept, and the next call failed (UnexpectedTracerError)
+        with jax.ensure_compile_time_eval():
+            out = {k: jnp.asarray(self.values[k], jnp.float32) for k in keys
+                   if k != "material.lafortune"}
+            if model == "lafortune":
+                from .formats import read_lafortune
+                from .shading import lafortune
 
-            brdf = self.values["material.brdf"]
-            out["material.lafortune"] = (lafortune.skin() if brdf == "skin" else
-                                         read_lafortune(brdf))
+                brdf = self.values["material.brdf"]
+                out["material.lafortune"] = (lafortune.skin() if brdf == "skin" else
+                                             read_lafortune(brdf))
         return out
 
 

@@ -257,6 +257,18 @@ def _assert_tracing():
     assert render._tracing()
 
 
+def test_scene_params_first_read_inside_jit_are_concrete():
+    """`Scene.params` is cached on first read; read first inside a jit, jnp.asarray of
+    `light.direction`'s list was a tracer, kept in the cache, and the next use raised
+    UnexpectedTracerError (found when the stability sweep was jitted)."""
+    sc = load_scene("makeup", ["texture.size=32", "camera.size=16"])
+    arrays = render.prepare(sc.config).arrays
+    jax.jit(lambda t: render.render_prepared(
+        sc.config, {**sc.params, "layer.blush.thickness_mm": t}, arrays))(jnp.float32(0.02))
+    assert not any(isinstance(v, jax.core.Tracer) for v in sc.params.values())
+    assert render.render(sc.config, sc.params).shape == (16, 16, 3)
+
+
 def test_a_sweep_frame_does_not_depend_on_the_sweep_around_it():
     """A value's frame is the same float32 image whether the sweep has 1 value or 3: every
     batch has `cluster.SWEEP_BATCH` values (padded), one compiled program. (Batches of 1
