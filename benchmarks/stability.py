@@ -227,8 +227,9 @@ def main():
 
 Command: `python benchmarks/stability.py`. Machine: {machine()}.
 
-Every differentiable stage, on grids of stiff and extreme inputs, in float32 and float64.
-Gradients are of the sum of the outputs with respect to every input.
+Every differentiable stage, on grids of stiff and extreme inputs, in float32 and float64,
+jitted as the renderer runs it. Gradients are of the sum of the outputs with respect to every
+input.
 `tests/test_stability.py` runs the same sweep, less the 4096² and 2048² cases (10 GB),
 and fails on any non-finite value or gradient, or a float32 error above 1e-5 (outputs are
 reflectances, colours, unit vectors).
