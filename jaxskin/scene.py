@@ -494,11 +494,12 @@ def parse_scene(doc: dict, path, overrides=(), allow=None, *, flag: str = "overr
     the editor confines a scene from the page to its folders so, and no error then tells
     whether a file outside them exists. `flag`: as in `load_scene`."""
     path = Path(path)
-    if isinstance(overrides, (str, bytes, dict)) or not all(
-            isinstance(item, str) for item in overrides):
+    given = overrides
+    overrides = [] if isinstance(given, (str, bytes, dict)) else list(given)
+    if not overrides and given or not all(isinstance(item, str) for item in overrides):
         # a string was read character by character ("expected key=value, got 't'")
         raise TypeError(f"overrides: expected a list of 'key=value' strings, got "
-                        f"{type(overrides).__name__} {overrides!r:.60}")
+                        f"{type(given).__name__} {given!r:.60}")
     allow = allow or (lambda key, file: None)
     doc = copy.deepcopy(doc)
     edits_raw = doc.get("fields", {}).pop("edit", []) if isinstance(doc.get("fields"), dict) \
