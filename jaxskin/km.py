@@ -11,6 +11,7 @@ and X → ∞ (see `layer`).
 
 from __future__ import annotations
 
+import warnings
 from typing import NamedTuple
 
 import jax
@@ -167,6 +168,11 @@ def over(R, T, Rg, R_back=None):
     return compose(top, (Rg, jnp.zeros_like(jnp.asarray(Rg))))[0]
 
 
+# More layers than this in `stack` is most likely an array laid out (texels, layers): a
+# benchmark's 3-layer stack over 108 cases composed 108 layers, two minutes to compile.
+MANY_LAYERS = 16
+
+
 def stack(R: Float[ArrayLike, " layers *shape"], T: Float[ArrayLike, " layers *shape"]) -> Slab:
     """A stack of homogeneous layers (leading axis: layers, top first) as one `Slab`.
 
@@ -181,6 +187,10 @@ def stack(R: Float[ArrayLike, " layers *shape"], T: Float[ArrayLike, " layers *s
     **Returns:** `Slab(R, T, R_back)` of the whole stack, each of shape `*shape`.
     """
     R, T = _promote(R, T)
+    if R.shape[0] > MANY_LAYERS:  # (texels, layers) for (layers, texels): 108 "layers"
+        warnings.warn(f"km.stack: {R.shape[0]} layers along the leading axis (shape "
+                      f"{R.shape}), each unrolled into the program; the layers go first, "
+                      "top first (a (texels, layers) array wants .T)", stacklevel=2)
     acc = Slab(R[-1], T[-1], R[-1])
     for i in range(R.shape[0] - 2, -1, -1):
         acc = compose((R[i], T[i]), acc)

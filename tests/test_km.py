@@ -257,3 +257,19 @@ def test_layer_gradient_is_r_infs_at_a_thickness_whose_square_overflows(x64, dty
     want = jax.grad(lambda s, k: s / (s + k + jnp.sqrt(k * k + 2 * k * s)), (0, 1))(S, K)
     np.testing.assert_allclose(np.array(gR), np.array(want), rtol=1e-5)
     assert np.all(np.array(gT) == 0)
+
+
+def test_a_stack_laid_out_texels_first_is_warned_about():
+    """A (cases, layers) array given to km.stack composed one "layer" per case: the
+    stability sweep's 3-layer stack over 108 cases was a 108-layer stack over 3 (its
+    gradient took two minutes to compile). More than MANY_LAYERS layers is warned about;
+    the layered order is silent."""
+    import warnings
+
+    R, T = jnp.full((3, 108), 0.2), jnp.full((3, 108), 0.7)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert km.stack(R, T).R.shape == (108,)
+    with pytest.warns(UserWarning, match=r"km.stack: 108 layers along the leading axis "
+                                         r"\(shape \(108, 3\)\).*wants .T"):
+        km.stack(R.T, T.T)
