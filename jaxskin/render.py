@@ -290,12 +290,16 @@ def _check_ranges(params: dict) -> None:
         spec = (LAYER_SCHEMA if key.startswith("layer.") else SCHEMA).get(name)
         if spec is None or isinstance(value, jax.core.Tracer) or not spec.param:
             continue
-        v = np.asarray(value, np.float64)
+        v = np.asarray(value)
+        if not np.issubdtype(v.dtype, np.floating):
+            v = v.astype(np.float64)
         if spec.kind == "vec3":
             if not (np.all(np.isfinite(v)) and np.any(v != 0)):
                 raise ValueError(f"params[{key!r}]: expected a finite, non-zero 3-vector, got "
                                  f"{v.tolist()}")
-        elif not (spec.lo <= v <= spec.hi):  # NaN fails too
+        # the ends rounded as the value is: float32(0.1) is above the float64 0.1, and a
+        # scene at a range end failed here (a newcomer's trial); NaN fails too
+        elif not (v.dtype.type(spec.lo) <= v <= v.dtype.type(spec.hi)):
             raise ValueError(f"params[{key!r}]: must be in [{spec.lo:g}, {spec.hi:g}] (the "
                              f"scene key's range), got {float(v):.6g}")
 

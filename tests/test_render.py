@@ -382,3 +382,24 @@ def test_render_checks_missing_keys_ranges_lists_and_mixed_dtypes(x64):
                                                                      jnp.float64)})
         assert image.dtype == jnp.float64, key
         assert float(jnp.abs(image - render.render(s.config, s.params)).max()) < 1e-5, key
+
+
+def test_every_range_end_passes_the_range_check_in_float32():
+    """`render`'s range check compared a float32 value with the float64 bound: float32(0.1)
+    is above 0.1, so a scene at six documented range ends (skin.haemoglobin = 0.1,
+    skin.roughness = 0.01, ...) failed to render (a newcomer's trial). Every scalar key
+    at both of its ends, as float32 and float64, passes; just outside them fails."""
+    from jaxskin.scene import LAYER_SCHEMA, SCHEMA
+
+    specs = {k: s for k, s in SCHEMA.items() if s.param and s.kind is float}
+    specs |= {f"layer.x.{k}": s for k, s in LAYER_SCHEMA.items() if s.kind is float}
+    for key, spec in specs.items():
+        for end in (spec.lo, spec.hi):
+            for dtype in (np.float32, np.float64):
+                render._check_ranges({key: np.asarray(end, dtype)})
+        for outside in (spec.lo - abs(spec.lo) * 1e-3 - 1e-3, spec.hi + abs(spec.hi) * 1e-3):
+            with pytest.raises(ValueError, match="the scene key's range"):
+                render._check_ranges({key: np.float32(outside)})
+    s = load_scene("face", ["texture.size=32", "camera.size=16", "material.model=biophysical",
+                            "skin.haemoglobin=0.1", "skin.epidermis_mm=0.01"])
+    assert np.isfinite(np.asarray(render.render(s.config, s.params))).all()
