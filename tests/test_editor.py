@@ -934,3 +934,59 @@ def test_the_stroke_reports_the_brush_size_it_paints(tmp_path):
     assert 3.0 < small < 8.0, small  # the half-pixel brush was drawn as half a pixel
     assert s.paint_stroke("b", "blush", [[W / 2, 32.0]], 12.0, 1.0)["radius_px"] == 12.0
     assert s.paint_stroke("c", "blush", [[1.0, 1.0]], 3.0, 1.0)["radius_px"] is None
+
+
+def test_requests_from_other_pages_are_refused(session, folder):
+    """A web page on another origin sent a "simple" POST (text/plain, no preflight) to the
+    editor on 127.0.0.1 and overwrote the scene it started from; a DNS-rebinding name got
+    in too (a newcomer's trial). Refused now, and nothing changes; the editor's own
+    requests (same Origin, or none, as curl sends) still work."""
+    tiny = folder / "scenes" / "tiny.toml"
+
+    async def body(c):
+        before = await (await c.get("/api/state")).json()
+        text = tiny.read_bytes()
+        own = f"http://{c.server.host}:{c.server.port}"
+        bad = [({"Origin": "http://evil.example"}, "application/json", 403, "another page"),
+               ({"Origin": "null"}, "application/json", 403, "another page"),
+               ({"Host": f"evil.example:{c.server.port}"}, "application/json", 403,
+                "not this machine's loopback"),
+               ({}, "text/plain", 415, "expected Content-Type application/json"),
+               ({"Origin": own}, "text/plain", 415, "application/json")]
+        for headers, kind, status, words in bad:
+            for path, request in (("/api/set", {"changes": {"skin.melanin": 1.7}}),
+                                  ("/api/save", {"name": "tiny", "overwrite": True})):
+                r = await c.post(path, data=json.dumps(request),
+                                 headers={**headers, "Content-Type": kind})
+                assert r.status == status and words in (await r.json())["error"], (headers,
+                                                                                   kind)
+        r = await c.get("/api/state", headers={"Host": "evil.example"})
+        assert r.status == 403  # nothing to read through a rebound name either
+        after = await (await c.get("/api/state")).json()
+        assert after["values"] == before["values"] and tiny.read_bytes() == text
+        assert not (folder / "out" / "tiny.toml").exists()
+        for headers in ({"Origin": own}, {}, {"Host": f"localhost:{c.server.port}"}):
+            r = await c.post("/api/set", json={"changes": {"skin.melanin": 0.5}},
+                             headers=headers)
+            assert r.status == 200, (headers, await r.text())
+        assert (await c.post("/api/undo", headers={"Origin": own})).status == 200
+    serve(session, body)
+
+
+def test_save_names_files_and_far_points(tmp_path):
+    """Save as "mine.toml" wrote mine.toml.toml; with the output folder the scene's own,
+    Open listed every file twice; a paint point at x = 1e300 was accepted (and a segment to
+    it would have listed 1e300 / spacing dabs). A newcomer's trial."""
+    (tmp_path / "tiny.toml").write_text(SCENE)
+    s = Session(str(tmp_path / "tiny.toml"), tmp_path)
+    files = s.files()
+    assert files["scenes"].count(str(tmp_path / "tiny.toml")) == 1
+    assert len(files["materials"]) == len(set(files["materials"]))
+    s.save("mine.toml")
+    assert (tmp_path / "mine.toml").is_file() and not (tmp_path / "mine.toml.toml").exists()
+    with pytest.raises(EditorError, match="far outside the 64x64 image"):
+        s.paint_stroke("far", "blush", [[32.0, 32.0], [1e300, 60.0]], 3.0, 1.0)
+    assert len(s.undo_stack) == 0  # refused before the stroke's undo step
+    from jaxskin.editor import brush
+
+    assert len(brush.dabs([(0.0, 0.0), (1e12, 0.0)], 3.0)) == brush.MAX_DABS

@@ -34,7 +34,8 @@ def command(args, run) -> int:
     from .state import EditorError, Session
 
     host = args.host
-    if host not in LOCAL:
+    local = host in LOCAL
+    if not local:
         try:
             local = ipaddress.ip_address(host).is_loopback
         except ValueError:
@@ -74,6 +75,6 @@ def command(args, run) -> int:
         import webbrowser
 
         webbrowser.open(url)
-    web.run_app(make_app(session, log=lambda line: print(line, file=sys.stderr)),
+    web.run_app(make_app(session, log=lambda line: print(line, file=sys.stderr), local=local),
                 sock=sock, print=None, handle_signals=False)
     return 0

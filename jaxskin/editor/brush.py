@@ -17,15 +17,18 @@ __all__ = ["MIN_RADIUS", "dab", "dabs", "texels_per_pixel"]
 MIN_RADIUS = 0.75  # texels: a smaller dab could fall between texel centres and paint nothing
 
 
+MAX_DABS = 20000  # per request: a segment of 1e300 pixels made a list as long
+
+
 def dabs(points: list, radius: float) -> list:
     """The stroke's dab centres: its points, with more between any two further apart than
     a third of the radius (a continuous line at any drag speed)."""
     out = [points[0]]
     spacing = max(radius / 3.0, 0.5)
     for (x0, y0), (x1, y1) in zip(points, points[1:], strict=False):
-        n = int(math.ceil(math.hypot(x1 - x0, y1 - y0) / spacing))
+        n = min(int(math.ceil(math.hypot(x1 - x0, y1 - y0) / spacing)), MAX_DABS)
         out += [(x0 + (x1 - x0) * t / n, y0 + (y1 - y0) * t / n) for t in range(1, n + 1)]
-    return out[:20000]
+    return out[:MAX_DABS]
 
 
 def texels_per_pixel(view, i: int, j: int, k: int) -> float:

@@ -30,6 +30,7 @@ import asyncio
 import concurrent.futures
 import functools
 import importlib.resources
+import ipaddress
 import json
 import threading
 import time
@@ -76,6 +77,45 @@ async def _errors(request, handler):
         return _error(500, f"internal error ({e.__class__.__name__}: {e})")
 
 
+def _loopback(host: str | None) -> bool:
+    """Whether `host` (a Host header's name, no port) names this machine's loopback."""
+    if host is None:
+        return False
+    if host.lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+def _guard(local: bool):
+    """Requests only from the editor's own page. Any web page the user opens may send a
+    browser's "simple" requests (a POST with a text/plain body, no preflight) to
+    127.0.0.1: before this, one overwrote the scene the editor started from (a newcomer's
+    trial). So: a request whose Origin is not this server's is refused (browsers send
+    Origin with every cross-origin POST; curl sends none); served on loopback, a Host that
+    is not a loopback name is refused (DNS rebinding: a foreign name resolved to
+    127.0.0.1, same-origin to the browser); a JSON endpoint's body must be declared
+    application/json, which no page can send elsewhere without a preflight this server
+    never allows."""
+    @web.middleware
+    async def guard(request, handler):
+        if local and not _loopback(request.url.host):
+            return _error(403, f"refused: Host {request.host!r} is not this machine's "
+                               "loopback address (open the editor at the address it printed)")
+        origin = request.headers.get("Origin")
+        if origin is not None and origin != f"{request.scheme}://{request.host}":
+            return _error(403, f"refused: a request from another page (Origin {origin!r:.80})")
+        if (request.method == "POST" and request.path != "/api/upload"
+                and (request.content_length or request.body_exists)
+                and request.content_type != "application/json"):
+            return _error(415, f"expected Content-Type application/json, got "
+                               f"{request.content_type!r}")
+        return await handler(request)
+    return guard
+
+
 class _Worker:
     """One thread for everything that touches the session (and JAX)."""
 
@@ -101,9 +141,10 @@ async def _body(request) -> dict:
     return body
 
 
-def make_app(session: Session, log=print) -> web.Application:
-    """The aiohttp application serving `session`."""
-    app = web.Application(middlewares=[_errors], client_max_size=MAX_BODY)
+def make_app(session: Session, log=print, local: bool = True) -> web.Application:
+    """The aiohttp application serving `session`; `local`: served on a loopback address,
+    so a request naming another Host is refused (`_guard`)."""
+    app = web.Application(middlewares=[_errors, _guard(local)], client_max_size=MAX_BODY)
     app[LOG] = log
     work = _Worker()
     latest: dict[str, int] = {}

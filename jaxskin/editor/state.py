@@ -527,6 +527,11 @@ class Session:
         for name, v, lo, hi in (("radius", radius, 0.5, 500.0), ("strength", strength, 0, 1)):
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo <= v <= hi:
                 raise EditorError(f"{name}: expected a number in [{lo:g}, {hi:g}], got {v!r}")
+        H, W = (n // config.supersample for n in view.mask.shape)
+        far = [p for p in points if not (-W <= p[0] <= 2 * W and -H <= p[1] <= 2 * H)]
+        if far:  # a drag may leave the image, not by more than its size (1e300 was a 200)
+            raise EditorError(f"points: {far[0]} is far outside the {W}x{H} image (at most "
+                              "one image size beyond its edges)", 400)
         k = config.supersample
         s = texture.setup(config.texture)
         Ht, Wt = s.tmap.height, s.tmap.width
@@ -580,6 +585,8 @@ class Session:
         """Write `<output>/<name>.toml` and each painted map as `<name>_<layer>.png` (16-bit
         grey) beside it: a scene `jaxskin render` renders to the image shown. The session
         then edits the saved file."""
+        if isinstance(name, str) and name.lower().endswith(".toml"):
+            name = name[:-5]  # "my_makeup.toml" wrote my_makeup.toml.toml
         try:
             check_name(name, "save")
         except InputError as e:
@@ -663,11 +670,11 @@ class Session:
     def files(self) -> dict:
         """Scenes and materials the page can open: built-in ones and files in the folders."""
         scenes, materials = list(BUILTIN_SCENES), cosmetics.shipped_materials()
-        for root in self.roots:
+        for root in dict.fromkeys(r.resolve() for r in self.roots):  # once if they are one
             if root.is_dir():
                 scenes += sorted(str(p) for p in root.glob("*.toml"))[:200]
                 materials += sorted(str(p) for p in root.glob("*.json"))[:200]
-        return {"scenes": scenes, "materials": materials}
+        return {"scenes": list(dict.fromkeys(scenes)), "materials": list(dict.fromkeys(materials))}
 
     def state(self) -> dict:
         """Everything the page draws its panels from (JSON)."""
