@@ -113,8 +113,13 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
 
     columns = _classify(header, path, header_line, bare_thickness)
     data, numbers = table.data, table.lines
+    descending = len(data) > 1 and bool(np.all(np.diff(data[:, 0]) < 0))
+    if descending:  # some instruments export the long wavelengths first
+        data, numbers = data[::-1], list(numbers)[::-1]
 
     wl, notes = _wavelengths_nm(data[:, 0], header[0], path, numbers)
+    if descending:
+        notes.append(f"{path}: wavelengths descend: read in increasing order")
     if comment_thickness is not None:  # said, so not dropped in silence
         value, number = meta["thickness_mm"]
         said = f"{path}:{number}: '# thickness_mm: {value}'"
@@ -302,6 +307,9 @@ def _reflectances(data, header, columns, path, numbers, percent, notes):
         bad = np.flatnonzero((values < 0) | (values > 1))
         if bad.size:
             hint = "" if percent or _is_radiance(name) else " (percent data? use --percent)"
+            if values[bad[0]] < 0:  # the percent hint was wrong for a reading of -0.0012
+                hint = (" (a dark-corrected reading below 0? reflectances cannot be "
+                        "negative: set it to 0 in the file)")
             raise InputError(f"{what}, got {values[bad[0]] * scale:g}{hint}",
                              path, numbers[bad[0]], name)
         out[name if kind == "thin" else kind] = values

@@ -497,18 +497,21 @@ def read_spectra(path, percent: bool = False) -> tuple[list[str], np.ndarray, np
         if len(wl) < 2:
             raise InputError("needs at least 2 rows of spectra", path, header_at + 1)
         wavelengths, R = np.asarray(wl), np.asarray(rows).T
-        header_line, line_of = header_at + 1, None
+        header_line, line_of, wl_name = header_at + 1, None, header[0]
     else:
         t = read_table(path, lambda c: c.lower() in _WAVELENGTH_NAMES,
                        "wavelength_nm,<spectrum name>,...", min_rows=2)
         if len(t.header) < 2:
             raise t.error("no spectra: expected wavelength_nm and one column per spectrum")
         names, wavelengths, R = t.header[1:], t.data[:, 0], t.data[:, 1:].T
-        header_line, line_of = t.header_line, t.lines
+        header_line, line_of, wl_name = t.header_line, t.lines, t.header[0]
+    if len(wavelengths) > 1 and np.all(np.diff(wavelengths) < 0):  # long ones first
+        wavelengths, R = wavelengths[::-1], R[:, ::-1]
+        line_of = None if line_of is None else list(line_of)[::-1]
     if np.any(np.diff(wavelengths) <= 0):
         row = int(np.flatnonzero(np.diff(wavelengths) <= 0)[0]) + 1
-        raise InputError("wavelengths must increase", path,
-                         None if line_of is None else line_of[row], "wavelength")
+        raise InputError("wavelengths must increase (or all decrease)", path,
+                         None if line_of is None else line_of[row], wl_name)
     if percent:
         check_percent(R, path)
         R = R / 100.0
@@ -517,7 +520,9 @@ def read_spectra(path, percent: bool = False) -> tuple[list[str], np.ndarray, np
         bad = np.flatnonzero((R[k] < 0) | (R[k] > 1.0))
         if bad.size:
             raise InputError(f"reflectance must be in [0, {top:g}]"
-                             + ("" if percent else " (use --percent for 0-100)")
+                             + (" (a dark-corrected reading below 0? set it to 0 in the file)"
+                                if R[k, bad[0]] < 0 else
+                                "" if percent else " (use --percent for 0-100)")
                              + f", got {R[k, bad[0]] * top:g} at {wavelengths[bad[0]]:g} nm",
                              path, None if line_of is None else line_of[bad[0]], name)
     seen = set()

@@ -183,9 +183,11 @@ BAD = [
     ("decimal comma", "wavelength_nm;a\n400;0,4\n", [], "decimal point"),
     ("percent without flag", "wavelength_nm,a\n" + _good_rows(value="45"), [],
      "use --percent"),
-    ("negative", "wavelength_nm,a\n" + _good_rows(value="-0.1"), [], "must be in [0, 1]"),
+    ("negative", "wavelength_nm,a\n" + _good_rows(value="-0.1"), [],
+     "must be in [0, 1] (a dark-corrected reading below 0? set it to 0 in the file), got -0.1"),
+    # the column named as the header spells it (it said 'wavelength' for wavelength_nm)
     ("not increasing", "wavelength_nm,a\n500,0.4\n490,0.4\n" + _good_rows(), [],
-     "must increase"),
+     "column 'wavelength_nm': wavelengths must increase (or all decrease)"),
     ("too short", "wavelength_nm,a\n" + _good_rows(450, 650), [], "at least 400-700 nm"),
     ("no spectra", "wavelength_nm\n" + "".join(f"{w}\n" for w in range(380, 790, 10)), [],
      "no spectra"),

@@ -297,3 +297,19 @@ def test_a_file_name_that_is_not_a_name_is_made_safe_with_a_note(tmp_path):
         read_measurement(long)
     assert str(info.value).startswith(f"{long}: the material name from the file name is 210 "
                                       "characters, more than 200: add a line '# name: NAME'")
+
+
+def test_descending_wavelengths_are_read_in_order_and_a_negative_reading_is_named(tmp_path):
+    """Some instruments export the long wavelengths first: refused before ("wavelengths must
+    increase, got 420 then 410"), now read in increasing order with a note. A dark-corrected
+    reading of -0.0012 was told "percent data? use --percent" (a newcomer's trial)."""
+    lines = GOOD.splitlines()
+    flipped = write(tmp_path, "\n".join([*lines[:2], *lines[:1:-1]]) + "\n", "down.csv")
+    up, down = read_measurement(write(tmp_path, GOOD, "up.csv")), read_measurement(flipped)
+    np.testing.assert_array_equal(down.wavelength_nm, up.wavelength_nm)
+    np.testing.assert_array_equal(down.R_inf, up.R_inf)
+    assert any("wavelengths descend" in n for n in down.notes)
+    with pytest.raises(InputError, match=r"bad.csv:3: column 'R_g': reflectance must be in "
+                                         r"\[0, 1\], got -0.0012 \(a dark-corrected reading"):
+        read_measurement(write(tmp_path, GOOD.replace("400,0.30,0.40,0.45,0.04",
+                                                      "400,0.30,0.40,0.45,-0.0012"), "bad.csv"))
