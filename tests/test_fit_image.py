@@ -657,3 +657,27 @@ def test_a_flat_colour_target_ends_with_a_warning_not_a_crash(tmp_path, capsys):
     said = [str(w.message) for w in caught if "fit ends at RMS" in str(w.message)]
     assert len(said) == 1 and "half an 8-bit step (0.002; " in said[0], said
     assert "the target's noise estimate 0" in capsys.readouterr().out
+
+
+def test_a_jpeg_target_is_warned_about(tmp_path, capsys):
+    """An ordinary JPEG target (quality 95, 4:2:0) halved the fitted blood (0.16 for 0.3)
+    with the RMS near its noise, so nothing was said (a newcomer's trial). A JPEG gets one
+    warning naming its subsampling; the same image as PNG gets none."""
+    from PIL import Image
+
+    sc = load_scene("hand", ["camera.size=32", "texture.size=32"])
+    image = np.asarray(render.render(sc.config, sc.params))
+    maps.write_image(np.clip(image, 0, 1), tmp_path / "t.png")
+    Image.open(tmp_path / "t.png").convert("RGB").save(tmp_path / "t.jpg", quality=95)
+    for name, words in (("t.jpg", "a JPEG (lossy, chroma subsampled 4:2:0)"), ("t.png", None)):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            code = main(["fit-image", "hand", str(tmp_path / name), "--fit", "material.melanin",
+                         "-D", "camera.size=32", "-D", "texture.size=32",
+                         "-o", str(tmp_path / name.replace(".", "_")), "--steps", "2"])
+        assert code == 0, capsys.readouterr().err
+        said = [str(w.message) for w in caught if "JPEG" in str(w.message)]
+        assert len(said) == (0 if words is None else 1), said
+        if words:
+            assert said[0].startswith(f"{tmp_path / name}: {words}: ") and said[0].endswith(
+                "give a PNG or TIFF"), said
