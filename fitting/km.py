@@ -13,9 +13,9 @@ memory) as a reference.
 Identifiability: where the thin layer is as good as opaque (|R − R∞| <= 3σ, σ the noise of
 one reading) or the background is as bright as the opaque layer (|Rg − R∞| <= 3σ), the band
 carries no thickness information: only K/S is known there; so are identifiable bands in a
-run of fewer than `MIN_RUN` (noise lifts a lone band over 3σ now and then). Such bands
-keep K/S from the fit to R∞, take S from the identifiable neighbours (linear in log S), and
-are marked `identifiable = False`.
+run shorter than `MIN_RUN` (noise lifts a lone band over 3σ now and then).
+Such bands keep K/S from the fit to R∞, take S from the identifiable neighbours (linear in
+log S), and are marked `identifiable = False`.
 """
 
 from __future__ import annotations
@@ -101,11 +101,11 @@ def identifiable(m: Measurement, noise: float = DEFAULT_NOISE) -> np.ndarray:
     return _runs(thin & background, MIN_RUN)
 
 
-# Identifiable bands count in runs of at least this many: noise alone lifts a band over 3σ
-# now and then (0.3 % of readings), and such a lone band, its S fitted to noise, anchored
-# the interpolation of log S across its neighbours (a noisy 1 nm lipstick: S 1.7 /mm at
-# 426 nm where the truth is 140, a magenta blush; a newcomer's trial). Real spectra change
-# smoothly: an identifiable stretch spans many bands.
+# Identifiable bands count in runs of at least this many (`_runs`): noise
+# alone lifts a band over 3σ now and then (0.3 % of readings), and such a lone band, its S
+# fitted to noise, anchored the interpolation of log S across its neighbours (a noisy 1 nm
+# lipstick: S 1.7 /mm at 426 nm where the truth is 140, a magenta blush; a newcomer's
+# trial). Real spectra change smoothly: an identifiable stretch spans many bands.
 MIN_RUN = 3
 
 
