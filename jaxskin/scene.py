@@ -495,8 +495,9 @@ def parse_scene(doc: dict, path, overrides=(), allow=None, *, flag: str = "overr
     whether a file outside them exists. `flag`: as in `load_scene`."""
     path = Path(path)
     given = overrides
-    overrides = [] if isinstance(given, (str, bytes, dict)) else list(given)
-    if not overrides and given or not all(isinstance(item, str) for item in overrides):
+    text = isinstance(given, (str, bytes, dict))
+    overrides = [] if text else list(given)
+    if (text and given) or not all(isinstance(item, str) for item in overrides):
         # a string was read character by character ("expected key=value, got 't'")
         raise TypeError(f"overrides: expected a list of 'key=value' strings, got "
                         f"{type(given).__name__} {given!r:.60}")

@@ -102,6 +102,8 @@ def test_overrides_are_checked_like_the_file(tmp_path):
                                                        "file; they cannot be set as one value")):
             load_scene(path, [item])
     # a string was read character by character: "expected -D key=value, got 't'"
+    assert load_scene(path, iter([])).config.texture.size == 64  # any iterable of strings
+    assert load_scene(path, (o for o in ["texture.size=32"])).config.texture.size == 32
     for overrides in ("texture.size=32", {"texture.size": 32}, [("texture.size", 32)]):
         with pytest.raises(TypeError, match="^overrides: expected a list of 'key=value' "
                                             "strings, got "):
