@@ -194,7 +194,8 @@ def _wavelengths_nm(wl, column, path, numbers):
     bad = np.flatnonzero(np.diff(wl) <= 0)
     if bad.size:
         raise InputError(
-            f"wavelengths must increase, got {_shown(wl, bad[0], micrometres)} then "
+            f"wavelengths must increase (or all decrease), got "
+            f"{_shown(wl, bad[0], micrometres)} then "
             f"{_shown(wl, bad[0] + 1, micrometres)}", path, numbers[bad[0] + 1], column)
     return wl, notes
 
