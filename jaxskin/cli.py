@@ -514,11 +514,12 @@ def _calibrate(args, run: _Run) -> int:
                 run.stage = f"fitting {measurements[k + 1].name}"
     for line in mismatched:
         print(f"jaxskin: warning: {line}", file=sys.stderr)
-    print(f"{'material':<24} {'bands':>5} {'identifiable':>12} {'rmse':>9} {'steps':>5} "
+    wide = max([24, *(len(name) for name, _, _ in rows)])  # long names kept the columns
+    print(f"{'material':<{wide}} {'bands':>5} {'identifiable':>12} {'rmse':>9} {'steps':>5} "
           f"{'time s':>7}")
     for name, r, dt in rows:
         flag = "" if r.converged else "  (not converged: see report)"
-        print(f"{name:<24} {len(r.wavelength_nm):>5} {int(r.identifiable.sum()):>12} "
+        print(f"{name:<{wide}} {len(r.wavelength_nm):>5} {int(r.identifiable.sum()):>12} "
               f"{r.rmse:>9.2e} {r.steps:>5} {dt:>7.2f}{flag}")
     _print_written(outputs)
     return 0
