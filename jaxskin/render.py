@@ -204,7 +204,7 @@ def render(config: SceneConfig, params: dict, output: str = "display"):
     uses the configuration's (see `jaxskin.shadow`). Calling it inside your own `jit` folds
     the prepared arrays in as constants: use `render_prepared` there."""
     _check_call(config, params)
-    _check_ranges(params)
+    _check_ranges(params, _known_keys(config)[0])
     params = _strong(params)
     config = _shadow_config(config, params)
     arrays = prepare(config).arrays
@@ -272,7 +272,7 @@ def _check_call(config, params) -> None:
                          + "; the scene's model needs every key of scene.params: start from "
                          "it, e.g. scene.params | {key: value}")
     for key, value in params.items():  # a scalar of another shape failed deep inside
-        want = known[key]
+        want = _shape(known[key])
         if want is not None and tuple(np.shape(value)) != want:
             what = "a number" if want == () else "a 3-vector"
             raise ValueError(f"params[{key!r}]: expected {what} (shape {want}), got shape "
@@ -280,15 +280,15 @@ def _check_call(config, params) -> None:
                              "jax.vmap over render (as --sweep does)")
 
 
-def _check_ranges(params: dict) -> None:
+def _check_ranges(params: dict, specs: dict) -> None:
     """Concrete scalars and `light.direction` in `params` checked against their scene keys'
-    ranges, as `load_scene` checks them: out of range the models give unphysical numbers
-    without an error (a negative thickness: pixels of −2e19; a zero light direction: NaN),
-    a newcomer's trial. Traced values (inside jit, grad, vmap) cannot be checked here."""
+    ranges (`specs`: key → its scene key, `_known_keys`), as `load_scene` checks them: out
+    of range the models give unphysical numbers without an error (a negative thickness:
+    pixels of −2e19; a zero light direction: NaN), a newcomer's trial. Traced values
+    (inside jit, grad, vmap) cannot be checked here."""
     for key, value in params.items():
-        name = key.rsplit(".", 1)[-1] if key.startswith("layer.") else key
-        spec = (LAYER_SCHEMA if key.startswith("layer.") else SCHEMA).get(name)
-        if spec is None or isinstance(value, jax.core.Tracer) or not spec.param:
+        spec = specs.get(key)
+        if spec is None or isinstance(value, jax.core.Tracer):
             continue
         v = np.asarray(value)
         if not np.issubdtype(v.dtype, np.floating):
@@ -307,19 +307,21 @@ def _check_ranges(params: dict) -> None:
 @functools.lru_cache(maxsize=32)
 def _known_keys(config: SceneConfig) -> tuple[dict, list, list]:
     """The params keys `config` may take (every differentiable scene key, the maps, the
-    lobes, its layers' keys), each with the shape it must have (None: a map or the lobes,
-    checked elsewhere), its layers' names, and the keys it needs (`scene.param_keys`):
-    once per configuration."""
-    def shape(spec):
-        return {float: (), "vec3": (3,)}.get(spec.kind)
-
+    lobes, its layers' keys), each with its scene key's spec (its kind, so the shape it must
+    have, and its range; None: a map or the lobes, checked elsewhere), its layers' names,
+    and the keys it needs (`scene.param_keys`): once per configuration."""
     layers = [] if config.spectral is None else [layer.name for layer in config.spectral.layers]
-    known = {k: shape(spec) for k, spec in SCHEMA.items() if spec.param}
+    known = {k: spec for k, spec in SCHEMA.items() if spec.param}
     known |= dict.fromkeys([*SKIN_MAPS, "material.lafortune"]
                            + [f"layer.{n}.map" for n in layers])
-    known |= {f"layer.{n}.{a}": shape(spec) for n in layers for a, spec in LAYER_SCHEMA.items()}
+    known |= {f"layer.{n}.{a}": spec for n in layers for a, spec in LAYER_SCHEMA.items()}
     skin = "nist" if config.spectral is None else config.spectral.skin
     return known, layers, param_keys(config.material, skin, layers)
+
+
+def _shape(spec) -> tuple | None:
+    """The shape a param of scene key `spec` must have (None: a map or the lobes)."""
+    return None if spec is None else {float: (), "vec3": (3,)}.get(spec.kind)
 
 
 def _check_maps(params, arrays) -> None:

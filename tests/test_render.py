@@ -389,17 +389,19 @@ def test_every_range_end_passes_the_range_check_in_float32():
     is above 0.1, so a scene at six documented range ends (skin.haemoglobin = 0.1,
     skin.roughness = 0.01, ...) failed to render (a newcomer's trial). Every scalar key
     at both of its ends, as float32 and float64, passes; just outside them fails."""
-    from jaxskin.scene import LAYER_SCHEMA, SCHEMA
-
-    specs = {k: s for k, s in SCHEMA.items() if s.param and s.kind is float}
-    specs |= {f"layer.x.{k}": s for k, s in LAYER_SCHEMA.items() if s.kind is float}
+    configs = [load_scene(name, ["texture.size=32", "camera.size=16", *more]).config
+               for name, more in (("makeup", []), ("face", ["material.model=biophysical"]),
+                                  ("hand", []))]
+    specs = {k: s for c in configs for k, s in render._known_keys(c)[0].items()
+             if s is not None and s.kind is float}
+    assert {"skin.haemoglobin", "layer.blush.roughness", "material.melanin"} <= set(specs)
     for key, spec in specs.items():
         for end in (spec.lo, spec.hi):
             for dtype in (np.float32, np.float64):
-                render._check_ranges({key: np.asarray(end, dtype)})
+                render._check_ranges({key: np.asarray(end, dtype)}, specs)
         for outside in (spec.lo - abs(spec.lo) * 1e-3 - 1e-3, spec.hi + abs(spec.hi) * 1e-3):
             with pytest.raises(ValueError, match="the scene key's range"):
-                render._check_ranges({key: np.float32(outside)})
+                render._check_ranges({key: np.float32(outside)}, specs)
     s = load_scene("face", ["texture.size=32", "camera.size=16", "material.model=biophysical",
                             "skin.haemoglobin=0.1", "skin.epidermis_mm=0.01"])
     assert np.isfinite(np.asarray(render.render(s.config, s.params))).all()
