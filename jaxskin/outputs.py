@@ -30,12 +30,17 @@ MAX_NAME_BYTES = 240
 _UNSAFE = re.compile(r"[^A-Za-z0-9._+=-]+")
 
 
+def _control(text: str) -> bool:
+    """Whether `text` holds a control character (a newline, a NUL, DEL)."""
+    return any(ord(c) < 32 or ord(c) == 127 for c in text)
+
+
 def check_name(name: str, where=None, key: str | None = "name") -> str:
     """`name` if it is one safe path component, else an `InputError` saying why."""
     why = None
     if not isinstance(name, str) or not name:
         why = "is empty"
-    elif any(ord(c) < 32 or ord(c) == 127 for c in name):
+    elif _control(name):
         why = "contains a control character"
     elif name != name.strip():  # " " wrote " _texture.size-64.png"
         why = "starts or ends with a space"
@@ -82,7 +87,7 @@ def check_folder(path, option: str = "-o") -> Path:
     if not probe.is_dir():
         raise InputError(f"{option}: cannot create the folder: {probe} is a file", path)
     new = path.relative_to(probe) if probe != path else Path()
-    if any(ord(c) < 32 or ord(c) == 127 for c in str(new)):  # a newline made a folder
+    if _control(str(new)):  # a newline made a folder
         raise InputError(f"{option}: a folder to create must not contain control characters "
                          f"(a newline?); got {str(path)!r}")
     try:
