@@ -674,7 +674,7 @@ class Session:
             if root.is_dir():
                 scenes += sorted(str(p) for p in root.glob("*.toml"))[:200]
                 materials += sorted(str(p) for p in root.glob("*.json"))[:200]
-        return {"scenes": list(dict.fromkeys(scenes)), "materials": list(dict.fromkeys(materials))}
+        return {"scenes": scenes, "materials": materials}
 
     def state(self) -> dict:
         """Everything the page draws its panels from (JSON)."""
