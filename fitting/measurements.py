@@ -25,19 +25,22 @@ Anything else is an `InputError` naming the file, the line and the column.
 from __future__ import annotations
 
 import dataclasses
+import fnmatch
 import math
 import re
 from pathlib import Path
 
 import numpy as np
 
-from jaxskin.formats import WAVELENGTH_RANGE_NM, check_percent, read_table
+from jaxskin.formats import PERCENT_MEDIAN, WAVELENGTH_RANGE_NM, check_percent, read_table
 from jaxskin.io import InputError
 from jaxskin.outputs import MAX_NAME
 
 __all__ = ["Measurement", "is_wavelength_column", "read_measurement"]
 
-_THIN = re.compile(r"^(?:R|E)_(?P<x>[^m]+)mm$")
+# A thin layer's column, after `_canonical`: R_0.05mm, R_0.05_mm (from "R 0.05 mm"),
+# R0.05mm, R_50um, R_50µm; E_… for radiance.
+_THIN = re.compile(r"^(?:R|E)_?(?P<x>.+?)_?(?P<unit>mm|um|µm|μm)$")
 # The first column: wavelength_nm (the format's name) or what instrument software writes:
 # "Wavelength", "Wavelength (nm)", "wavelength [µm]", "lambda", "wl", "nm", ...
 _WAVELENGTH = re.compile(
@@ -46,7 +49,6 @@ _WAVELENGTH = re.compile(
 _NAME = re.compile(r"[\w.+-]+")  # a material name (it names the output files)
 MAX_THICKNESS_MM = 100.0  # a cosmetic layer is µm to a few mm; beyond this it is a typo
 MAX_RADIANCE = 1e30  # any unit of radiance or counts; beyond this it is an overflow
-PERCENT_MEDIAN = 1.5  # reflectances read as percent when their median is above this
 
 
 def is_wavelength_column(name: str) -> bool:
@@ -81,7 +83,8 @@ class Measurement:
     notes: tuple[str, ...] = ()
 
 
-def read_measurement(path, thickness_mm: float | None = None, percent: bool = False):
+def read_measurement(path, thickness_mm: float | None = None, percent: bool = False,
+                     ignore=()):
     """Read and check one measurement CSV.
 
     **Arguments:**
@@ -91,33 +94,61 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
     - `percent`: reflectance columns are 0–100 instead of 0–1 (radiance columns unaffected).
       Without it, reflectances whose median is above 1.5 are read as percent (and must then
       lie in [0, 100]), with a note; otherwise anything above 1 is an error.
+    - `ignore`: column names or `fnmatch` patterns (`SD_*`) of columns to skip, as the
+      file's own `# ignore: NAME, NAME` line does; a name in that line that is no column
+      is an error, a pattern here that matches nothing in this file is not.
 
     Wavelengths all under 10 are read as µm (× 1000, with a note); after that they must lie
     in 200–3000 nm and increase.
 
     **Returns:** a `Measurement`. **Raises:** `InputError` on anything malformed.
     """
-    table = read_table(path, is_wavelength_column, "wavelength_nm,R_<X>mm,...,R_inf,R_g",
-                       min_rows=2, other_column=_is_reading, once=("name", "thickness_mm"))
-    path, meta, header, header_line = table.path, table.meta, table.header, table.header_line
-
-    comment_thickness = None
-    if "thickness_mm" in meta:
-        value, number = meta["thickness_mm"]
-        comment_thickness = _positive(value, path, number, "thickness_mm")
+    path = Path(path)
+    ignore = (ignore,) if isinstance(ignore, str) else tuple(ignore)
     if thickness_mm is not None and not (
             math.isfinite(thickness_mm) and 0 < thickness_mm <= MAX_THICKNESS_MM):
         raise InputError(f"--thickness must be a positive number of mm (at most "
                          f"{MAX_THICKNESS_MM:g}), got {thickness_mm}", path)
-    bare_thickness = thickness_mm if thickness_mm is not None else comment_thickness
+    seen = {}
 
-    columns = _classify(header, path, header_line, bare_thickness)
+    def on_header(header, meta, line):
+        """The columns to skip; the others classified before any row is read (so that an
+        unknown text column is named as unknown, not as a cell that is no number)."""
+        names = [n for n in header[1:] if any(fnmatch.fnmatchcase(n, p) for p in ignore)]
+        if "ignore" in meta:
+            value, number = meta["ignore"]
+            for name in filter(None, (n.strip() for n in re.split(r"[,;]", value))):
+                found = [n for n in header if fnmatch.fnmatchcase(n, name)]
+                if not found:
+                    raise InputError(f"'# ignore:' names {name!r}, which is no column of the "
+                                     "header", path, number)
+                names += found
+        ignored = list(dict.fromkeys(names))
+        if header[0] in ignored:
+            raise InputError("the first column cannot be ignored", path, line, header[0])
+        seen["comment"] = None
+        if "thickness_mm" in meta:
+            value, number = meta["thickness_mm"]
+            seen["comment"] = _positive(value, path, number, "thickness_mm")
+        bare = thickness_mm if thickness_mm is not None else seen["comment"]
+        seen["columns"] = _classify([n for n in header if n not in ignored], path, line, bare)
+        seen["ignored"] = ignored
+        return ignored
+
+    table = read_table(path, is_wavelength_column, "wavelength_nm,R_<X>mm,...,R_inf,R_g",
+                       min_rows=2, other_column=_is_reading,
+                       once=("name", "thickness_mm", "ignore"), on_header=on_header)
+    meta, header, header_line = table.meta, table.header, table.header_line
+    comment_thickness, columns, ignored = seen["comment"], seen["columns"], seen["ignored"]
     data, numbers = table.data, table.lines
     descending = len(data) > 1 and bool(np.all(np.diff(data[:, 0]) < 0))
     if descending:  # some instruments export the long wavelengths first
         data, numbers = data[::-1], list(numbers)[::-1]
 
     wl, notes = _wavelengths_nm(data[:, 0], header[0], path, numbers)
+    if ignored:
+        notes.append(f"{path}: ignored column{'s' if len(ignored) > 1 else ''} "
+                     + ", ".join(ignored))
     if descending:
         notes.append(f"{path}: wavelengths descend: read in increasing order")
     if comment_thickness is not None:  # said, so not dropped in silence
@@ -209,12 +240,22 @@ def _column_of(columns, role):
 
 
 def _is_radiance(name: str) -> bool:
-    return name == "E" or name.startswith("E_")
+    short = _canonical(name)
+    return short == "E" or short.startswith("E_")
 
 
-def _positive(value, path, line, column) -> float:
+def _is_float(text: str) -> bool:
     try:
-        x = float(value)
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _positive(value, path, line, column, scale=1.0) -> float:
+    """A thickness in mm (`value` times `scale`: 1e-3 for µm), checked."""
+    try:
+        x = float(value) * scale
     except ValueError:
         x = math.nan
     if not (math.isfinite(x) and 0 < x <= MAX_THICKNESS_MM):
@@ -223,15 +264,23 @@ def _positive(value, path, line, column) -> float:
     return x
 
 
+def _canonical(name: str) -> str:
+    """A reading column's name in the format's spelling: spaces as `_` (`R 0.05 mm` →
+    `R_0.05_mm`), `E_R_…` as `E_…`, `∞` as `inf`."""
+    short = re.sub(r"\s+", "_", name.strip()).replace("∞", "inf")
+    return "E_" + short[4:] if short.startswith("E_R_") else short
+
+
 def _classify(header, path, line, bare_thickness):
     """Map each header name to (role, thickness); role is thin, inf, g or white."""
-    expected = "expected R_<X>mm, R, R_inf, R_g (or E_… and E_white)"
+    expected = ("expected R_<X>mm (or R_<X>um), R, R_inf, R_g (or E_… and E_white); skip "
+                "other columns with '# ignore: NAME' or --ignore")
     columns: dict[str, tuple[str, float]] = {}
     seen: dict[tuple[str, float], str] = {}
     for name in header[1:]:
         if is_wavelength_column(name):
             raise InputError("a second wavelength column", path, line, name)
-        short = "E_" + name[4:] if name.startswith("E_R_") else name
+        short = _canonical(name)
         if short in ("R_inf", "E_inf"):
             role = ("inf", 0.0)
         elif short in ("R_g", "E_g"):
@@ -245,8 +294,9 @@ def _classify(header, path, line, bare_thickness):
                     "or pass --thickness", path, line, name,
                 )
             role = ("thin", bare_thickness)
-        elif m := _THIN.match(short):
-            role = ("thin", _positive(m["x"], path, line, name))
+        elif (m := _THIN.match(short)) and _is_float(m["x"]):
+            role = ("thin", _positive(m["x"], path, line, name,
+                                      1.0 if m["unit"] == "mm" else 1e-3))
         else:
             raise InputError(f"unknown column; {expected}", path, line, name)
         if role in seen:
@@ -257,7 +307,7 @@ def _classify(header, path, line, bare_thickness):
     for kind, what in (("thin", "R_<X>mm"), ("inf", "R_inf"), ("g", "R_g")):
         if kind not in roles:
             raise InputError(f"missing column {what}; {expected}", path, line)
-    radiance = [n for n in columns if _is_radiance(n) and n != "E_white"]
+    radiance = [n for n, (kind, _) in columns.items() if _is_radiance(n) and kind != "white"]
     if radiance and "white" not in roles:
         raise InputError("radiance columns need E_white (the white standard)", path, line,
                          radiance[0])
@@ -277,12 +327,13 @@ def _reflectances(data, header, columns, path, numbers, percent, notes):
                 raise InputError(f"radiance must be in [0, {MAX_RADIANCE:g}], got "
                                  f"{values[bad[0]]:g}", path, numbers[bad[0]], name)
     white = None
-    if "E_white" in columns:
-        white = data[:, index["E_white"]]
+    white_name = next((n for n, (kind, _) in columns.items() if kind == "white"), None)
+    if white_name is not None:
+        white = data[:, index[white_name]]
         bad = np.flatnonzero(white <= 0)
         if bad.size:
             raise InputError(f"the white standard must be > 0, got {white[bad[0]]:g}",
-                             path, numbers[bad[0]], "E_white")
+                             path, numbers[bad[0]], white_name)
     plain = [index[n] for n in columns if not _is_radiance(n)]
     if plain and percent:
         check_percent(data[:, plain], path)

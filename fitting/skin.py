@@ -365,7 +365,8 @@ def command(args, run) -> int:
 
     outputs = Outputs(args.output, [args.file])
     fixed = _fixed(args.fix)
-    names, wavelengths, R = read_spectra(args.file, percent=args.percent)
+    notes = []
+    names, wavelengths, R = read_spectra(args.file, percent=args.percent or None, notes=notes)
     if any(_THIN.match(n) for n in names) and {"R_inf", "R_g"} & set(names):
         raise InputError("a cosmetic's measurement (columns R_<X>mm, R_inf, R_g), not skin "
                          f"spectra: calibrate it with 'jaxskin calibrate {args.file} -o DIR'",
@@ -376,6 +377,8 @@ def command(args, run) -> int:
     csv_path = outputs.plan("fit.csv", "the fit")
     png_path = None if args.no_report else outputs.plan("fit.png", "the report")
     run.outputs.append(outputs)
+    for note in notes:
+        print(f"jaxskin: note: {note}", file=sys.stderr)
     run.stage = f"fitting {len(names)} spectra"
     t0 = time.perf_counter()
     if args.cluster:

@@ -236,7 +236,13 @@ def _parser() -> argparse.ArgumentParser:
                    help="thickness in mm of a bare 'R' column (overrides '# thickness_mm:'); "
                    "warned of when no file has one")
     c.add_argument("--percent", action="store_true",
-                   help="reflectance columns are in percent (0–100) instead of 0–1")
+                   help="reflectance columns are in percent (0–100) instead of 0–1 (without "
+                   "it, a file whose reflectances have a median above 1.5 is read as percent, "
+                   "with a note)")
+    c.add_argument("--ignore", action="append", default=[], metavar="COLUMN",
+                   help="skip this column in every file (repeatable; a pattern such as "
+                   "'SD_*' in quotes skips all that match): standard deviations, counts, "
+                   "notes. A file can also say '# ignore: NAME, NAME' itself")
     # The bounds are fitting.km's MAX_SMOOTH and MAX_NOISE (not imported: that imports JAX,
     # and --help stays quick; tests/test_calibrate.py checks that they agree).
     c.add_argument("--smooth", type=_number(lo=0.0, hi=1e6), default=0.0, metavar="W",
@@ -387,7 +393,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="hold a parameter at a value, e.g. --fix epidermis_mm=0.06 "
                    "(repeatable)")
     k.add_argument("--percent", action="store_true",
-                   help="reflectance is in percent (0-100) instead of 0-1")
+                   help="reflectance is in percent (0-100) instead of 0-1 (without it, spectra "
+                   "whose median is above 1.5 are read as percent, with a note)")
     k.add_argument("--no-report", action="store_true", help="write fit.csv only, no PNG")
     cluster.add_option(k, "chunk of 10 spectra")
 
@@ -454,7 +461,8 @@ def _calibrate(args, run: _Run) -> int:
     # Check everything first: a bad file anywhere means nothing is written.
     measurements, paths = [], []
     for f in args.files:
-        m = read_measurement(f, thickness_mm=args.thickness, percent=args.percent)
+        m = read_measurement(f, thickness_mm=args.thickness, percent=args.percent,
+                             ignore=args.ignore)
         check_name(m.name, f, key="name")
         json_path = outputs.plan(f"{m.name}.json", f)
         png_path = None if args.no_report else outputs.plan(f"{m.name}.png", f)

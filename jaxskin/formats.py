@@ -153,7 +153,7 @@ def _header_row(line: str, first_column, other_column=None):
 
 
 def read_table(path, first_column, expected_header: str, min_rows: int = 1,
-               other_column=None, once: tuple[str, ...] = ()) -> Table:
+               other_column=None, once: tuple[str, ...] = (), on_header=None) -> Table:
     """Read a numeric CSV table.
 
     **Arguments:**
@@ -167,6 +167,9 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
     - `min_rows`: the fewest data rows accepted.
     - `once`: `# key:` lines the caller reads: one given twice with another value is an
       error (which would count is a guess); other keys keep their first value.
+    - `on_header`: called with `(header, meta, header line)` once the header is found,
+      before any row is read (it may check the header and raise); returns the names of
+      columns to skip (not parsed, not returned: standard deviations, counts, notes).
 
     **Returns:** a `Table`. **Raises:** `InputError` on anything malformed.
     """
@@ -207,6 +210,8 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
             raise InputError(f"header cell {i + 1} is empty", path, header_line)
         if name in header[:i]:
             raise InputError("column appears twice", path, header_line, name)
+    skipped = set(on_header(header, meta, header_line)) if on_header is not None else set()
+    kept = [c for c, name in enumerate(header) if name not in skipped]
 
     rows, numbers = [], []
     for number, raw in enumerate(lines[header_line:], start=header_line + 1):
@@ -226,15 +231,13 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
                                  header[len(cells)])
             raise InputError(f"{len(cells)} cells where the header has {len(header)}{hint}",
                              path, number)
-        values = []
-        for c, cell in enumerate(cells):
-            values.append(_number(cell, path, number, header[c]))
-        rows.append(values)
+        rows.append([_number(cells[c], path, number, header[c]) for c in kept])
         numbers.append(number)
     if len(rows) < min_rows:
         rows_ = "row" if min_rows == 1 else "rows"
         raise InputError(f"needs at least {min_rows} data {rows_}, found {len(rows)}", path,
                          header_line)
+    header = [header[c] for c in kept]
     data = np.asarray(rows, np.float64).reshape(len(rows), len(header))
     return Table(path, header, header_line, data, numbers, meta, delimiter)
 
@@ -257,6 +260,12 @@ def _number(cell: str, path, line: int, column: str) -> float:
 
 
 # ---------------------------------------------------------------- JSON
+
+
+# Reflectances whose median is above this are read as percent when not told (calibrate,
+# fit-skin): no skin or cosmetic reflects more than 1 at most bands, and no percent
+# reading of them has a median of 1.5 % (fractions are at most 1).
+PERCENT_MEDIAN = 1.5
 
 
 def check_percent(values, path) -> None:
@@ -454,13 +463,16 @@ def haemoglobin_table() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 _WAVELENGTH_NAMES = ("wavelength_nm", "wavelength (nm)", "wavelength", "lambda_nm", "nm")
 
 
-def read_spectra(path, percent: bool = False) -> tuple[list[str], np.ndarray, np.ndarray]:
+def read_spectra(path, percent: bool | None = False, notes: list | None = None
+                 ) -> tuple[list[str], np.ndarray, np.ndarray]:
     """Reflectance spectra to fit, one per column: `(names, wavelengths (n,), R (m, n))`.
 
     Two layouts: a wide CSV (`wavelength_nm` — or `Wavelength (nm)` — then one column per
     spectrum, named by its header), and the NIST skin file's (`Wavelength (nm)` then groups
     `R1, R2, R3, Average` under a row naming `Subject k`: each subject's `Average` is read,
-    named `subject_k`). Reflectance in 0–1 (`percent`: 0–100); wavelengths increasing.
+    named `subject_k`). Reflectance in 0–1 (`percent`: 0–100; `None`: percent when the
+    median is above `PERCENT_MEDIAN`, as `calibrate` guesses, with a line appended to
+    `notes`); wavelengths increasing, or all decreasing (then reversed, with a note).
     `InputError` names the file, line and column of anything else.
     """
     path = Path(path)
@@ -505,15 +517,23 @@ def read_spectra(path, percent: bool = False) -> tuple[list[str], np.ndarray, np
             raise t.error("no spectra: expected wavelength_nm and one column per spectrum")
         names, wavelengths, R = t.header[1:], t.data[:, 0], t.data[:, 1:].T
         header_line, line_of, wl_name = t.header_line, t.lines, t.header[0]
+    notes = [] if notes is None else notes
     if len(wavelengths) > 1 and np.all(np.diff(wavelengths) < 0):  # long ones first
         wavelengths, R = wavelengths[::-1], R[:, ::-1]
         line_of = None if line_of is None else list(line_of)[::-1]
+        notes.append(f"{path}: wavelengths descend: read in increasing order")
     if np.any(np.diff(wavelengths) <= 0):
         row = int(np.flatnonzero(np.diff(wavelengths) <= 0)[0]) + 1
         raise InputError("wavelengths must increase (or all decrease)", path,
                          None if line_of is None else line_of[row], wl_name)
-    if percent:
+    if percent is None:
+        percent = bool(R.size) and float(np.median(R)) > PERCENT_MEDIAN
+        if percent:
+            notes.append(f"{path}: reflectances have a median of {np.median(R):.3g}: read as "
+                         "percent (/ 100; --percent says so)")
+    elif percent:
         check_percent(R, path)
+    if percent:
         R = R / 100.0
     top = 100.0 if percent else 1.0
     for k, name in enumerate(names):

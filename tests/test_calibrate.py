@@ -229,6 +229,32 @@ def test_cli_writes_material_and_report(tmp_path, capsys):
     assert "lipstick_red" in capsys.readouterr().out
 
 
+def test_cli_ignore_skips_an_instruments_extra_columns(tmp_path, capsys):
+    """An export with a standard deviation and a notes column: refused by name, with the
+    two ways past; with --ignore the material is the plain file's, byte for byte."""
+    src = ROOT / "data" / "measurements" / "lipstick_red.csv"
+    rows = []
+    for line in src.read_text().splitlines():
+        if line.startswith("wavelength_nm"):
+            line += ",SD_0.003mm,SD_0.01mm,Notes"
+        elif line[:1].isdigit():
+            line += ",0.001,0.002,\"lamp, warm\""
+        rows.append(line)
+    (tmp_path / "lipstick_red.csv").write_text("\n".join(rows) + "\n")
+    out = tmp_path / "out"
+    assert main(["calibrate", str(tmp_path / "lipstick_red.csv"), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "column 'SD_0.003mm': unknown column" in err[0], err
+    assert "'# ignore: NAME' or --ignore" in err[0] and not out.exists()
+    assert main(["calibrate", str(tmp_path / "lipstick_red.csv"), "-o", str(out),
+                 "--ignore", "SD_*", "--ignore", "Notes", "--no-report"]) == 0
+    assert "ignored columns SD_0.003mm, SD_0.01mm, Notes" in capsys.readouterr().err
+    assert main(["calibrate", str(src), "-o", str(tmp_path / "plain"), "--no-report"]) == 0
+    mine, plain = (json.loads((d / "lipstick_red.json").read_text()) for d in (out, tmp_path / "plain"))
+    for key in ("S_per_mm", "K_per_mm", "identifiable", "rmse"):
+        assert mine[key] == plain[key], key
+
+
 def test_cli_bad_file_writes_nothing_and_exits_2(tmp_path):
     good = ROOT / "data" / "measurements" / "foundation_beige.csv"
     bad = tmp_path / "bad.csv"

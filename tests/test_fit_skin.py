@@ -181,8 +181,13 @@ def _good_rows(lo=380, hi=780, step=10, value="0.4"):
 BAD = [
     ("missing", None, [], "no such file"),
     ("decimal comma", "wavelength_nm;a\n400;0,4\n", [], "decimal point"),
-    ("percent without flag", "wavelength_nm,a\n" + _good_rows(value="45"), [],
-     "use --percent"),
+    # percent is guessed from the median (45 is read as 0.45); above 1 with a median of
+    # fractions, the flag is named
+    ("percent among fractions", "wavelength_nm,a,b\n"
+     + "".join(f"{w},0.4,{45 if w == 500 else 0.4}\n" for w in range(380, 790, 10)), [],
+     "column 'b': reflectance must be in [0, 1] (use --percent for 0-100), got 45"),
+    ("percent above 100", "wavelength_nm,a\n" + _good_rows(value="145"), [],
+     "reflectance must be in [0, 100], got 145"),
     ("negative", "wavelength_nm,a\n" + _good_rows(value="-0.1"), [],
      "must be in [0, 1] (a dark-corrected reading below 0? set it to 0 in the file), got -0.1"),
     # the column named as the header spells it (it said 'wavelength' for wavelength_nm)

@@ -151,6 +151,22 @@ BAD = [
     ),
     ("no data", lambda t: t.split("400")[0], 2, None, "needs at least 2 data rows"),
     ("radiance without white", lambda t: t.replace("R_inf", "E_inf"), 2, "E_inf", "E_white"),
+    # an instrument's extra column (a trial: 'unknown column' with no way past it) is named
+    # with the two ways to skip it
+    ("extra column", lambda t: t.replace("R_g\n", "R_g,SD_0.05mm\n").replace("0.04\n",
+                                                                             "0.04,0.01\n"),
+     2, "SD_0.05mm", "skip other columns with '# ignore: NAME' or --ignore"),
+    ("thickness without a number", lambda t: t.replace("R_0.05mm", "RSD_0.05mm"), 2,
+     "RSD_0.05mm", "unknown column"),
+    ("thickness without a unit", lambda t: t.replace("R_0.05mm", "R_0.05"), 2, "R_0.05",
+     "unknown column"),
+    ("zero thickness in µm", lambda t: t.replace("R_0.05mm", "R_0um"), 2, "R_0um", "positive"),
+    ("an ignore line naming no column", lambda t: "# ignore: SD\n" + t, 1, None,
+     "'# ignore:' names 'SD', which is no column of the header"),
+    ("ignoring the wavelengths", lambda t: "# ignore: wavelength_nm\n" + t, 3,
+     "wavelength_nm", "the first column cannot be ignored"),
+    ("two ignore lines", lambda t: "# ignore: R_g\n# ignore: R_inf\n" + t, 2, None,
+     "'# ignore:' again"),
 ]
 
 
@@ -313,3 +329,64 @@ def test_descending_wavelengths_are_read_in_order_and_a_negative_reading_is_name
                                          r"\[0, 1\], got -0.0012 \(a dark-corrected reading"):
         read_measurement(write(tmp_path, GOOD.replace("400,0.30,0.40,0.45,0.04",
                                                       "400,0.30,0.40,0.45,-0.0012"), "bad.csv"))
+
+
+@pytest.mark.parametrize("header", [
+    "wavelength_nm,R_50um,R_150µm,R inf,R_g",        # micrometres, a space
+    "wavelength_nm,R 0.05 mm,R_0.15_mm,R_∞,R_g",     # spaces, underscores, ∞
+    "wavelength_nm,R0.05mm,R_0.15mm,R_inf,R_g",      # no separator
+])
+def test_other_spellings_of_the_columns_read_like_the_format(tmp_path, header):
+    """`R_3um`, `R 0.05 mm` and the like were 'unknown column' (a trial): they are the
+    format's columns, thicknesses in mm (50 µm = 0.05 mm)."""
+    plain = read_measurement(write(tmp_path, GOOD, "plain.csv"))
+    m = read_measurement(write(tmp_path, GOOD.replace(
+        "wavelength_nm,R_0.05mm,R_0.15mm,R_inf,R_g", header)))
+    np.testing.assert_array_equal(m.thickness_mm, [0.05, 0.15])
+    for got, want in ((m.R, plain.R), (m.R_inf, plain.R_inf), (m.R_g, plain.R_g)):
+        np.testing.assert_array_equal(got, want)
+    rad = write(tmp_path, "wavelength_nm,E 100 um,E_R_inf,E g,E white\n"
+                "400,1.0,2.0,0.2,4.0\n410,1.5,3.0,0.3,6.0\n", "rad.csv")
+    m = read_measurement(rad)
+    np.testing.assert_allclose(m.thickness_mm, [0.1])
+    np.testing.assert_allclose(m.R[0], [0.25, 0.25])
+    np.testing.assert_allclose(m.R_g, [0.05, 0.05])
+
+
+def test_ignored_columns_are_not_read_and_are_named(tmp_path):
+    """Standard deviations and notes beside the readings: skipped by the file's
+    '# ignore:' line (names or patterns) or the caller's patterns, not parsed (text is
+    fine), named in a note; the readings are those of the plain file."""
+    plain = read_measurement(write(tmp_path, GOOD, "plain.csv"))
+    text = ("# name: test_foundation\n# ignore: Notes\n"
+            "wavelength_nm,R_0.05mm,SD_0.05mm,R_0.15mm,SD_0.15mm,R_inf,R_g,Notes\n"
+            "400,0.30,0.01,0.40,0.02,0.45,0.04,dark room\n"
+            "410,0.31,0.01,0.41,0.02,0.46,0.04,\"lamp, warm\"\n"
+            "420,0.32,0.01,0.42,0.02,0.47,0.04,-\n")
+    path = write(tmp_path, text, "sd.csv")
+    with pytest.raises(InputError, match="column 'SD_0.05mm': unknown column"):
+        read_measurement(path)
+    for ignore in (["SD_*"], "SD_*", ["SD_0.05mm", "SD_0.15mm", "absent"]):
+        m = read_measurement(path, ignore=ignore)
+        np.testing.assert_array_equal(m.R, plain.R)
+        np.testing.assert_array_equal(m.R_inf, plain.R_inf)
+        assert m.notes == (f"{path}: ignored columns SD_0.05mm, SD_0.15mm, Notes",)
+    m = read_measurement(write(tmp_path, text.replace("# ignore: Notes", "# ignore: SD_*; Notes"),
+                               "own.csv"))
+    np.testing.assert_array_equal(m.R, plain.R)
+
+
+def test_fit_skin_reads_percent_spectra_with_a_note(tmp_path):
+    """fit-skin refused percent spectra without --percent where calibrate guessed them (a
+    trial): both guess now, from a median above 1.5, and say so."""
+    from jaxskin.formats import read_spectra
+
+    (tmp_path / "p.csv").write_text("wavelength_nm,a,b\n400,20,35.5\n500,30,41\n600,40,52\n")
+    notes = []
+    names, wl, R = read_spectra(tmp_path / "p.csv", percent=None, notes=notes)
+    np.testing.assert_allclose(R, [[0.2, 0.3, 0.4], [0.355, 0.41, 0.52]])
+    assert notes == [f"{tmp_path / 'p.csv'}: reflectances have a median of 37.8: read as "
+                     "percent (/ 100; --percent says so)"]
+    (tmp_path / "f.csv").write_text("wavelength_nm,a\n400,0.9\n500,1.4\n600,1.2\n")
+    with pytest.raises(InputError, match=r"got 1.4 at 500 nm"):  # median 1.2: not guessed
+        read_spectra(tmp_path / "f.csv", percent=None)
