@@ -5,7 +5,7 @@ formula; the paper prints T1 R1 T1 where T1 R2 T1 is meant — see
 `shared/reference/constants.md`). S and K are per millimetre, thicknesses in millimetres.
 
 Every function is elementwise over broadcastable arrays of any shape, follows the dtype of
-its inputs, and is jit-, vmap- and grad-safe, including at the limits K → 0, S → 0, X → 0
+its inputs (float32 at least: float16 and integers compute in float32), and is jit-, vmap- and grad-safe, including at the limits K → 0, S → 0, X → 0
 and X → ∞ (see `layer`).
 """
 
@@ -82,8 +82,10 @@ def _layer_parts(S, K, X):
     inv_beta = jax.lax.rsqrt(jnp.where(q > 0, q, 1.0))  # safe: only read where z² >= 0.25
     SK = S + K
     # X clamped where only the branch test and the series see it: X² overflowed float32 at
-    # X ~ 2e19 mm, and inf·0 in its derivative made the gradient NaN there (values held)
-    Xc = jnp.minimum(X, 1e15)
+    # X ~ 2e19 mm, and inf·0 in its derivative made the gradient NaN there (values held).
+    # Float64 clamps at 1e75 (X² ~ 1e150): at 1e15 it took the series at K = 1e-40,
+    # X = 1e20 (z ~ 1.4), T 1.0e-20 for mpmath's 7.3e-21 (a trial).
+    Xc = jnp.minimum(X, 1e15 if X.dtype.itemsize < 8 else 1e75)
     z2 = q * (Xc * Xc)
     small = z2 < _Q_SMALL
     # Series branch (double-`where`: the unused branch sees harmless values).
@@ -187,6 +189,9 @@ def stack(R: Float[ArrayLike, " layers *shape"], T: Float[ArrayLike, " layers *s
     **Returns:** `Slab(R, T, R_back)` of the whole stack, each of shape `*shape`.
     """
     R, T = _promote(R, T)
+    if min(R.ndim, T.ndim) == 0 or min(R.shape[0], T.shape[0]) == 0:
+        raise ValueError(f"km.stack: R {R.shape} and T {T.shape} need at least one layer "
+                         "along the leading axis (layers first, top first)")
     if R.shape[0] > MANY_LAYERS:  # (texels, layers) for (layers, texels): 108 "layers"
         warnings.warn(f"km.stack: {R.shape[0]} layers along the leading axis (shape "
                       f"{R.shape}), each unrolled into the program; the layers go first, "
@@ -198,6 +203,9 @@ def stack(R: Float[ArrayLike, " layers *shape"], T: Float[ArrayLike, " layers *s
 
 
 def _slab(x):
+    if len(x) not in (2, 3):
+        raise ValueError(f"km.compose: a layer is (R, T) or (R, T, R_back), got {len(x)} "
+                         "arrays")
     if len(x) == 2:
         R, T = _promote(*x)
         return R, T, R

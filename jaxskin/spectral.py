@@ -46,6 +46,14 @@ class Grid:
     illuminant: str = "D65"
 
     def __post_init__(self):
+        for name in ("step", "start", "stop"):  # 5.0 for 5: whole numbers as ints (they
+            value = getattr(self, name)          # index arrays and key caches)
+            number = not isinstance(value, bool) and isinstance(
+                value, (int, float, np.integer, np.floating))
+            if not number or not np.isfinite(value) or value != int(value):
+                raise ValueError(f"spectral grid {name} must be a whole number of nm, got "
+                                 f"{value!r}")
+            object.__setattr__(self, name, int(value))
         if self.step not in STEPS:
             raise ValueError(f"spectral step must be one of {STEPS} nm, got {self.step}")
         if self.illuminant not in ILLUMINANTS:
@@ -124,12 +132,14 @@ def _rgb_matrix(start: int, stop: int, step: int, illuminant: str) -> np.ndarray
 def to_xyz(spectra: Float[ArrayLike, "*shape n"], grid: Grid) -> Float[Array, "*shape 3"]:
     """CIE XYZ (Y = 1 for a perfect reflector) of reflectance spectra sampled on `grid`."""
     spectra = jnp.asarray(spectra)
+    _check_bands(spectra, grid)
     return matmul(spectra, jnp.asarray(grid.xyz_matrix, dtype=_float(spectra)))
 
 
 def to_rgb(spectra: Float[ArrayLike, "*shape n"], grid: Grid) -> Float[Array, "*shape 3"]:
     """Linear sRGB of reflectance spectra sampled on `grid` (last axis = wavelength)."""
     spectra = jnp.asarray(spectra)
+    _check_bands(spectra, grid)
     return matmul(spectra, jnp.asarray(grid.rgb_matrix, dtype=_float(spectra)))
 
 
@@ -137,12 +147,29 @@ def resample(values: ArrayLike, wavelengths: ArrayLike, grid: Grid) -> np.ndarra
     """Linear interpolation of host-side spectra `(..., m)` from `wavelengths` onto `grid`.
 
     Values outside the measured range are held at the end values (and should be avoided).
+    `wavelengths` may increase or decrease (read in increasing order); other orders, a
+    length other than `values`' last axis, or non-finite wavelengths are a ValueError.
     """
     values = np.asarray(values, dtype=np.float64)
     wl = np.asarray(wavelengths, dtype=np.float64)
+    if wl.ndim != 1 or values.ndim < 1 or len(wl) != values.shape[-1] or len(wl) < 1:
+        raise ValueError(f"resample: {wl.shape} wavelengths for values of shape "
+                         f"{values.shape}: one wavelength per entry of the last axis")
+    if len(wl) > 1 and np.all(np.diff(wl) < 0):  # long wavelengths first: np.interp wants
+        wl, values = wl[::-1], values[..., ::-1]  # increasing ones (it was silently wrong)
+    if not np.all(np.isfinite(wl)) or np.any(np.diff(wl) <= 0):
+        raise ValueError("resample: wavelengths must be finite and strictly increasing (or "
+                         "all decreasing)")
     flat = values.reshape(-1, values.shape[-1])
     out = np.stack([np.interp(grid.wavelengths, wl, row) for row in flat])
     return out.reshape(*values.shape[:-1], len(grid))
+
+
+def _check_bands(spectra, grid) -> None:
+    if spectra.ndim < 1 or spectra.shape[-1] != len(grid):
+        raise ValueError(f"spectra of shape {spectra.shape} on a grid of {len(grid)} bands "
+                         f"({grid.start:g}-{grid.stop:g} nm every {grid.step:g}): the last "
+                         "axis must be the grid's wavelengths")
 
 
 def _float(x) -> jnp.dtype:

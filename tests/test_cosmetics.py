@@ -81,6 +81,50 @@ def test_a_kernel_wider_than_the_image_is_cut_without_changing_the_blur(x64):
     np.testing.assert_allclose(got.reshape(-1, 3), num / den, rtol=1e-10, atol=0)
 
 
+@pytest.mark.parametrize("texel", [1e-6, 1e-4, 0.2])
+def test_texels_far_below_the_profile_blur_to_the_mean_not_to_black(texel):
+    """A mesh a million times too small (`mesh.unit_mm = 1e-6`, in range) rendered black,
+    and `sss.texel_mm = 1e-6` dark blue (a trial): the kernel's mass within the image was
+    ~1e-8, under the absolute 1e-6 the blur took for "off the mesh". Now a uniform field
+    stays uniform under a mask, and with texels far below the profile's 0.08–2.7 mm every
+    texel gets the masked mean (the profile is flat over the image); the 4σ window (11
+    million samples at 1e-6 mm) is not built."""
+    rng = np.random.default_rng(4)
+    mask = np.zeros((48, 40), np.float32)
+    mask[5:40, 8:33] = 1.0
+    flat = np.broadcast_to(np.float32([0.5, 0.3, 0.2]), (48, 40, 3))
+    got = np.asarray(sss.blur(jnp.asarray(flat), texel, mask=jnp.asarray(mask)))
+    on = mask > 0
+    np.testing.assert_allclose(got[on], flat[on], rtol=2e-6)  # measured 4e-7
+    assert np.all(got[~on] == 0)
+    if texel < 1e-3:
+        E = rng.uniform(0, 1, (48, 40, 3)).astype(np.float32)
+        got = np.asarray(sss.blur(jnp.asarray(E), texel, mask=jnp.asarray(mask)))
+        mean = E[on].mean(axis=0)
+        np.testing.assert_allclose(got[on], np.broadcast_to(mean, got[on].shape), rtol=1e-4)
+
+
+def test_energy_near_an_open_edge_is_as_documented(x64):
+    """The normalised convolution keeps a uniform field uniform but does not conserve
+    energy within a few mm of the mesh's edge (sss.py and docs/explanations/sss.md give
+    these figures; a trial measured 0.81–1.04 on another image): a unit impulse in red at
+    0.1 mm texels beside a straight edge keeps 0.81 at the edge, 0.94 two texels in, 1.015
+    at 27 texels; 6 mm from it (and 8 from the image's other edges), 1.0085."""
+    H, W = 160, 200
+    mask = np.zeros((H, W))
+    mask[:, 100:] = 1.0  # the mesh: the right half
+    kept = {}
+    for d in (0, 2, 27, 60):
+        E = np.zeros((H, W, 3))
+        E[80, 100 + d] = 1.0
+        out = np.asarray(sss.blur(jnp.asarray(E), 0.1, mask=jnp.asarray(mask)))
+        kept[d] = out[..., 0].sum()
+    assert kept[0] == pytest.approx(0.8060, abs=1e-4)
+    assert kept[2] == pytest.approx(0.9415, abs=1e-4)
+    assert kept[27] == pytest.approx(1.0149, abs=1e-4)
+    assert kept[60] == pytest.approx(1.0085, abs=1e-4)
+
+
 @pytest.mark.parametrize("method", METHODS)
 def test_a_point_of_light_spreads_to_the_profile(x64, method):
     E = np.zeros((81, 81, 3))

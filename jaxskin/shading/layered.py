@@ -15,8 +15,13 @@ passes the cosmetics again. That pass is spectral, T(λ), but after the blur onl
 is left; it is applied as the factor t = XYZ(T a) / XYZ(a) per XYZ channel, which lies in
 [0, 1] (T ≤ 1 and the colour-matching functions are ≥ 0), so it is stable for any
 spectrum, where the same ratio in sRGB is not (saturated spectra give negative or zero
-sRGB channels). Without blur the factor is exact. Huang et al. blur "the energy of light
-passing through the cosmetics" the same way, in RGB.
+sRGB channels). Without blur the factor is exact. With blur, the light reaching a texel
+comes partly from its neighbours (bare skin beside a lipstick's edge), and unequal X, Y, Z
+factors can take that light out of the gamut: at a strongly absorbing layer's edge, t ≈ 0
+for X and Z but not Y left red below 0 and green above (a trial found −0.05 red). There
+the result is moved toward the blurred light dimmed by t_Y alone, just far enough that no
+channel is negative (`_in_gamut`); nowhere else is it changed. Huang et al. blur "the
+energy of light passing through the cosmetics" the same way, in RGB.
 
 Specular (§3.3): the skin's Kelemen highlight, then for each layer from the bottom up, the
 highlight so far is dimmed by that layer's transmittance, in and out (the colour of
@@ -105,7 +110,19 @@ def radiance(grid: Grid, N, L, V, ambient, light, skin_R, skin_roughness, skin_r
     t1 = jnp.where(ok, xyz_dta / jnp.where(ok, xyz_a, 1.0), -1.0)  # t − 1, in [−1, 0]
     out = blur(skin)
     rgb_to_xyz = jnp.asarray(np.linalg.inv(grid.xyz_to_rgb), dtype)
-    return (rgb_surface + (out + matmul(t1 * matmul(out, rgb_to_xyz), xyz_to_rgb))) + h
+    return (rgb_surface + _in_gamut(out + matmul(t1 * matmul(out, rgb_to_xyz), xyz_to_rgb),
+                                    (1.0 + t1[..., 1:2]) * out)) + h
+
+
+def _in_gamut(x, y):
+    """`x`, the light leaving through the layers after the blur, moved toward `y` (the blurred
+    light dimmed by the luminance factor alone: ≥ 0 where the light that arrived is) just
+    far enough that no channel that is ≥ 0 in `y` is < 0: x + λ (y − x) with the least λ in
+    [0, 1]. Where x has no such channel (wherever the light is uniform, or nearly: every
+    pixel of the built-in scenes), x itself, exactly."""
+    bad = (x < 0) & (y > 0)
+    lam = jnp.where(bad, -x / jnp.where(bad, y - x, 1.0), 0.0)  # y − x > 0 where bad
+    return x + jnp.max(lam, axis=-1, keepdims=True) * (y - x)
 
 
 def _spectra(X, E, h, h_l, S, K, skin_R):
