@@ -415,6 +415,14 @@ def read_material(path) -> MaterialFile:
     if not isinstance(doc, dict):
         raise InputError("expected a JSON object (a material written by jaxskin calibrate)",
                          path)
+    model = doc.get("model", "kubelka-munk")
+    if model == "lafortune" or "lobes" in doc:  # a fit-brdf output (a trial)
+        raise InputError("a Lafortune BRDF (written by jaxskin fit-brdf; it goes in "
+                         "material.brdf), expected a Kubelka-Munk material (written by jaxskin "
+                         "calibrate)", path, key="model" if "model" in doc else None)
+    if model != "kubelka-munk":  # it was not read at all
+        raise InputError(f"expected \"kubelka-munk\" (or no model key), got {model!r}", path,
+                         key="model")
     arrays = {}
     for k in ("wavelength_nm", "S_per_mm", "K_per_mm"):
         v = doc.get(k)

@@ -5,6 +5,8 @@ optics modules never call: they receive its arrays."""
 
 from __future__ import annotations
 
+import warnings
+
 import os
 import struct
 import tempfile
@@ -172,13 +174,24 @@ def read_image(path, what: str = "image", key=None):
     return np.broadcast_to(grey_or_rgb, (*img.shape[:2], 3)).copy(), alpha
 
 
+_SAID_COLOUR: set[str] = set()  # colour images read as grey, warned of once each
+
+
 def read_grey(path, what: str = "greyscale image", key=None) -> np.ndarray:
     """A greyscale map `(H, W)` float64 in [0, 1] (a layer's thickness map, the melanin
     map): `read_image`'s values, colour averaged over R, G, B, alpha ignored, clipped to
     [0, 1]. Row 0 is the image's top. `InputError` naming the file as `read_image`."""
     rgb, _ = read_image(path, what, key)
-    grey = rgb[..., 0] if np.all(rgb[..., 1:] == rgb[..., :1]) else rgb.mean(axis=-1)
-    return np.clip(grey, 0.0, 1.0)  # grey as read, not (g + g + g) / 3 rounded
+    if np.all(rgb[..., 1:] == rgb[..., :1]):
+        grey = rgb[..., 0]  # grey as read, not (g + g + g) / 3 rounded
+    else:  # said, not done in silence (a trial: a pure red map gave a third of the value)
+        grey = rgb.mean(axis=-1)
+        if str(path) not in _SAID_COLOUR:  # once a file: the checks and the render read it
+            _SAID_COLOUR.add(str(path))
+            warnings.warn(f"{path}: a colour image where a greyscale map is expected: read "
+                          f"as the mean of R, G and B (mean {grey.mean():.3g} of 1); save it "
+                          "as greyscale to say what you mean", stacklevel=2)
+    return np.clip(grey, 0.0, 1.0)
 
 
 def write_grey16(values, path) -> None:

@@ -291,6 +291,8 @@ def _check_ranges(params: dict, specs: dict) -> None:
         if spec is None or isinstance(value, jax.core.Tracer):
             continue
         v = np.asarray(value)
+        if v.dtype == np.bool_:  # True rendered as 1.0 (a trial): a slip, not a number
+            raise ValueError(f"params[{key!r}]: expected a number, got {value!r}")
         if not np.issubdtype(v.dtype, np.floating):
             v = v.astype(np.float64)
         if spec.kind == "vec3":

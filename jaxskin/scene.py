@@ -569,6 +569,10 @@ def parse_scene(doc: dict, path, overrides=(), allow=None, *, flag: str = "overr
         if not Path(mesh).is_absolute():
             values["mesh.file"] = str((base("mesh.file") / mesh).resolve())
         allow("mesh.file", Path(values["mesh.file"]).resolve())
+        if not Path(values["mesh.file"]).is_file():  # named with the file and key (a trial)
+            raise InputError(f"expected a built-in mesh ({', '.join(BUILTIN_MESHES)}) or a mesh "
+                             f"file; no file {values['mesh.file']}", source("mesh.file"),
+                             key="mesh.file")
     brdf = values["material.brdf"]
     if brdf != "skin":
         brdf_path = Path(brdf) if Path(brdf).is_absolute() else (

@@ -144,7 +144,13 @@ def blur(irradiance, texel_mm: float, mask=None, method: str = "fft", cut: float
     `irradiance`.
     """
     E = jnp.asarray(irradiance)
+    if E.ndim != 3 or E.shape[-1] != 3:
+        raise ValueError(f"sss.blur: irradiance must be (H, W, 3) linear RGB, got shape "
+                         f"{E.shape}")
     m = jnp.ones(E.shape[:2], E.dtype) if mask is None else jnp.asarray(mask, E.dtype)
+    if m.shape != E.shape[:2]:
+        raise ValueError(f"sss.blur: mask {m.shape} must be the image's (H, W) = "
+                         f"{E.shape[:2]}")
     Em = E * m[..., None]
     if method == "fft":
         if kernels is None:

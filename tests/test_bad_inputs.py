@@ -235,7 +235,17 @@ CASES = {
     "material-negative": lambda t: material(t, {**good_material(), "K_per_mm": [
         -1.0] * len(good_material()["K_per_mm"])}),
     "material-nested": lambda t: material(t, "[" * 100000 + "]" * 100000),
+    # a fit-brdf output as a layer's material said 'wavelength_nm: expected a list', and a
+    # "model" that is not Kubelka-Munk was not read at all (a trial)
+    "material-is-a-lafortune-brdf": lambda t: material(t, {
+        "model": "lafortune", "diffuse": [0.43, 0.30, 0.33],
+        "lobes": [{"Cxy": [-1.0, -1.0, -1.0], "Cz": [0.86, 0.70, 0.57], "n": [64, 64, 44]}]}),
+    "material-model-lafortune-with-lists": lambda t: material(t, {**good_material(),
+                                                                  "model": "lafortune"}),
+    "material-model-unknown": lambda t: material(t, {**good_material(), "model": "gaussian"}),
     "material-missing": lambda t: layered(t, "nope.json"),
+    # said "nonexist.obj: no such mesh file", naming neither the scene nor the key (a trial)
+    "mesh-missing": lambda t: scene(t, '[mesh]\nfile = "nonexist.obj"\n'),
     "material-wavelength-um": lambda t: material(t, {**good_material(), "extrapolate": "hold",
                                                      "wavelength_nm": [
         w / 1000 for w in good_material()["wavelength_nm"]]}),
@@ -410,6 +420,11 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
                                          "calibrate"),
     ("material-is-a-tab-measurement-as-dat", "blush.dat: a measurement table"),
     ("material-is-prose", "notes.txt:1: not a JSON material file"),
+    ("material-is-a-lafortune-brdf", "mat.json: key 'model': a Lafortune BRDF (written by "
+                                     "jaxskin fit-brdf; it goes in material.brdf)"),
+    ("material-model-unknown", "key 'model': expected \"kubelka-munk\" (or no model key), "
+                               "got 'gaussian'"),
+    ("mesh-missing", "s.toml: key 'mesh.file': expected a built-in mesh (hand, "),
     ("cli-noise-zero", "argument --noise: expected a finite number > 0"),
     ("name-blank", "' ' starts or ends with a space"),
     ("out-newline", "-o: a folder to create must not contain control characters"),

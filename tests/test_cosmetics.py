@@ -343,3 +343,28 @@ def test_a_material_name_is_a_shipped_one_only_when_it_is_a_bare_name(tmp_path):
     leak.write_text("{}")
     climb = os.path.relpath(tmp_path / "leak", data_dir() / "materials")
     assert material_path(climb, tmp_path) == (tmp_path / climb).resolve() != leak
+
+
+def test_a_colour_thickness_map_is_read_as_its_mean_with_one_warning(tmp_path):
+    """A pure red PNG as a layer's `image` rendered at a third of the thickness without a
+    word (a trial): it is still read as the mean of R, G, B (as documented), and said once
+    per file; a grey image is read without a word."""
+    import warnings
+
+    import imageio.v3 as iio
+
+    from jaxskin import maps
+
+    red = np.zeros((5, 7, 3), np.uint8)
+    red[..., 0] = 255
+    iio.imwrite(tmp_path / "red.png", red)
+    iio.imwrite(tmp_path / "grey.png", np.full((5, 7, 3), 128, np.uint8))
+    with pytest.warns(UserWarning, match=r"red\.png: a colour image where a greyscale map is "
+                                         r"expected: read as the mean of R, G and B \(mean "
+                                         r"0\.333 of 1\)"):
+        grey = maps.read_grey(tmp_path / "red.png")
+    np.testing.assert_allclose(grey, 1.0 / 3.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        maps.read_grey(tmp_path / "red.png")  # said once
+        np.testing.assert_allclose(maps.read_grey(tmp_path / "grey.png"), 128 / 255)

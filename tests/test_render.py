@@ -370,6 +370,10 @@ def test_render_checks_missing_keys_ranges_lists_and_mixed_dtypes(x64):
             (h, "light.direction", [0.0, 0.0, 0.0], "expected a finite, non-zero 3-vector")):
         with pytest.raises(ValueError, match=rf"^params\['{re.escape(key)}'\]: {words}"):
             render.render(sc.config, sc.params | {key: jnp.asarray(value, jnp.float32)})
+    for value in (True, np.bool_(False)):  # True rendered as 1.0 (a trial)
+        with pytest.raises(ValueError, match=r"^params\['material.melanin'\]: expected a "
+                                             r"number, got (True|False)$"):
+            render.render(h.config, h.params | {"material.melanin": value})
     # at the ends of the range, and traced (unchecked): renders
     render.render(s.config, s.params | {"layer.blush.thickness_mm": 0.0})
     g = jax.grad(lambda t: render.render(s.config, s.params | {
