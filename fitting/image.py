@@ -481,7 +481,7 @@ def view_matrix(config) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     NumPy, once per configuration)."""
     p = render.prepare(config)
     a = p.arrays
-    pixel, texel, summed = pixel_entries(a["tex"], a["view_mask"], a["pad"],
+    pixel, texel, summed = pixel_entries(a["tex"], a["view_shaded"], a["pad"],
                                          np.asarray(a["mask"]).shape, p.view.wrap_x,
                                          config.supersample)
     keep = summed != 0

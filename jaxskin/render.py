@@ -101,18 +101,22 @@ def _prepare(config: SceneConfig) -> Prepared:
     s = texture.setup(config.texture)
     view = make_view(s.tmap, config.image, config.camera, config.supersample, config.fov,
                      config.rotate, config.image_height, config.zoom, config.center)
+    # view_mask: the samples that see the mesh (the alpha); view_shaded: of those, the ones
+    # that see a triangle's front (colour is sampled there; the inside of an open mesh,
+    # seen through its opening, is black: it was shaded as the outside, lit from the wrong
+    # side, a trial)
     arrays = {"normals": s.normals, "mask": s.mask, "tex": jnp.asarray(view.tex),
-              "view_mask": jnp.asarray(view.mask),
+              "view_mask": jnp.asarray(view.mask), "view_shaded": jnp.asarray(view.shaded),
               "pad": jnp.asarray(pad_index(s.tmap.raster.mask, s.tmap.wrap_x), jnp.int32)}
     # The view sampling's transpose as a table: reverse mode reads it instead of scattering.
     # The cosmetics model samples a colour that is linear all the way to the pixels: the
     # sampling and the averaging over supersamples as one map, a table each way (at
     # 1280x720 the render 152 → 146 ms, its gradient 384 → 344 ms: benchmarks/RESULTS.md).
     if config.spectral is not None and config.mode != "height":
-        tables = pixel_table(view.tex, view.mask, arrays["pad"], s.mask.shape, view.wrap_x,
+        tables = pixel_table(view.tex, view.shaded, arrays["pad"], s.mask.shape, view.wrap_x,
                              config.supersample)
     else:
-        tables = transpose_table(view.tex, view.mask, arrays["pad"], s.mask.shape,
+        tables = transpose_table(view.tex, view.shaded, arrays["pad"], s.mask.shape,
                                  view.wrap_x)
     arrays.update({k: jnp.asarray(v) for k, v in tables.items()})
     if config.needs_furrows:
@@ -361,11 +365,12 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
     # come in `arrays` (the editor compiles under a key config with another camera)
     p = prepare(config)
     mask, view_mask, k = arrays["mask"], arrays["view_mask"], config.supersample
+    shaded = arrays["view_shaded"]
 
     table = _view_table(arrays)
 
     def to_view(texture_image):  # bilinear samples at every (super)sample, padded texture
-        return sample_padded(texture_image, arrays["pad"], arrays["tex"], view_mask,
+        return sample_padded(texture_image, arrays["pad"], arrays["tex"], shaded,
                              p.view.wrap_x, table)
 
     if config.needs_furrows:
@@ -399,7 +404,7 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
                                  ambient, light)
         else:
             colour = lafortune.shade(params["material.lafortune"], N, L, V, ambient, light)
-        colour = jnp.where(view_mask[..., None], colour, 0.0)
+        colour = jnp.where(shaded[..., None], colour, 0.0)
     if config.mode == "height":
         return _finish(colour, view_mask, k, output, None)
     # Every material model gives linear sRGB on one scale (`shading.blinn`'s docstring):
@@ -429,7 +434,7 @@ def texture_to_view(config: SceneConfig, arrays: dict, texture_image):
     samples of the padded texture, averaged over each pixel's supersamples, `(H, W, C)`
     (0 where no sample sees the mesh); by `view.pixel_table` where `prepare` made one (the
     cosmetics model), else sampled, then averaged."""
-    vm, k = arrays["view_mask"], config.supersample
+    vm, k = arrays["view_shaded"], config.supersample
     if all(key in arrays for key in PIXEL_TABLE):
         return view_pixels(texture_image, [arrays[key] for key in PIXEL_TABLE],
                            (vm.shape[0] // k, vm.shape[1] // k))

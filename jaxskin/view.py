@@ -66,6 +66,15 @@ class View:
     # which centres the projected mesh: the optical axis meets the (unzoomed) image at pixel
     # (W/2 (1 + shift_x), H/2 (1 − shift_y)).
     shift: tuple = (0.0, 0.0)
+    # Samples that see the front of a triangle (its outward side faces the camera); the
+    # others look into an open mesh (through the wrist, the face's back) and are drawn
+    # black: the texture holds the outside's shading only. None: every sample in `mask`.
+    front: np.ndarray | None = None
+
+    @property
+    def shaded(self) -> np.ndarray:
+        """`mask` less the samples that see a triangle's back: where colour is sampled."""
+        return self.mask if self.front is None else self.mask & self.front
 
 
 def make_view(tmap: TextureMap, size: int, projection: str = "orthographic",
@@ -120,8 +129,17 @@ def make_view(tmap: TextureMap, size: int, projection: str = "orthographic",
         bary /= np.maximum(bary.sum(axis=-1, keepdims=True), 1e-300)
     corners = tmap.face_corners()  # (F, 3, 2) texture coordinates, unwrapped at the seam
     tex = np.einsum("hwk,hwkc->hwc", bary, corners[safe])
+    # The outward side faces the camera where the triangle's normal (right-hand rule, the
+    # mesh turned outward on loading) points to the eye: +z (orthographic), or toward the
+    # pinhole from the triangle.
+    a, b, c = (v[mesh.faces[:, i]] for i in range(3))
+    normal = np.cross(b - a, c - a)
+    toward = normal[:, 2] if eye is None else np.einsum("fk,fk->f", normal,
+                                                        eye - (a + b + c) / 3)
+    front = r.mask & (toward[safe] >= 0)
     return View(tex.astype(np.float32), r.mask, R, eye, tmap.wrap_x,
-                Raster(r.tri, bary.astype(np.float32)), xy, tuple(float(a) for a in shift))
+                Raster(r.tri, bary.astype(np.float32)), xy, tuple(float(a) for a in shift),
+                front)
 
 
 def _pinhole(c, focal: float, aspect: float):

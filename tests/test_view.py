@@ -138,3 +138,43 @@ def test_a_flat_mesh_facing_a_perspective_camera_fills_the_frame_as_orthographic
                                    atol=1e-6)
         np.testing.assert_allclose([y.min(), y.max()], [50 - 90 * 3 / 8, 50 + 90 * 3 / 8],
                                    atol=1e-6)
+
+
+def _sphere_with_a_hole(tmp_path):
+    """A sphere (radius 20 mm) with its cap toward the camera (+z) cut away, as a scene."""
+    import trimesh
+
+    s = trimesh.creation.icosphere(subdivisions=3, radius=20.0)
+    keep = s.triangles_center[:, 2] < 12.0
+    trimesh.Trimesh(s.vertices, s.faces[keep], process=False).export(tmp_path / "hole.obj")
+    (tmp_path / "hole.toml").write_text('[mesh]\nfile = "hole.obj"\nprojection = "planar"\n')
+    return tmp_path / "hole.toml"
+
+
+@pytest.mark.parametrize("model", ["blinn", "lafortune", "spectral"])
+def test_the_inside_of_an_open_mesh_is_black_whatever_the_light(tmp_path, model):
+    """Through an open mesh's opening the camera sees the back of triangles, whose texels
+    hold the outside's shading: the inside of a sphere with a hole was lit by a light
+    behind the sphere (0.60 where the light cannot reach, a trial) and flat under a light
+    from the camera. Those samples are now black, opaque (alpha 1), under either light;
+    the sphere's outside (the ring round the hole) is lit by the light from the camera."""
+    path = _sphere_with_a_hole(tmp_path)
+    common = ["texture.size=64", "camera.size=64", "camera.supersample=1",
+              f"material.model={model}", "light.ambient=0.2"]
+    behind = load_scene(path, [*common, "light.direction=[0, 0, -1]"])
+    front = load_scene(path, [*common, "light.direction=[0, 0, 1]"])
+    view = render.prepare(behind.config).view
+    inside = view.mask & ~view.front
+    assert inside.sum() > 400 and np.array_equal(view.shaded, view.mask & view.front)
+    for sc in (behind, front):
+        rgba = np.asarray(render.render(sc.config, sc.params, "linear_rgba"))
+        assert np.all(rgba[inside][:, :3] == 0.0) and np.all(rgba[inside][:, 3] == 1.0)
+    rgba = np.asarray(render.render(front.config, front.params, "linear_rgba"))
+    assert rgba[view.front][:, :3].mean() > 0.1  # measured 0.16 (Blinn)
+
+
+@pytest.mark.parametrize("scene", ["hand", "foot", "arm", "face"])
+def test_the_built_in_views_see_no_triangle_from_behind(scene):
+    """So the black inside changes none of them (their openings face away)."""
+    view = render.prepare(load_scene(scene, ["texture.size=128", "camera.size=96"]).config).view
+    assert view.mask.sum() > 1000 and np.array_equal(view.front, view.mask)

@@ -38,7 +38,7 @@ def texels_per_pixel(view, i: int, j: int, k: int) -> float:
     steps = []
     for di, dj in ((0, 1), (1, 0), (0, -1), (-1, 0)):
         a, b = i + di, j + dj
-        if 0 <= a < H and 0 <= b < W and view.mask[a, b]:
+        if 0 <= a < H and 0 <= b < W and view.shaded[a, b]:
             d = np.abs(view.tex[a, b] - view.tex[i, j])
             if d.max() < 8:  # not across a seam or a fold
                 steps.append(float(np.hypot(*d)))

@@ -549,7 +549,7 @@ class Session:
         shown = None
         for x, y in dabs:
             i, j = math.floor(y * k), math.floor(x * k)
-            if not (0 <= i < H and 0 <= j < W and view.mask[i, j]):
+            if not (0 <= i < H and 0 <= j < W and view.shaded[i, j]):
                 continue  # off the image (a drag that left the view: the page captures the
                 # pointer) or off the mesh; a stroke may go out and come back
             t = view.tex[i, j].astype(np.float64)
