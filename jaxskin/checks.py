@@ -145,6 +145,8 @@ def unused_overrides(sc, overrides) -> list[str]:
             continue
         if without.values.get(key) == sc.values.get(key):
             continue  # the scene's own value: nothing asked to change
+        if without.values.get(key) == "auto":  # the choice "auto" makes here: it is used
+            continue  # (wrinkles.method=sequential on a CPU was "not used", a trial)
         if without.config == sc.config and same(without.params, sc.params):
             out.append(item)
     return out

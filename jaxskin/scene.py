@@ -378,8 +378,12 @@ class Scene:
         # (its jit key) does not change with it, and `-D material.brdf=...` on a Blinn
         # scene is reported as changing nothing (`checks.unused_overrides`).
         brdf = v["material.brdf"] if v["material.model"] == "lafortune" else "skin"
+        # Likewise the field of view only where a perspective camera has one (-D camera.fov
+        # on an orthographic scene was the same image without a word, a trial).
+        fov = (v["camera.fov"] if v["camera.projection"] == "perspective"
+               else SCHEMA["camera.fov"].default)
         return SceneConfig(tex, v["material.model"], brdf, v["camera.projection"],
-                           v["camera.size"], v["camera.supersample"], v["camera.fov"],
+                           v["camera.size"], v["camera.supersample"], fov,
                            tuple(v["camera.rotate"]), v["view.mode"], spectral,
                            v["camera.height"],
                            tuple(v["light.direction"]) if v["light.shadows"] else None,

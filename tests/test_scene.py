@@ -220,6 +220,12 @@ def test_an_override_the_scene_does_not_use_is_found():
     assert unused("makeup", "layer.blush.thickness_mm=0.02", "camera.size=64") == []
     brdf = str(Path(__file__).resolve().parents[1] / "data" / "brdf" / "skin_samples.csv")
     assert unused("hand", f"material.brdf={brdf}") == [f"material.brdf={brdf}"]
+    # a trial: camera.fov on an orthographic scene gave the same image and no warning, and
+    # wrinkles.method=sequential was "not used" on a CPU, where auto picks it
+    assert unused("hand", "camera.fov=60") == ["camera.fov=60"]
+    assert unused("hand", "camera.fov=60", "camera.projection=perspective") == []
+    assert unused("hand", "wrinkles.method=sequential") == []
+    assert unused("hand", "wrinkles.method=parallel") == []
 
 
 def test_a_layers_material_is_set_with_D(tmp_path, monkeypatch):
