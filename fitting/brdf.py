@@ -59,6 +59,39 @@ def _direction(theta_deg, phi_deg):
     return np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1)
 
 
+def _nearest(cell: str) -> str:
+    """"(did you mean 'theta_in_deg'?)" for a column name close to one of the format's."""
+    import difflib
+
+    close = difflib.get_close_matches(cell, (*ANGLES, *VECTORS, *RGB, "weight"), n=1,
+                                      cutoff=0.6)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def _misspelt_header(path: Path):
+    """`(line, cell)` of the first header cell that is not a column name, where the first
+    row that is not a comment names columns (most of its cells are the format's names, or
+    close to them) but no row was taken as the header; else None."""
+    from jaxskin.formats import DELIMITERS, read_text
+
+    try:
+        lines = read_text(path).splitlines()
+    except InputError:
+        return None
+    names = (*ANGLES, *VECTORS, *RGB, "weight")
+    for number, raw in enumerate(lines, start=1):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        delimiter = max(DELIMITERS, key=line.count)
+        cells = [c.strip() for c in line.split(delimiter)]
+        near = [c for c in cells if c in names or _nearest(c)]
+        if len(cells) >= 4 and len(near) >= len(cells) - 1:
+            return number, next(c for c in cells if c not in names)
+        return None
+    return None
+
+
 def read_samples(path) -> BRDFSamples:
     """Read and check a BRDF sample CSV; `InputError` names the file, line and column."""
     try:
@@ -68,11 +101,17 @@ def read_samples(path) -> BRDFSamples:
             raise InputError("a table of spectra (a wavelength column), not BRDF samples: a "
                              "cosmetic's measurement goes to 'jaxskin calibrate', skin "
                              "spectra to 'jaxskin fit-skin'", path) from None
+        misspelt = _misspelt_header(Path(path))
+        if misspelt is not None:  # was "no header row" for a header with a typo (a trial)
+            line, cell = misspelt
+            raise InputError(f"unknown column{_nearest(cell)}; expected {_EXPECTED}", path,
+                             line, cell) from None
         raise
     names = set(t.header)
     unknown = [c for c in t.header if c not in {*ANGLES, *VECTORS, *RGB, "weight"}]
     if unknown:
-        raise t.error(f"unknown column; expected {_EXPECTED}", column=unknown[0])
+        raise t.error(f"unknown column{_nearest(unknown[0])}; expected {_EXPECTED}",
+                      column=unknown[0])
     for c in RGB:
         if c not in names:
             raise t.error(f"missing column {c}; expected {_EXPECTED}")

@@ -5,8 +5,8 @@ formula; the paper prints T1 R1 T1 where T1 R2 T1 is meant — see
 `shared/reference/constants.md`). S and K are per millimetre, thicknesses in millimetres.
 
 Every function is elementwise over broadcastable arrays of any shape, follows the dtype of
-its inputs (float32 at least: float16 and integers compute in float32), and is jit-, vmap- and grad-safe, including at the limits K → 0, S → 0, X → 0
-and X → ∞ (see `layer`).
+its inputs (float32 at least: float16 and integers compute in float32), and is jit-, vmap-
+and grad-safe, including at the limits K → 0, S → 0, X → 0 and X → ∞ (see `layer`).
 """
 
 from __future__ import annotations

@@ -5,11 +5,10 @@ optics modules never call: they receive its arrays."""
 
 from __future__ import annotations
 
-import warnings
-
 import os
 import struct
 import tempfile
+import warnings
 import zlib
 from pathlib import Path
 

@@ -291,6 +291,10 @@ CASES = {
         "fit-brdf", write(t, "samples.json", (ROOT / "data" / "brdf" / "skin_samples.csv")
                           .read_text()), "-o", str(t / "samples.json")],
     "fit-brdf-given-a-cosmetic": lambda t: ["fit-brdf", measurement(t), "-o", str(t / "f.json")],
+    # a typo in the first column said "no header row" (a trial)
+    "fit-brdf-header-typo": lambda t: ["fit-brdf", write(t, "typo.csv", (
+        ROOT / "data" / "brdf" / "skin_samples.csv").read_text().replace(
+        "theta_in_deg", "theta_in", 1)), "-o", str(t / "f.json")],
     "fit-brdf-out-not-json": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "r.png")],
     "fit-brdf-out-newline": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "a\nb.json")],
     "fit-brdf-out-under-file": lambda t: ["fit-brdf", brdf_csv(t), "-o",
@@ -420,6 +424,8 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
                                          "calibrate"),
     ("material-is-a-tab-measurement-as-dat", "blush.dat: a measurement table"),
     ("material-is-prose", "notes.txt:1: not a JSON material file"),
+    ("fit-brdf-header-typo", "typo.csv:2: column 'theta_in': unknown column (did you mean "
+                             "'theta_in_deg'?)"),
     ("material-is-a-lafortune-brdf", "mat.json: key 'model': a Lafortune BRDF (written by "
                                      "jaxskin fit-brdf; it goes in material.brdf)"),
     ("material-model-unknown", "key 'model': expected \"kubelka-munk\" (or no model key), "
