@@ -244,8 +244,6 @@ CASES = {
                                                                   "model": "lafortune"}),
     "material-model-unknown": lambda t: material(t, {**good_material(), "model": "gaussian"}),
     "material-missing": lambda t: layered(t, "nope.json"),
-    # said "nonexist.obj: no such mesh file", naming neither the scene nor the key (a trial)
-    "mesh-missing": lambda t: scene(t, '[mesh]\nfile = "nonexist.obj"\n'),
     "material-wavelength-um": lambda t: material(t, {**good_material(), "extrapolate": "hold",
                                                      "wavelength_nm": [
         w / 1000 for w in good_material()["wavelength_nm"]]}),
@@ -430,6 +428,7 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
                                      "jaxskin fit-brdf; it goes in material.brdf)"),
     ("material-model-unknown", "key 'model': expected \"kubelka-munk\" (or no model key), "
                                "got 'gaussian'"),
+    # said "nope.obj: no such mesh file", naming neither the scene nor the key (a trial)
     ("mesh-missing", "s.toml: key 'mesh.file': expected a built-in mesh (hand, "),
     ("cli-noise-zero", "argument --noise: expected a finite number > 0"),
     ("name-blank", "' ' starts or ends with a space"),
