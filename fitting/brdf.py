@@ -86,8 +86,9 @@ def _misspelt_header(path: Path):
         delimiter = max(DELIMITERS, key=line.count)
         cells = [c.strip() for c in line.split(delimiter)]
         near = [c for c in cells if c in names or _nearest(c)]
-        if len(cells) >= 4 and len(near) >= len(cells) - 1:
-            return number, next(c for c in cells if c not in names)
+        unknown = [c for c in cells if c not in names]
+        if len(cells) >= 4 and len(near) >= len(cells) - 1 and unknown:
+            return number, unknown[0]
         return None
     return None
 
@@ -96,12 +97,12 @@ def read_samples(path) -> BRDFSamples:
     """Read and check a BRDF sample CSV; `InputError` names the file, line and column."""
     try:
         t = read_table(path, lambda cell: cell in (*ANGLES, *VECTORS), _EXPECTED)
-    except InputError:
+    except InputError as e:
         if Path(path).is_file() and _is_measurement_table(Path(path)):
             raise InputError("a table of spectra (a wavelength column), not BRDF samples: a "
                              "cosmetic's measurement goes to 'jaxskin calibrate', skin "
                              "spectra to 'jaxskin fit-skin'", path) from None
-        misspelt = _misspelt_header(Path(path))
+        misspelt = _misspelt_header(Path(path)) if "no header row" in str(e) else None
         if misspelt is not None:  # was "no header row" for a header with a typo (a trial)
             line, cell = misspelt
             raise InputError(f"unknown column{_nearest(cell)}; expected {_EXPECTED}", path,

@@ -20,7 +20,8 @@ comes partly from its neighbours (bare skin beside a lipstick's edge), and unequ
 factors can take that light out of the gamut: at a strongly absorbing layer's edge, t ≈ 0
 for X and Z but not Y left red below 0 and green above (a trial found −0.05 red). There
 the result is moved toward the blurred light dimmed by t_Y alone, just far enough that no
-channel is negative (`_in_gamut`); nowhere else is it changed. Huang et al. blur "the
+channel is below 0, or below the texel's own light where a saturated stack makes that
+negative (`_in_gamut`); nowhere else is it changed. Huang et al. blur "the
 energy of light passing through the cosmetics" the same way, in RGB.
 
 Specular (§3.3): the skin's Kelemen highlight, then for each layer from the bottom up, the
@@ -110,18 +111,23 @@ def radiance(grid: Grid, N, L, V, ambient, light, skin_R, skin_roughness, skin_r
     t1 = jnp.where(ok, xyz_dta / jnp.where(ok, xyz_a, 1.0), -1.0)  # t − 1, in [−1, 0]
     out = blur(skin)
     rgb_to_xyz = jnp.asarray(np.linalg.inv(grid.xyz_to_rgb), dtype)
-    return (rgb_surface + _in_gamut(out + matmul(t1 * matmul(out, rgb_to_xyz), xyz_to_rgb),
-                                    (1.0 + t1[..., 1:2]) * out)) + h
+    x = out + matmul(t1 * matmul(out, rgb_to_xyz), xyz_to_rgb)
+    own = skin + E * matmul(xyz_dta, xyz_to_rgb)  # E rgb(T a): the texel's own, unblurred
+    return (rgb_surface + _in_gamut(x, (1.0 + t1[..., 1:2]) * out,
+                                    jnp.minimum(own, 0.0))) + h
 
 
-def _in_gamut(x, y):
+def _in_gamut(x, y, floor):
     """`x`, the light leaving through the layers after the blur, moved toward `y` (the blurred
     light dimmed by the luminance factor alone: ≥ 0 where the light that arrived is) just
-    far enough that no channel that is ≥ 0 in `y` is < 0: x + λ (y − x) with the least λ in
-    [0, 1]. Where x has no such channel (wherever the light is uniform, or nearly: every
-    pixel of the built-in scenes), x itself, exactly."""
-    bad = (x < 0) & (y > 0)
-    lam = jnp.where(bad, -x / jnp.where(bad, y - x, 1.0), 0.0)  # y − x > 0 where bad
+    far enough that no channel is below `floor` (0, or the texel's own light where that is
+    negative: a saturated spectrum's colour, which the factor gives exactly where the light
+    is uniform): x + λ (y − x) with the least λ in [0, 1]. Where no channel is below its
+    floor — wherever the light is uniform, and every pixel of the built-in scenes — x
+    itself (a floor of 0 alone moved the uniform light of saturated stacks too, and a
+    per-texel Gauss–Newton fit of three maps stalled at 25× its noise)."""
+    bad = (x < floor) & (y > floor)
+    lam = jnp.where(bad, (floor - x) / jnp.where(bad, y - x, 1.0), 0.0)  # y − x > 0 there
     return x + jnp.max(lam, axis=-1, keepdims=True) * (y - x)
 
 
