@@ -173,7 +173,15 @@ def fit_keys(scene: Scene, text: str, where: str = "--fit") -> tuple[FitKey, ...
             continue
         if key not in params:
             fittable = list(params) + list(maps)
-            if spec is not None and not spec.param:
+            layers = [layer.name for layer in scene.layers]
+            layer = key.split(".")[1] if key.startswith("layer.") and key.count(".") >= 2 \
+                else None
+            if layer is not None and layer not in layers:  # said "not used by this scene's
+                # material model" (a trial)
+                near = difflib.get_close_matches(key, fittable, n=1, cutoff=0.5)
+                why = (f"names no layer of this scene (its layers: {', '.join(layers) or 'none'})"
+                       + (f"; did you mean '{near[0]}'?" if near else ""))
+            elif spec is not None and not spec.param:
                 why = ("is not differentiable: it is static (it decides which stages run or "
                        "their sizes)")
             elif spec is not None:

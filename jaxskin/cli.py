@@ -305,7 +305,8 @@ def _parser() -> argparse.ArgumentParser:
                    "batches of 8 values by one compiled program (fewer are padded to 8: a "
                    "value's image has the same bytes in any sweep), e.g. --sweep "
                    "material.melanin=0:1:5; writes "
-                   "DIR/<scene>_sweep-<i>_<key>-<value>.png")
+                   "DIR/<scene>_sweep-<i>_<key>-<value>.png. One --sweep a command (a grid "
+                   "of two keys: one command per value of the second, with -D)")
     r.add_argument("-D", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene value, e.g. -D wrinkles.k_scale=1.3 or -D "
                    "layer.blush.material=foundation_dark (a shipped material or a calibrate "

@@ -95,7 +95,9 @@ class Session:
         self.timings: dict[str, float] = {}
         self._trusted: set[Path] = set()  # the files the command line's scene names
         self.written: list[Path] = []  # every file Save and uploads wrote (for the last line)
-        self.open(str(scene), {})
+        # the command line's scene from the working directory, as `render` reads it
+        # (`edit dir/s.toml -o out` looked for dir/dir/s.toml and out/dir/s.toml, a trial)
+        self.open(str(scene) if str(scene) in BUILTIN_SCENES else str(first.resolve()), {})
         self._trusted = set(_scene_files(self.scene).values())
 
     # --- opening and the document --------------------------------------------------------
@@ -310,6 +312,8 @@ class Session:
         if value in cosmetics.shipped_materials():
             return value
         path = self.confine(value, key, self.path.parent)
+        if not path.is_file():  # then each folder: an upload lands in the output folder
+            path = self.confine(value, key)  # (a trial: 'm.json' was not found there)
         if not path.is_file():
             raise EditorError(f"no material file {value!r} (shipped materials: "
                               f"{', '.join(cosmetics.shipped_materials())}; or a calibrated "
@@ -452,10 +456,9 @@ class Session:
                    and math.isfinite(v) for v in (x, y)):
             raise EditorError("expected pixel coordinates x, y (numbers)", 400)
         H, W = view.mask.shape
-        i, j = int(math.floor(y * k)), int(math.floor(x * k))
-        if not (0 <= i < H and 0 <= j < W):
+        if not (0 <= y * k < H and 0 <= x * k < W):  # before floor: 1e308 * k is inf (a 500)
             raise EditorError(f"pixel ({x}, {y}) is outside the {W // k}x{H // k} image", 400)
-        return i, j
+        return int(math.floor(y * k)), int(math.floor(x * k))
 
     def pick(self, x, y) -> dict:
         """The mesh vertex nearest to image pixel `(x, y)` (the triangle the view's raster
@@ -654,7 +657,9 @@ class Session:
                     cosmetics.check_material(probe)
                 else:
                     doc = tomllib.loads(toml_text(data, name))
-                    parse_scene(doc, target, allow=lambda k, f: self._allow(k, f, name))
+                    scene = parse_scene(doc, target, allow=lambda k, f: self._allow(k, f, name))
+                    check_name(scene.name, target)  # as render checks it (a trial: a
+                    # name = "../../x" was uploaded, and refused only by a later render)
             except InputError as e:
                 raise EditorError(f"{name}: {e.message}", 400, e.key) from None
             except (UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
