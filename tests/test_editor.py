@@ -379,9 +379,16 @@ def test_uploads_are_checked_bounded_and_kept_in_the_output_folder(session, fold
         r = await c.post("/api/set", json={"changes": {"layer.blush.material": path}})
         assert r.status == 200
         assert (await r.json())["layers"][0]["material"] == path
+        # by its bare name too (a trial: 'rouge.json' was "no material file" though the
+        # message named the output folder)
+        r = await c.post("/api/set", json={"changes": {"layer.blush.material": "rouge.json"}})
+        assert r.status == 200, await r.json()
+        assert (await r.json())["layers"][0]["material"] == path
         r = await c.post("/api/upload?name=scene2.toml", data=SCENE.encode())
         assert r.status == 200
         cases = [("../x.json", material, 400), ("x.exe", material, 400),
+                 # a scene whose name would write outside (render refused it only later)
+                 ("evil.toml", b'name = "../../evil"\n' + SCENE.encode(), 400),
                  ("bad.json", b'{"name": 1}', 400), ("bad.toml", b"[mesh\n", 400),
                  ("bad2.toml", b"[material]\nmodel = 'phong'\n", 400),
                  ("rouge.json", material + b" ", 409),
@@ -990,3 +997,19 @@ def test_save_names_files_and_far_points(tmp_path):
     from jaxskin.editor import brush
 
     assert len(brush.dabs([(0.0, 0.0), (1e12, 0.0)], 3.0)) == brush.MAX_DABS
+
+
+def test_a_relative_scene_path_with_a_folder_and_a_pick_far_outside(tmp_path, monkeypatch):
+    """`jaxskin edit scenes/tiny.toml -o out` looked for scenes/scenes/tiny.toml and
+    out/scenes/tiny.toml and refused (a trial): the command line's scene is read from the
+    working directory, as `render` reads it. A pick at x = 1e308 was a 500 (an overflow
+    in floor); it is a 400 naming the image's size."""
+    (tmp_path / "scenes").mkdir()
+    (tmp_path / "scenes" / "tiny.toml").write_text(SCENE)
+    monkeypatch.chdir(tmp_path)
+    s = Session("scenes/tiny.toml", "out")
+    assert s.path == tmp_path / "scenes" / "tiny.toml"
+    for x, y in ((1e308, 1e308), (-1e308, 2.0), (2.0, float(2 ** 70))):
+        with pytest.raises(EditorError, match=r"is outside the \d+x\d+ image") as e:
+            s.pick(x, y)
+        assert e.value.status == 400
