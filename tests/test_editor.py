@@ -388,7 +388,8 @@ def test_uploads_are_checked_bounded_and_kept_in_the_output_folder(session, fold
         assert r.status == 200
         cases = [("../x.json", material, 400), ("x.exe", material, 400),
                  # a scene whose name would write outside (render refused it only later)
-                 ("evil.toml", b'name = "../../evil"\n' + SCENE.encode(), 400),
+                 ("evil.toml", SCENE.replace('name = "tiny"', 'name = "../../evil"')
+                  .encode(), 400),
                  ("bad.json", b'{"name": 1}', 400), ("bad.toml", b"[mesh\n", 400),
                  ("bad2.toml", b"[material]\nmodel = 'phong'\n", 400),
                  ("rouge.json", material + b" ", 409),
@@ -396,6 +397,8 @@ def test_uploads_are_checked_bounded_and_kept_in_the_output_folder(session, fold
         for name, data, status in cases:
             r = await c.post(f"/api/upload?name={name}", data=data)
             assert r.status == status and "error" in await r.json(), name
+            if name == "evil.toml":
+                assert "an output name must be one plain file name" in (await r.json())["error"]
         assert not (folder / "out" / "bad.json").exists()
         assert not (folder / "x.json").exists()
     serve(session, body)
