@@ -873,6 +873,9 @@ def write_report(result: ImageFit, target, w, maps: dict, path, title: str = "")
     fig.colorbar(im, ax=axes[0, 2], shrink=0.8)
     ax = axes[0, 3]
     ax.semilogy(np.arange(1, len(result.history) + 1), result.history)
+    finite = [v for v in result.history if np.isfinite(v) and v > 0]
+    if finite and max(finite) < 10 * min(finite):  # at least a decade shown: a flat loss
+        ax.set_ylim(min(finite) / 4, max(finite) * 4)  # had every tick "4.52176×10⁻⁴" (a trial)
     ax.set_xlabel("step")
     ax.set_ylabel("loss")
     ax.set_title("loss")
