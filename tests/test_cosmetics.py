@@ -368,3 +368,11 @@ def test_a_colour_thickness_map_is_read_as_its_mean_with_one_warning(tmp_path):
         warnings.simplefilter("error")
         maps.read_grey(tmp_path / "red.png")  # said once
         np.testing.assert_allclose(maps.read_grey(tmp_path / "grey.png"), 128 / 255)
+
+
+def test_blur_names_a_wrong_shape():
+    """An image without its channel axis was a broadcasting TypeError (a trial)."""
+    with pytest.raises(ValueError, match=r"irradiance must be \(H, W, 3\)"):
+        sss.blur(jnp.ones((8, 8)), 0.1)
+    with pytest.raises(ValueError, match=r"mask \(4, 4\) must be the image's"):
+        sss.blur(jnp.ones((8, 8, 3)), 0.1, mask=jnp.ones((4, 4)))

@@ -273,3 +273,23 @@ def test_a_stack_laid_out_texels_first_is_warned_about():
     with pytest.warns(UserWarning, match=r"km.stack: 108 layers along the leading axis "
                                          r"\(shape \(108, 3\)\).*wants .T"):
         km.stack(R.T, T.T)
+
+
+def test_float64_tiny_k_and_huge_thickness_takes_the_right_branch(x64):
+    """X was clamped to 1e15 for the branch test in float64 too: at K = 1e-40, X = 1e20
+    (z ~ 1.4) the series branch gave T = 1.0e-20 for 7.3e-21 (a trial, against mpmath)."""
+    R, T = km.layer(*f64(1.0, 1e-40, 1e20))
+    R_ref, T_ref = reference_layer(1.0, 1e-40, 1e20)
+    assert float(T) == pytest.approx(float(T_ref), rel=1e-12)  # measured 7.3e-21 both
+    assert float(R) == pytest.approx(float(R_ref), rel=1e-12)
+
+
+@pytest.mark.parametrize("call, words", [
+    (lambda: km.stack(jnp.zeros((0, 3)), jnp.zeros((0, 3))), "at least one layer"),
+    (lambda: km.stack(0.2, 0.3), "at least one layer"),
+    (lambda: km.compose((0.2,), (0.1, 0.2)), r"a layer is \(R, T\) or \(R, T, R_back\), got 1"),
+])
+def test_malformed_stacks_are_named(call, words):
+    """Were an IndexError, a tuple index error and an unpacking error (a trial)."""
+    with pytest.raises(ValueError, match=words):
+        call()

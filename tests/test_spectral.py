@@ -71,3 +71,29 @@ def test_resample_onto_grid():
     wl = np.arange(379.0, 782.0, 3.0)
     out = spectral.resample(2.0 * wl, wl, grid)
     np.testing.assert_allclose(out, 2.0 * grid.wavelengths)
+
+
+def test_resample_reads_descending_wavelengths_and_refuses_others():
+    """Wavelengths long ones first gave [1, 0, 0, …] for a ramp (np.interp wants them
+    increasing; a trial): read in increasing order; a shuffled order, a length other than
+    the values' and NaN are refused."""
+    grid = spectral.Grid(step=10)
+    np.testing.assert_allclose(spectral.resample([1.0, 0.0], [780.0, 380.0], grid),
+                               (grid.wavelengths - 380.0) / 400.0, atol=1e-15)
+    for values, wl in (([1.0, 0.0, 2.0], [380.0, 780.0, 500.0]), ([1.0, 0.0], [380.0]),
+                       ([1.0, 0.0], [380.0, np.nan])):
+        with pytest.raises(ValueError, match="resample"):
+            spectral.resample(values, wl, grid)
+
+
+def test_grid_takes_whole_floats_and_the_conversions_check_the_bands():
+    """Grid(step=5.0) failed deep in arange; 40 bands on a 41-band grid was a dot_general
+    TypeError (a trial)."""
+    assert spectral.Grid(step=5.0) == spectral.Grid(step=5)
+    assert hash(spectral.Grid(step=10.0)) == hash(spectral.Grid(step=10))
+    for bad in (5.5, "5", True, float("nan")):
+        with pytest.raises(ValueError, match="whole number of nm"):
+            spectral.Grid(step=bad)
+    for convert in (spectral.to_rgb, spectral.to_xyz):
+        with pytest.raises(ValueError, match=r"spectra of shape \(40,\) on a grid of 41 bands"):
+            convert(np.ones(40), spectral.Grid(step=10))
