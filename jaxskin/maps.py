@@ -42,12 +42,31 @@ def write_image(image, path, bits: int = 8) -> None:
 
 
 def image_bytes(image, bits: int = 8) -> bytes:
-    """The PNG file `write_image` writes, as bytes (the editor sends these to the page)."""
+    """The PNG file `write_image` writes, as bytes (the editor sends these to the page),
+    tagged sRGB (`_srgb`): its values are display values."""
     if bits not in (8, 16):
         raise ValueError(f"bits must be 8 or 16, got {bits}")
     if bits == 8:
-        return png_bytes(quantize(image, 8))
-    return png16_bytes(quantize(image, 16))
+        return _srgb(png_bytes(quantize(image, 8)))
+    return _srgb(png16_bytes(quantize(image, 16)))
+
+
+def _srgb(png: bytes) -> bytes:
+    """`png` with an sRGB chunk (rendering intent 0, perceptual) and the gAMA chunk PNG 1.2
+    pairs with it (1/2.2, for decoders without sRGB) right after IHDR: a render's values
+    are sRGB-encoded, and untagged a colour-managed viewer had to guess (a trial). Maps
+    that hold data (heights, normals, thickness) stay untagged."""
+    at = 8 + 25  # the signature, then IHDR: length, type, 13 bytes, CRC
+    if png[12:16] != b"IHDR":
+        raise ValueError("not a PNG with IHDR first")
+    return (png[:at] + _chunk(b"sRGB", b"\x00") + _chunk(b"gAMA", struct.pack(">I", 45455))
+            + png[at:])
+
+
+def _chunk(kind: bytes, body: bytes) -> bytes:
+    """One PNG chunk: length, type, body, CRC of type and body."""
+    crc = zlib.crc32(kind + body) & 0xFFFFFFFF
+    return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", crc)
 
 
 def quantize(image, bits: int = 8) -> np.ndarray:
@@ -68,13 +87,9 @@ def png16_bytes(image) -> bytes:
     rows = image.astype(">u2").reshape(H, W * C).view(np.uint8)
     data = np.concatenate([np.zeros((H, 1), np.uint8), rows], axis=1).tobytes()
 
-    def chunk(kind: bytes, body: bytes) -> bytes:
-        crc = zlib.crc32(kind + body) & 0xFFFFFFFF
-        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", crc)
-
     header = struct.pack(">IIBBBBB", W, H, 16, colour_type, 0, 0, 0)
-    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(data, 6))
-            + chunk(b"IEND", b""))
+    return (b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", header)
+            + _chunk(b"IDAT", zlib.compress(data, 6)) + _chunk(b"IEND", b""))
 
 
 def png16_colour(data: bytes) -> np.ndarray | None:

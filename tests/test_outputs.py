@@ -297,3 +297,26 @@ def test_a_long_scene_name_gives_way_to_the_digest_or_names_the_scene(tmp_path, 
     assert err.startswith(f"jaxskin: error: {tmp_path / 'long.toml'}: key 'name': the scene's "
                           "name is 199 characters; with what this run adds"), err
     assert len(err.splitlines()) == 1 and not (tmp_path / "p").exists()
+
+
+def test_renders_are_tagged_srgb_and_data_maps_are_not(tmp_path):
+    """A render's PNG held sRGB-encoded values without saying so (a trial): it now has an
+    sRGB chunk (perceptual intent) and PNG 1.2's gAMA of 1/2.2 right after IHDR, 8 and 16
+    bits, with the same samples; a height or thickness map (data, not colour) has neither."""
+    import io
+
+    from PIL import Image
+
+    image = np.random.default_rng(0).uniform(0, 1, (5, 7, 3))
+    for bits in (8, 16):
+        data = maps.image_bytes(image, bits)
+        assert data[33:41] == b"\x00\x00\x00\x01sRGB" and data[46:54] == b"\x00\x00\x00\x04gAMA"
+        info = Image.open(io.BytesIO(data)).info
+        assert info["srgb"] == 0 and info["gamma"] == pytest.approx(0.45455)
+        samples = iio.imread(data) if bits == 8 else maps.png16_colour(data)
+        assert np.array_equal(samples, maps.quantize(image, bits))
+    maps.write_height(np.full((4, 4), 0.5), tmp_path / "h.png")
+    maps.write_grey16(np.full((4, 4), 0.5), tmp_path / "t.png")
+    for name in ("h.png", "t.png"):
+        data = (tmp_path / name).read_bytes()
+        assert b"sRGB" not in data and b"gAMA" not in data
