@@ -293,6 +293,11 @@ CASES = {
     "fit-brdf-header-typo": lambda t: ["fit-brdf", write(t, "typo.csv", (
         ROOT / "data" / "brdf" / "skin_samples.csv").read_text().replace(
         "theta_in_deg", "theta_in", 1)), "-o", str(t / "f.json")],
+    # the same in a Windows export: semicolons, a quoted cell, cp1252 (µ) in a comment
+    "fit-brdf-header-typo-windows": lambda t: ["fit-brdf", write(t, "typo.csv", (
+        "# probe \u00b5-goniometer\n" + (ROOT / "data" / "brdf" / "skin_samples.csv")
+        .read_text().replace("theta_in_deg", "theta_in", 1).replace(",", ";")
+        .replace(";R;", ';"R";', 1)).encode("cp1252")), "-o", str(t / "f.json")],
     "fit-brdf-out-not-json": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "r.png")],
     "fit-brdf-out-newline": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "a\nb.json")],
     "fit-brdf-out-under-file": lambda t: ["fit-brdf", brdf_csv(t), "-o",
@@ -424,6 +429,8 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
     ("material-is-prose", "notes.txt:1: not a JSON material file"),
     ("fit-brdf-header-typo", "typo.csv:2: column 'theta_in': unknown column (did you mean "
                              "'theta_in_deg'?)"),
+    ("fit-brdf-header-typo-windows", "typo.csv:3: column 'theta_in': unknown column (did "
+                                     "you mean 'theta_in_deg'?)"),
     ("material-is-a-lafortune-brdf", "mat.json: key 'model': a Lafortune BRDF (written by "
                                      "jaxskin fit-brdf; it goes in material.brdf)"),
     ("material-model-unknown", "key 'model': expected \"kubelka-munk\" (or no model key), "
