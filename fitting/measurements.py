@@ -24,6 +24,7 @@ Anything else is an `InputError` naming the file, the line and the column.
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import fnmatch
 import math
@@ -32,7 +33,13 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxskin.formats import PERCENT_MEDIAN, WAVELENGTH_RANGE_NM, check_percent, read_table
+from jaxskin.formats import (
+    DECIMAL_COMMA_NOTE,
+    PERCENT_MEDIAN,
+    WAVELENGTH_RANGE_NM,
+    check_percent,
+    read_table,
+)
 from jaxskin.io import InputError
 from jaxskin.outputs import MAX_NAME
 
@@ -48,6 +55,12 @@ _WAVELENGTH = re.compile(
     r"\s*[)\]]?)?|nm")
 _NAME = re.compile(r"[\w.+-]+")  # a material name (it names the output files)
 MAX_THICKNESS_MM = 100.0  # a cosmetic layer is µm to a few mm; beyond this it is a typo
+# Reflectances down to this below 0 are a dark-corrected instrument's noise: read as 0,
+# with a note (a black card's reading of -0.0004 refused the whole file; a trial).
+NEGATIVE_NOISE = 0.005
+# Thin-layer thicknesses outside this are named in a note: cosmetic films are µm to a
+# tenth of a mm; R_3mm for R_3um fits as well with S, K 1000× too small (a trial).
+USUAL_THICKNESS_MM = (1e-4, 1.0)
 MAX_RADIANCE = 1e30  # any unit of radiance or counts; beyond this it is an overflow
 
 
@@ -135,9 +148,14 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
         seen["ignored"] = ignored
         return ignored
 
-    table = read_table(path, is_wavelength_column, "wavelength_nm,R_<X>mm,...,R_inf,R_g",
-                       min_rows=2, other_column=_is_reading,
-                       once=("name", "thickness_mm", "ignore"), on_header=on_header)
+    try:
+        table = read_table(path, is_wavelength_column, "wavelength_nm,R_<X>mm,...,R_inf,R_g",
+                           min_rows=2, other_column=_is_reading,
+                           once=("name", "thickness_mm", "ignore"), on_header=on_header)
+    except InputError as e:
+        if "no header row" in str(e) and (layout := _other_layout(path)) is not None:
+            raise InputError(layout[1], path, layout[0]) from None
+        raise
     meta, header, header_line = table.meta, table.header, table.header_line
     comment_thickness, columns, ignored = seen["comment"], seen["columns"], seen["ignored"]
     data, numbers = table.data, table.lines
@@ -146,11 +164,19 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
         data, numbers = data[::-1], list(numbers)[::-1]
 
     wl, notes = _wavelengths_nm(data[:, 0], header[0], path, numbers)
+    if table.decimal_comma:
+        notes.append(f"{path}: {DECIMAL_COMMA_NOTE}")
     if ignored:
         notes.append(f"{path}: ignored column{'s' if len(ignored) > 1 else ''} "
                      + ", ".join(ignored))
     if descending:
         notes.append(f"{path}: wavelengths descend: read in increasing order")
+    lo, hi = USUAL_THICKNESS_MM
+    for name, (kind, x) in columns.items():
+        if kind == "thin" and not lo <= x <= hi:
+            notes.append(f"{path}: column '{name}': a {x:g} mm film; cosmetic films are "
+                         f"{lo * 1000:g} µm to {hi:g} mm thick, and S, K scale as 1 / "
+                         f"thickness: {'µm (R_<X>um)' if x > hi else 'mm'} meant?")
     if comment_thickness is not None:  # said, so not dropped in silence
         value, number = meta["thickness_mm"]
         said = f"{path}:{number}: '# thickness_mm: {value}'"
@@ -172,15 +198,54 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
     if not name:
         name = _name_from_stem(path, notes)
     elif not _NAME.fullmatch(name):
+        safe = re.sub(r"[^\w.+-]+", "_", name.lower()).strip("_.+-")
+        hint = f", e.g. '# name: {safe}'" if safe else ""
         raise InputError(
-            f"name {name!r} must be letters, digits, '.', '_', '+' or '-' (it names files)",
-            path, line,
+            f"name {name!r} must be letters, digits, '.', '_', '+' or '-' (it names "
+            f"files){hint}", path, line,
         )
     return Measurement(
         path=path, name=name, wavelength_nm=wl, thickness_mm=np.array([x for x, _ in thin]),
         R=R, R_inf=R_inf, R_g=R_g, columns=tuple(n for _, n in thin), header_line=header_line,
         notes=tuple(notes),
     )
+
+
+_WAVELENGTH_CELL = re.compile(r"(?i)\d+(?:\.\d+)?\s*(?:nm)?")
+
+
+def _other_layout(path):
+    """`(line, message)` when a table with no header row is laid out in a way the format
+    is not: wavelengths along a row (one row per sample, as some instruments export), or
+    the wavelength column after another (a sample name first); else None."""
+    from jaxskin.formats import DELIMITERS, _split, read_text
+
+    try:
+        lines = read_text(path, fallback="cp1252").splitlines()
+    except InputError:
+        return None
+    for number, raw in enumerate(lines, start=1):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        try:
+            cells = max((_split(line, d) for d in DELIMITERS), key=len)
+        except csv.Error:
+            return None
+        along = [c for c in cells[1:] if _WAVELENGTH_CELL.fullmatch(c)
+                 and 200 <= float(c.lower().removesuffix("nm")) <= 3000]
+        if len(cells) >= 5 and len(along) >= 0.8 * (len(cells) - 1):
+            return number, (f"wavelengths run along this row ({cells[1]}, {cells[2]}, ...: "
+                            "one row per reading): the format has them down the first "
+                            "column, one column per reading; transpose the table (in a "
+                            "spreadsheet: copy, then paste special > transpose)")
+        later = [c for c in cells[1:] if is_wavelength_column(c)]
+        if later and any(_is_reading(c) for c in cells):
+            before = cells[:cells.index(later[0])]
+            return number, (f"the wavelength column '{later[0]}' is not the first: move it "
+                            f"first, or delete the column{'s' if len(before) > 1 else ''} "
+                            f"before it ({', '.join(repr(c) for c in before)})")
+    return None
 
 
 def _name_from_stem(path, notes) -> str:
@@ -267,8 +332,10 @@ def _positive(value, path, line, column, scale=1.0) -> float:
 def _canonical(name: str) -> str:
     """A reading column's name in the format's spelling: spaces as `_` (`R 0.05 mm` →
     `R_0.05_mm`), `E_R_…` as `E_…`, `∞` as `inf`."""
-    short = re.sub(r"\s+", "_", name.strip()).replace("∞", "inf")
-    return "E_" + short[4:] if short.startswith("E_R_") else short
+    short = re.sub(r"\s*[(\[]\s*%\s*[)\]]$|\s*%$", "", name.strip())  # "R_inf (%)"
+    short = re.sub(r"\s+", "_", short).replace("∞", "inf")
+    short = "E_" + short[4:] if short.startswith("E_R_") else short
+    return {"Rinf": "R_inf", "Rg": "R_g", "Einf": "E_inf", "Eg": "E_g"}.get(short, short)
 
 
 def _classify(header, path, line, bare_thickness):
@@ -356,12 +423,19 @@ def _reflectances(data, header, columns, path, numbers, percent, notes):
         else:
             what, scale = "reflectance must be in [0, 1]", 1.0
         values = values / scale
+        noise = (values < 0) & (values >= -NEGATIVE_NOISE)
+        if noise.any():  # a dark-corrected reading of a black card: noise about 0
+            notes.append(f"{path}: column '{name}': {int(noise.sum())} reading"
+                         f"{'s' if noise.sum() > 1 else ''} below 0 (down to "
+                         f"{values[noise].min() * scale:g}, within the "
+                         f"{NEGATIVE_NOISE * scale:g} of noise) read as 0")
+            values = np.where(noise, 0.0, values)
         bad = np.flatnonzero((values < 0) | (values > 1))
         if bad.size:
             hint = "" if percent or _is_radiance(name) else " (percent data? use --percent)"
             if values[bad[0]] < 0:  # the percent hint was wrong for a reading of -0.0012
-                hint = (" (a dark-corrected reading below 0? reflectances cannot be "
-                        "negative: set it to 0 in the file)")
+                hint = (f" (below the -{NEGATIVE_NOISE * scale:g} read as noise: "
+                        "reflectances cannot be negative)")
             raise InputError(f"{what}, got {values[bad[0]] * scale:g}{hint}",
                              path, numbers[bad[0]], name)
         out[name if kind == "thin" else kind] = values

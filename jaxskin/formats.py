@@ -46,8 +46,9 @@ DELIMITERS = (",", "\t", ";")
 MAX_BYTES = 256 * 2**20  # a spectrum at 0.01 nm with 50 columns is ~40 MB
 WAVELENGTH_RANGE_NM = (200.0, 3000.0)  # what a spectroradiometer can measure, generously
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
-_DECIMAL_COMMA = re.compile(r"[+-]?\d+,\d+")
+_DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+(?:[eE][+-]?\d+)?")
 _NAMES = {"\t": "tab", ",": "comma", ";": "semicolon"}
+DECIMAL_COMMA_NOTE = "numbers with a decimal comma (18,65) read as 18.65"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,6 +64,7 @@ class Table:
     lines: list[int]
     meta: dict[str, tuple[str, int]]
     delimiter: str = ","
+    decimal_comma: bool = False  # numbers written with a decimal comma were read
 
     def column(self, name: str) -> np.ndarray:
         """The values of the column named `name`, `(rows,)`."""
@@ -214,6 +216,7 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
     kept = [c for c, name in enumerate(header) if name not in skipped]
 
     rows, numbers = [], []
+    decimal_comma = False
     for number, raw in enumerate(lines[header_line:], start=header_line + 1):
         line = raw.strip()
         if not line or line.startswith("#"):
@@ -222,7 +225,14 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
             cells = _split(line, delimiter)
         except csv.Error as e:
             raise InputError(f"not CSV ({e})", path, number) from None
+        if all(c == "" for c in cells):  # a spreadsheet's empty row: ",,,,"
+            continue
         if len(cells) != len(header):
+            if not _NUMBER.fullmatch(cells[0]) and not _DECIMAL_COMMA.fullmatch(cells[0]):
+                shown = line if len(line) <= 40 else line[:37] + "..."
+                raise InputError(f"a row that is not data ({shown!r}) after the table: "
+                                 "delete it, or start it with '#' to make it a comment",
+                                 path, number)
             others = [_NAMES[d] for d in DELIMITERS if d != delimiter and d in line]
             hint = (f" (the header is {_NAMES[delimiter]}-separated; this row has "
                     f"{' and '.join(others)}s)") if others else ""
@@ -231,6 +241,11 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
                                  header[len(cells)])
             raise InputError(f"{len(cells)} cells where the header has {len(header)}{hint}",
                              path, number)
+        if delimiter != ",":  # then 18,65 can only be a decimal comma (Excel in Europe)
+            for c in kept:
+                if _DECIMAL_COMMA.fullmatch(cells[c]):
+                    cells[c] = cells[c].replace(",", ".")
+                    decimal_comma = True
         rows.append([_number(cells[c], path, number, header[c]) for c in kept])
         numbers.append(number)
     if len(rows) < min_rows:
@@ -239,7 +254,7 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
                          header_line)
     header = [header[c] for c in kept]
     data = np.asarray(rows, np.float64).reshape(len(rows), len(header))
-    return Table(path, header, header_line, data, numbers, meta, delimiter)
+    return Table(path, header, header_line, data, numbers, meta, delimiter, decimal_comma)
 
 
 def _number(cell: str, path, line: int, column: str) -> float:
@@ -247,8 +262,13 @@ def _number(cell: str, path, line: int, column: str) -> float:
     if not _NUMBER.fullmatch(cell):
         shown = cell if len(cell) <= 40 else cell[:37] + "..."
         if _DECIMAL_COMMA.fullmatch(cell):
-            raise InputError(f"expected a number with a decimal point, got {shown!r} (decimal "
-                             "commas are not read; export with '.' as the decimal mark)",
+            raise InputError(f"expected a number with a decimal point, got {shown!r} (in a "
+                             "comma-separated file a decimal comma cannot be told from a "
+                             "column break: export with '.' as the decimal mark, or with "
+                             "';' or tabs between columns)", path, line, column)
+        if cell.endswith("%") and _NUMBER.fullmatch(cell[:-1].strip()):
+            raise InputError(f"expected a number, got {shown!r}: write percent without the "
+                             "'%' sign (percent readings are recognised, or pass --percent)",
                              path, line, column)
         if cell.lower().lstrip("+-") in ("nan", "inf", "infinity"):
             raise InputError(f"expected a finite number, got {shown!r}", path, line, column)
@@ -492,6 +512,7 @@ def read_spectra(path, percent: bool | None = False, notes: list | None = None
         if cells and cells[0].strip().lower() in _WAVELENGTH_NAMES:
             header_at = i
             break
+    t = None
     if header_at is not None and "Average" in _split(lines[header_at], ","):
         header = _split(lines[header_at], ",")
         above = next((_split(lines[j], ",") for j in range(header_at - 1, -1, -1)
@@ -526,6 +547,8 @@ def read_spectra(path, percent: bool | None = False, notes: list | None = None
         names, wavelengths, R = t.header[1:], t.data[:, 0], t.data[:, 1:].T
         header_line, line_of, wl_name = t.header_line, t.lines, t.header[0]
     notes = [] if notes is None else notes
+    if t is not None and t.decimal_comma:
+        notes.append(f"{path}: {DECIMAL_COMMA_NOTE}")
     if len(wavelengths) > 1 and np.all(np.diff(wavelengths) < 0):  # long ones first
         wavelengths, R = wavelengths[::-1], R[:, ::-1]
         line_of = None if line_of is None else list(line_of)[::-1]

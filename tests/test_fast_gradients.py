@@ -30,6 +30,7 @@ def _spectral_inputs(point, per_texel_skin, P=40, L=4, seed=0):
         X[1, 5:9] = 10.0  # opaque
         X[2, 9:12] = 1e-7
         X[:, 12:14] = 0.0  # no layer at all
+        X[L - 1, 16:] = 0.0  # absent from whole chunks of 16: its S, K sums skipped there
         K[2, :4] = 0.0
         S[0, :3] = 0.0
         K[0, 4:6] = 1e-9

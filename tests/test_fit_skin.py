@@ -180,7 +180,7 @@ def _good_rows(lo=380, hi=780, step=10, value="0.4"):
 
 BAD = [
     ("missing", None, [], "no such file"),
-    ("decimal comma", "wavelength_nm;a\n400;0,4\n", [], "decimal point"),
+    ("decimal comma", 'wavelength_nm,a\n400,"0,4"\n', [], "decimal point"),
     # percent is guessed from the median (45 is read as 0.45); above 1 with a median of
     # fractions, the flag is named
     ("percent among fractions", "wavelength_nm,a,b\n"

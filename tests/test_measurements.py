@@ -326,15 +326,25 @@ def test_descending_wavelengths_are_read_in_order_and_a_negative_reading_is_name
     np.testing.assert_array_equal(down.R_inf, up.R_inf)
     assert any("wavelengths descend" in n for n in down.notes)
     with pytest.raises(InputError, match=r"bad.csv:3: column 'R_g': reflectance must be in "
-                                         r"\[0, 1\], got -0.0012 \(a dark-corrected reading"):
+                                         r"\[0, 1\], got -0.012 \(below the -0.005 read as "
+                                         r"noise: reflectances cannot be negative\)"):
         read_measurement(write(tmp_path, GOOD.replace("400,0.30,0.40,0.45,0.04",
-                                                      "400,0.30,0.40,0.45,-0.0012"), "bad.csv"))
+                                                      "400,0.30,0.40,0.45,-0.012"), "bad.csv"))
+    # a black card's dark-corrected noise, -0.0012 and -0.005, is read as 0 with a note (it
+    # refused the whole file; a trial); in percent the same margin is 0.5
+    noisy = read_measurement(write(tmp_path, GOOD.replace("0.04\n410", "-0.0012\n410")
+                                   .replace("0.04\n420", "-0.005\n420"), "noisy.csv"))
+    np.testing.assert_array_equal(noisy.R_g, [0.0, 0.0, 0.04])
+    assert any("column 'R_g': 2 readings below 0 (down to -0.005, within the 0.005 of noise) "
+               "read as 0" in n for n in noisy.notes), noisy.notes
 
 
 @pytest.mark.parametrize("header", [
     "wavelength_nm,R_50um,R_150µm,R inf,R_g",        # micrometres, a space
     "wavelength_nm,R 0.05 mm,R_0.15_mm,R_∞,R_g",     # spaces, underscores, ∞
     "wavelength_nm,R0.05mm,R_0.15mm,R_inf,R_g",      # no separator
+    "wavelength_nm,R_0.05mm (%),R_0.15mm [%],R∞,Rg",  # a unit after the name; R∞, Rg
+    "wavelength_nm,R_0.05mm %,R_0.15mm,Rinf,R_g %",
 ])
 def test_other_spellings_of_the_columns_read_like_the_format(tmp_path, header):
     """`R_3um`, `R 0.05 mm` and the like were 'unknown column' (a trial): they are the
@@ -390,3 +400,73 @@ def test_fit_skin_reads_percent_spectra_with_a_note(tmp_path):
     (tmp_path / "f.csv").write_text("wavelength_nm,a\n400,0.9\n500,1.4\n600,1.2\n")
     with pytest.raises(InputError, match=r"got 1.4 at 500 nm"):  # median 1.2: not guessed
         read_spectra(tmp_path / "f.csv", percent=None)
+
+
+def test_spreadsheet_exports_decimal_commas_empty_rows_and_a_footer(tmp_path):
+    """European Excel exports: decimal commas where ';' or tabs separate the columns (then
+    they cannot be a column break) read as points, with a note; rows of bare delimiters
+    (",,,,") skipped like blank lines; a footer line after the data named as one (it was
+    "1 cells where the header has 5"). A decimal comma in a comma-separated file stays an
+    error (a trial: all three refused the whole file)."""
+    plain = read_measurement(write(tmp_path, GOOD, "plain.csv"))
+    for sep in (";", "\t"):
+        head, rows = GOOD.split("R_g\n")
+        text = (head.replace(",", sep) + "R_g\n" + rows.replace(",", sep).replace(".", ",")
+                + sep * 4 + "\n" + sep * 4 + "\n")
+        m = read_measurement(write(tmp_path, text, "eu.csv"))
+        for a in ("R", "R_inf", "R_g", "thickness_mm", "wavelength_nm"):
+            np.testing.assert_array_equal(getattr(m, a), getattr(plain, a))
+        assert any("decimal comma (18,65) read as 18.65" in n for n in m.notes), m.notes
+    assert not any("decimal comma" in n for n in plain.notes)
+    empty_rows = read_measurement(write(tmp_path, GOOD + ",,,,\n,,,,\n", "rows.csv"))
+    np.testing.assert_array_equal(empty_rows.R, plain.R)
+    with pytest.raises(InputError, match=r"foot.csv:6: a row that is not data \('End of "
+                                         r"data'\) after the table: delete it, or start it "
+                                         r"with '#'"):
+        read_measurement(write(tmp_path, GOOD + "End of data\n", "foot.csv"))
+    with pytest.raises(InputError, match=r"column 'R_inf': expected a number with a decimal "
+                                         r"point, got '0,45' \(in a comma-separated file"):
+        read_measurement(write(tmp_path, GOOD.replace("0.45", '"0,45"'), "c.csv"))
+    with pytest.raises(InputError, match=r"pc.csv:3: column 'R_0.05mm': expected a number, "
+                                         r"got '30 %': write percent without the '%' sign"):
+        read_measurement(write(tmp_path, GOOD.replace("0.30", "30 %"), "pc.csv"))
+
+
+@pytest.mark.parametrize("text, line, words", [
+    # one row per reading, wavelengths along the first row (an X-Rite style export)
+    ("Sample Name,400nm,410nm,420nm,430nm\nR_0.05mm,0.3,0.31,0.32,0.33\n", 1,
+     "wavelengths run along this row (400nm, 410nm, ...: one row per reading): the format "
+     "has them down the first column"),
+    ("# lab 3\nSample;400;410;420;430;440\nR_inf;0.3;0.31;0.32;0.33;0.34\n", 2,
+     "wavelengths run along this row"),
+    # a sample name before the wavelengths
+    ("Sample,wavelength_nm,R_0.05mm,R_0.15mm,R_inf,R_g\nA,400,0.3,0.4,0.45,0.04\n", 1,
+     "the wavelength column 'wavelength_nm' is not the first: move it first, or delete the "
+     "column before it ('Sample')"),
+])
+def test_other_layouts_are_named(tmp_path, text, line, words):
+    """A transposed export or a sample-name column first said "no header row" with no line
+    (a trial)."""
+    with pytest.raises(InputError) as info:
+        read_measurement(write(tmp_path, text, "x.csv"))
+    assert str(info.value).startswith(f"{tmp_path / 'x.csv'}:{line}: {words}"), str(info.value)
+
+
+@pytest.mark.parametrize("column, note", [
+    ("R_3mm", "column 'R_3mm': a 3 mm film; cosmetic films are 0.1 µm to 1 mm thick, and S, K "
+              "scale as 1 / thickness: µm (R_<X>um) meant?"),
+    ("R_0.05um", "column 'R_0.05um': a 5e-05 mm film; cosmetic films are 0.1 µm to 1 mm "
+                 "thick, and S, K scale as 1 / thickness: mm meant?"),
+])
+def test_a_film_thickness_far_from_a_cosmetics_is_named(tmp_path, column, note):
+    """R_3mm written for R_3um fitted as well as the right unit, with S and K 1000× too
+    small, and said nothing (a trial)."""
+    m = read_measurement(write(tmp_path, GOOD.replace("R_0.05mm", column)))
+    assert any(note in n for n in m.notes), m.notes
+    assert not any("film" in n for n in read_measurement(write(tmp_path, GOOD, "g.csv")).notes)
+
+
+def test_a_name_line_that_is_no_name_suggests_one(tmp_path):
+    with pytest.raises(InputError, match=r"m.csv:1: name 'Rouge n°12' must be letters, .*"
+                                         r"e.g. '# name: rouge_n_12'"):
+        read_measurement(write(tmp_path, GOOD.replace("test_foundation", "Rouge n°12")))

@@ -169,6 +169,7 @@ def _joint(grid, blurred, *args):
 # aliasing among the ~30 arrays a fusion reads). Inside the whole render's gradient the
 # difference was within the load's noise.
 CHUNK = 1000
+_SKIP = True
 # Chunks per step of the transpose's loop, computed side by side (`_cotangents_chunked`).
 STREAMS = 2
 
@@ -406,7 +407,13 @@ def _cotangents(grid, blurred, X, E, h, h_l, S, K, skin_R, g):
         # ∂R0/∂X = S T², ∂T/∂X = −T (S + K − S R0) (Kubelka–Munk's equations).
         dX[i] = (_rowsum(aR_l[i] * S[i] * T2 - aT_l[i] * T[i] * (S[i] + K[i] - S[i] * R[i]))
                  + h_l[i] * sum_D * (1.0 - cover) / COVER_MM)[:, 0]
-        dS[i], dK[i] = _layer_SK(S[i], K[i], x[i], parts[i], aR_l[i], aT_l[i])
+        # A layer absent from every texel of the chunk (X = 0: τ = 0, so every term is
+        # exactly 0) adds nothing to its S and K: the sums are skipped there (most of a
+        # face's chunks have only the foundation).
+        dS[i], dK[i] = jax.lax.cond(
+            jnp.any(x[i] != 0) if _SKIP else True, _layer_SK,
+            lambda S_, K_, *_: (jnp.zeros_like(S_), jnp.zeros_like(K_)),
+            S[i], K[i], x[i], parts[i], aR_l[i], aT_l[i])
         a_D = a_D * T2
     dh = _rowsum(dh)
     d_skin = a_s if skin_R.ndim == 2 else _colsum(a_s)
