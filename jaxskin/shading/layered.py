@@ -169,7 +169,6 @@ def _joint(grid, blurred, *args):
 # aliasing among the ~30 arrays a fusion reads). Inside the whole render's gradient the
 # difference was within the load's noise.
 CHUNK = 1000
-_SKIP = True
 # Chunks per step of the transpose's loop, computed side by side (`_cotangents_chunked`).
 STREAMS = 2
 
@@ -197,7 +196,8 @@ def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
     2-core AVX2 machine: scalars 2.8–3.1×, maps 2.3–2.4× (benchmarks/RESULTS.md, issue 19).
     Then with two chunks a step side by side (`STREAMS`), the stack's adjoints divided and
     the S and K sums as products (2-core AVX-512, ABBA): maps 1.91–2.05×, scalars
-    2.28–2.53×.
+    2.28–2.53×. Since 2026-12-04 a layer absent from a whole chunk skips its S and K sums
+    (quiet, separate processes: scalars 2.80–2.85× → 2.58–2.62×; maps unchanged).
     Earlier: plain reverse mode through this forward (the `switch` inside a `map` keeps
     every branch's residuals) 162× and 21 GB; reverse mode over checkpointed chunks of
     `_joint` 5.8–14×.
@@ -408,10 +408,12 @@ def _cotangents(grid, blurred, X, E, h, h_l, S, K, skin_R, g):
         dX[i] = (_rowsum(aR_l[i] * S[i] * T2 - aT_l[i] * T[i] * (S[i] + K[i] - S[i] * R[i]))
                  + h_l[i] * sum_D * (1.0 - cover) / COVER_MM)[:, 0]
         # A layer absent from every texel of the chunk (X = 0: τ = 0, so every term is
-        # exactly 0) adds nothing to its S and K: the sums are skipped there (most of a
-        # face's chunks have only the foundation).
+        # exactly 0) adds nothing to its S and K: the sums are skipped there. On the makeup
+        # face 1.6 layers of 4 are present in a chunk on average; the render's gradient with
+        # respect to its scalars 2.80-2.85× → 2.58-2.62× its forward (separate processes,
+        # alternated; benchmarks/RESULTS.md, issue 19).
         dS[i], dK[i] = jax.lax.cond(
-            jnp.any(x[i] != 0) if _SKIP else True, _layer_SK,
+            jnp.any(x[i] != 0), _layer_SK,
             lambda S_, K_, *_: (jnp.zeros_like(S_), jnp.zeros_like(K_)),
             S[i], K[i], x[i], parts[i], aR_l[i], aT_l[i])
         a_D = a_D * T2
