@@ -17,12 +17,23 @@ Everything numeric follows the dtype of its inputs; rendering defaults to float3
 (`jaxskin.DEFAULT_DTYPE`), fitting (`fitting`) runs in float64.
 """
 
-import jax.numpy as jnp
+import importlib
 
-from . import km, spectral
 from .io import InputError
 
 __version__ = "0.1.0"
-DEFAULT_DTYPE = jnp.float32
 
 __all__ = ["DEFAULT_DTYPE", "InputError", "km", "spectral", "__version__"]
+
+
+def __getattr__(name: str):
+    """`km`, `spectral` and `DEFAULT_DTYPE` (float32) on first use: importing the package
+    does not import JAX (about a second), so that the `jaxskin` command can take SIGINT
+    from its first moment (`_console`)."""
+    if name in ("km", "spectral"):
+        return importlib.import_module(f".{name}", __name__)
+    if name == "DEFAULT_DTYPE":
+        import jax.numpy as jnp
+
+        return jnp.float32
+    raise AttributeError(f"module 'jaxskin' has no attribute {name!r}")

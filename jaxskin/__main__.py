@@ -1,5 +1,5 @@
 """`python -m jaxskin`: the same command line as the `jaxskin` script."""
 
-from .cli import main
+from ._console import main
 
 raise SystemExit(main())

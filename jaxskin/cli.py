@@ -99,13 +99,24 @@ def _gc_stop(phase, info):
 def _on_signal(signum, frame):
     """Raise KeyboardInterrupt / _Terminated where the signal arrived, unless that is inside
     the garbage collector's callbacks or a finaliser, where Python would print the exception
-    and drop it: then it is kept and raised at the next `_raise_pending` (a stage change, or
-    the command's end)."""
-    if _collecting[0] or (frame is not None and frame.f_code.co_name in ("__del__",
-                                                                         "_xla_gc_callback")):
+    and drop it, or inside an import, which some libraries wrap in `except BaseException`
+    (trimesh's optional imports: the command ran on to exit 0; a trial): then it is kept
+    and raised at the next `_raise_pending` (a stage change, or the command's end)."""
+    if _collecting[0] or _held_back(frame):
         _pending.append(signum)
         return
     raise _SIGNAL_ERRORS[signum]()
+
+
+def _held_back(frame) -> bool:
+    """Whether `frame` is in a finaliser or JAX's collector callback, or inside an import."""
+    if frame is not None and frame.f_code.co_name in ("__del__", "_xla_gc_callback"):
+        return True
+    while frame is not None:
+        if frame.f_code.co_filename.startswith("<frozen importlib"):
+            return True
+        frame = frame.f_back
+    return False
 
 
 def _raise_pending() -> None:
@@ -837,9 +848,25 @@ def _edit(args, run: _Run) -> int:
     return command(args, run)
 
 
-def main(argv=None) -> int:
+def main(argv=None, early=None) -> int:
     """The `jaxskin` command: parse `argv` (default `sys.argv[1:]`), run the command, and
-    return its exit code (0 done, 2 bad input, 1 failure, 130 SIGINT, 143 SIGTERM)."""
+    return its exit code (0 done, 2 bad input, 1 failure, 130 SIGINT, 143 SIGTERM).
+    `early`: signals noted before this was called (`_console`); until the command's own
+    handlers are in place (`_signals`) it goes on noting them there, and they end the
+    command before any work."""
+    early = [] if early is None else early
+    old = {}
+    if threading.current_thread() is threading.main_thread():
+        old = {sig: signal.signal(sig, lambda signum, frame: early.append(signum))
+               for sig in _SIGNAL_ERRORS}
+    try:
+        return _main(argv, early)
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+
+
+def _main(argv, early: list) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
     if args.command is None:  # the help, on stderr, and the exit code of a usage error
@@ -853,6 +880,9 @@ def main(argv=None) -> int:
                 "fit-skin": _fit_skin, "edit": _edit, "fit-image": _fit_image}
     with _signals(), _pipe_safe_stdout():
         try:
+            _pending.extend(early)  # what arrived before `_signals`: ends it here
+            early.clear()
+            _raise_pending()
             code = commands[args.command](args, run)
             _raise_pending()
             return code

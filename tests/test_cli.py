@@ -180,6 +180,63 @@ def test_a_signal_inside_the_garbage_collector_is_not_lost(tmp_path, monkeypatch
     assert "while checking the inputs" in err
 
 
+def test_a_signal_inside_an_import_is_not_lost(tmp_path, monkeypatch, capsys):
+    """trimesh wraps its optional imports in `except BaseException`: a SIGINT raised inside
+    one was dropped and the render ran on to exit 0 (a trial). A signal that lands inside
+    an import is held and raised at the next stage."""
+    import importlib
+    import signal
+
+    from jaxskin import cli
+
+    module = tmp_path / "swallows_signals.py"
+    module.write_text("import os, signal\ntry:\n    os.kill(os.getpid(), signal.SIGINT)\n"
+                      "    for _ in range(1000):\n        pass\nexcept BaseException:\n"
+                      "    pass\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+
+    def command(args, run):
+        importlib.import_module("swallows_signals")  # the import drops what it catches
+        run.stage = "rendering the next scene"  # held signal raised here
+        raise AssertionError("the held signal was not raised")
+
+    monkeypatch.setattr(cli, "_render", command)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert main(["render", "hand", "-o", str(tmp_path)]) == 130
+    err = capsys.readouterr().err
+    assert err == ("jaxskin: interrupted (SIGINT) while checking the inputs; no file was "
+                   "written\n"), err
+
+
+@pytest.mark.parametrize("sig, code", [("SIGINT", 130), ("SIGTERM", 143)])
+def test_a_signal_while_the_command_line_loads_ends_it(tmp_path, sig, code):
+    """A signal in the first second (JAX importing) went Python's way: a traceback, an
+    ImportError, a crash, or nothing at all, the command running to exit 0 (a trial). The
+    entry point notes it, and the command ends before any work: one line, 130 / 143."""
+    import signal
+
+    script = ("import os, signal, sys\n"
+              "from jaxskin import _console\n"
+              "real = signal.signal\n"
+              "def install(sig, handler):  # the signal arrives as soon as the notes are set\n"
+              "    old = real(sig, handler)\n"
+              f"    if sig == signal.{sig}:\n"
+              "        assert 'jaxskin.cli' not in sys.modules and 'jax' not in sys.modules\n"
+              "        signal.signal = real\n"
+              f"        os.kill(os.getpid(), signal.{sig})\n"
+              "    return old\n"
+              "signal.signal = install\n"
+              f"sys.exit(_console.main(['render', 'hand', '-o', {str(tmp_path / 'out')!r}]))\n")
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=300)
+    word = "interrupted" if sig == "SIGINT" else "terminated"
+    assert proc.returncode == code, proc.stderr
+    assert proc.stderr == (f"jaxskin: {word} ({sig}) while checking the inputs; no file was "
+                           "written\n"), proc.stderr
+    assert not (tmp_path / "out").exists()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
 @pytest.mark.slow
 def test_wheel_installs_and_renders_from_an_empty_folder(tmp_path):
     """A regular (non-editable) install: build the wheel, install it into a folder of its

@@ -1,0 +1,25 @@
+"""The `jaxskin` command's entry point: takes SIGINT and SIGTERM from its first moment.
+
+Importing the command line imports JAX (about a second). A signal in that second went
+Python's default way: a traceback, an `ImportError` from an extension interrupted while it
+loaded, a crash, or — raised inside JAX's garbage-collector callback, where Python prints
+and drops it — no effect at all, the command running to the end with exit 0 (a trial).
+Here a signal before the command line's own handlers is only noted, and `cli.main` ends
+with 130 / 143 and its one line before doing any work.
+"""
+
+import signal
+import sys
+
+
+def main(argv=None) -> int:
+    early: list[int] = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda signum, frame: early.append(signum))
+    from jaxskin import cli  # JAX and the rest: about a second
+
+    return cli.main(argv, early=early)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
