@@ -83,6 +83,8 @@ def _check_scene(sc, count: int) -> list:
         if image is not None:
             inputs.append(image)
             maps.read_grey(image, key=image_key)
+        elif sc.values.get(image_key):  # set, but this model reads no such map (`idle_maps`)
+            inputs.append(sc.values[image_key])  # still never overwritten (a trial)
     for layer in sp.layers if sp is not None else ():
         inputs.append(layer.material)
         with reading(layer.material):
@@ -99,15 +101,20 @@ def _check_scene(sc, count: int) -> list:
 
 
 def idle_maps(sc) -> list[str]:
-    """Warnings for skin maps that change nothing in scene `sc`: a `skin.*_image` scales its
+    """Warnings for skin maps that change nothing in scene `sc`: one its material model does
+    not read (`skin.melanin_image` in a Blinn scene), or a `skin.*_image` that scales its
     scalar (`skin.melanin_image` × `skin.melanin`, ...), so with that scalar at 0 (the
     default of `skin.melanin`) the map is read and multiplied by 0: the render is the same
     to the byte, and nothing said so."""
     from .scene import SKIN_MAPS
 
     out = []
-    for scalar, image in SKIN_MAPS.values():
-        if sc.values.get(image) and scalar in sc.params and float(sc.values[scalar]) == 0.0:
+    sp = sc.config.spectral
+    for map_key, (scalar, image) in SKIN_MAPS.items():
+        if sc.values.get(image) and (sp is None or sp.image_of(map_key) is None):
+            out.append(f"{image}: scene {sc.name!r}'s material model "
+                       f"({sc.values['material.model']}) reads no such map: it changes nothing")
+        elif sc.values.get(image) and scalar in sc.params and float(sc.values[scalar]) == 0.0:
             out.append(f"{image} scales {scalar}, which is 0 in scene {sc.name!r}: the map "
                        f"changes nothing (set {scalar}, e.g. -D {scalar}=1)")
     return out

@@ -332,6 +332,29 @@ def test_a_skin_map_whose_scalar_is_0_is_found(tmp_path, capsys):
         capsys.readouterr().err
 
 
+def test_a_skin_map_the_model_does_not_read_is_named_and_never_overwritten(tmp_path, capsys):
+    """A Blinn scene with `skin.melanin_image = "n.png"`, rendered into its own folder,
+    replaced the user's n.png with the render (the map was no input of a model that does
+    not read it) and said nothing (a trial). Now a warning names the idle key, and the map
+    is an input the outputs may not overwrite."""
+    import imageio.v3 as iio
+
+    from jaxskin.checks import idle_maps
+    from jaxskin.cli import main
+
+    grey = np.full((16, 16), 128, np.uint8)
+    iio.imwrite(tmp_path / "n.png", grey)
+    (tmp_path / "n.toml").write_text('name = "n"\n[mesh]\nfile = "hand"\n[skin]\n'
+                                     'melanin_image = "n.png"\n')
+    assert idle_maps(load_scene(tmp_path / "n.toml")) == [
+        "skin.melanin_image: scene 'n''s material model (blinn) reads no such map: it "
+        "changes nothing"]
+    assert main(["render", str(tmp_path / "n.toml"), "-o", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert f"n.png: the output {tmp_path / 'n.png'} would overwrite this input" in err, err
+    np.testing.assert_array_equal(iio.imread(tmp_path / "n.png"), grey)
+
+
 def test_a_check_failing_on_a_D_value_names_the_D_item(tmp_path, capsys):
     """`-D mesh.projection=uv` on the hand (no texture coordinates) was blamed on
     data/scenes/hand.toml, which does not set it; now the -D item is named. An error about
