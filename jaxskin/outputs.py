@@ -79,6 +79,15 @@ def check_folder(path, option: str = "-o") -> Path:
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise InputError(f"{option}: expected a folder, but this is a file", path)
+    try:  # a link that leads nowhere: a missing target, or a loop (exit 1 after the work)
+        os.stat(path)
+    except FileNotFoundError:
+        if os.path.islink(path):
+            raise InputError(f"{option}: a link to {os.readlink(path)!r}, which does not "
+                             "exist; create it or give another folder", path) from None
+    except OSError as e:
+        raise InputError(f"{option}: cannot use this folder ({e.strerror or e.__class__.__name__})",
+                         path) from None
     probe = path
     while not probe.exists():  # the nearest existing ancestor must take a new folder
         if probe.parent == probe:
@@ -130,6 +139,9 @@ class Outputs:
         """Reserve `folder/filename`: one safe component, confined, unique, not an input."""
         check_name(filename, key=None)
         path = self.folder / filename
+        if path.is_dir() and not path.is_symlink():  # the rename onto it would fail at the end
+            raise InputError(f"a folder is where the output {filename!r} goes; move it or "
+                             f"choose another {self.option}", path)
         # One safe component cannot leave the folder; a link already there is replaced by
         # the rename (atomic_write), never written through.
         assert Path(os.path.abspath(path)).parent == Path(os.path.abspath(self.folder))

@@ -46,6 +46,16 @@ def write(tmp, name, content):
     return str(path)
 
 
+def _link(path, target):
+    os.symlink(target, path)
+    return str(path)
+
+
+def _folder_at(path):
+    path.mkdir(parents=True)
+    return str(path.parent)
+
+
 def scene(tmp, text, *extra):
     return ["render", write(tmp, "s.toml", text), "-o", str(tmp / "out"), *SMALL, *extra]
 
@@ -175,6 +185,13 @@ CASES = {
     "name-trailing-space": lambda t: scene(t, 'name = "hand "\n'),
     # made a folder whose name held a newline (a newcomer's trial)
     "out-newline": lambda t: ["render", "hand", "-o", str(t / "new\nline"), *SMALL],
+    # a link to nowhere, a link loop, a folder where the image goes: exit 1 after the
+    # render (a trial)
+    "out-dangling-link": lambda t: ["render", "hand", "-o", _link(t / "dl", t / "nowhere"),
+                                    *SMALL],
+    "out-link-loop": lambda t: ["render", "hand", "-o", _link(t / "loop", t / "loop"), *SMALL],
+    "out-folder-in-the-way": lambda t: ["render", "hand", "-o", _folder_at(
+        t / "o" / "hand_texture.size-64_camera.size-32.png"), *SMALL],
     # 120 two-byte letters: 200 characters allowed, but with the suffixes over 255 bytes
     # (the file system's limit): failed with exit 1 after the render
     "name-too-many-bytes": lambda t: hand(t, "-D", "name=" + "é" * 120, "-D",
@@ -440,6 +457,10 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
     ("cli-noise-zero", "argument --noise: expected a finite number > 0"),
     ("name-blank", "' ' starts or ends with a space"),
     ("out-newline", "-o: a folder to create must not contain control characters"),
+    ("out-dangling-link", "dl: -o: a link to "),
+    ("out-link-loop", "loop: -o: cannot use this folder (Too many levels of symbolic links)"),
+    ("out-folder-in-the-way", "a folder is where the output 'hand_texture.size-64_camera"
+                              ".size-32.png' goes; move it or choose another -o"),
 ])
 def test_what_the_line_says(case, words, tmp_path, capsys, monkeypatch):
     """The line names the mistake: '[fields.edit]' said "expected a table with at…" of what
