@@ -120,6 +120,34 @@ def idle_maps(sc) -> list[str]:
     return out
 
 
+# A view that shows more than this share of a planar map's −z side gets a warning.
+HIDDEN_SIDE_WARN = 0.25
+
+
+def hidden_side(sc) -> list[str]:
+    """A warning when scene `sc`'s camera sees mostly the side of a planar map that does not
+    own its texels (`view.hidden_side_share`): the hand turned 180° was a flat, unlit
+    silhouette and nothing said why (a trial). Measured on a 64-pixel view of the camera."""
+    from . import texture
+    from .view import hidden_side_share, make_view
+
+    config = sc.config
+    if config.texture.projection != "planar":
+        return []
+    tmap = texture.mapped(config.texture.mesh, "planar", config.texture.size)[1]
+    height = max(1, round(64 * config.image_height / config.image)) if config.image_height \
+        else 0
+    view = make_view(tmap, 64, config.camera, 1, config.fov, config.rotate, height,
+                     config.zoom, config.center)
+    share = hidden_side_share(tmap, view)
+    if share <= HIDDEN_SIDE_WARN:
+        return []
+    return [f"scene {sc.name!r}: {share:.0%} of the view is the mesh's side facing -z, which "
+            "the planar projection shades with the +z side's texels (their normals, their "
+            "light): it shows unlit or wrongly lit; view the +z side (camera.rotate about y "
+            "within ±90°) or use mesh.projection = \"cylindrical\""]
+
+
 def unused_overrides(sc, overrides) -> list[str]:
     """The `-D` items of `overrides` that change nothing in scene `sc` (loaded with them):
     a value the scene's material model does not use (`skin.subject` on the Blinn hand,

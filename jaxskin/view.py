@@ -30,9 +30,9 @@ from .linear import linear_call
 from .projection import TextureMap
 from .raster import Raster, rasterize
 
-__all__ = ["PIXEL_TABLE", "View", "coverage", "downsample", "make_view", "pad_index",
-           "pixel_entries", "pixel_table", "rotation", "sample", "sample_padded", "transpose_table",
-           "view_pixels"]
+__all__ = ["PIXEL_TABLE", "View", "coverage", "downsample", "hidden_side_share", "make_view",
+           "pad_index", "pixel_entries", "pixel_table", "rotation", "sample", "sample_padded",
+           "transpose_table", "view_pixels"]
 
 MARGIN = 0.05
 PAD = 3  # texels of padding around the mesh's texels (bilinear reads reach one)
@@ -140,6 +140,24 @@ def make_view(tmap: TextureMap, size: int, projection: str = "orthographic",
     return View(tex.astype(np.float32), r.mask, R, eye, tmap.wrap_x,
                 Raster(r.tri, bary.astype(np.float32)), xy, tuple(float(a) for a in shift),
                 front)
+
+
+def hidden_side_share(tmap: TextureMap, view: View) -> float:
+    """The share of the samples `view` shades that see the side of a planar map's mesh
+    facing −z: the planar projection gives its texels to the side facing +z (the back of
+    the hand over the palm), so the other side shows that side's shading, lit as if it
+    faced the other way. 0 for the other projections."""
+    if tmap.kind != "planar" or view.raster is None:
+        return 0.0
+    mesh = tmap.mesh
+    a, b, c = (mesh.vertices[mesh.faces[:, i]] for i in range(3))
+    faces_minus_z = np.cross(b - a, c - a)[:, 2] < 0
+    shaded = view.shaded
+    seen = int(shaded.sum())
+    if seen == 0:
+        return 0.0
+    return float((faces_minus_z[np.where(view.raster.tri >= 0, view.raster.tri, 0)]
+                  & shaded).sum() / seen)
 
 
 def _pinhole(c, focal: float, aspect: float):

@@ -178,3 +178,20 @@ def test_the_built_in_views_see_no_triangle_from_behind(scene):
     """So the black inside changes none of them (their openings face away)."""
     view = render.prepare(load_scene(scene, ["texture.size=128", "camera.size=96"]).config).view
     assert view.mask.sum() > 1000 and np.array_equal(view.front, view.mask)
+
+
+def test_a_view_of_a_planar_maps_hidden_side_is_warned():
+    """The hand turned 180° about y shows its palm, shaded with the back's texels (their
+    normals face away from the light): a flat silhouette, and nothing said why (a trial).
+    The share of the view on the −z side is measured and warned above a quarter; every
+    built-in scene's own view stays below it (none warned)."""
+    from jaxskin.checks import hidden_side
+    from jaxskin.scene import load_scene
+
+    small = ["texture.size=64", "camera.size=32"]
+    for name in ("hand", "foot", "arm", "face", "makeup"):
+        assert hidden_side(load_scene(name, small)) == [], name
+    turned = hidden_side(load_scene("hand", [*small, "camera.rotate=[0,180,0]"]))
+    assert len(turned) == 1 and turned[0].startswith(
+        "scene 'hand': 100% of the view is the mesh's side facing -z"), turned
+    assert hidden_side(load_scene("hand", [*small, "camera.rotate=[0,60,0]"])) == []
