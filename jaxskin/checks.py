@@ -67,6 +67,8 @@ def _check_scene(sc, count: int) -> list:
             raise InputError(f"vertex {e.vertex} does not exist; the mesh has "
                              f"{len(mesh.vertices)} vertices", sc.source,
                              key=f"fields.edit[{i}].vertex")
+    if config.texture.edits:
+        _check_edits(sc, config)
     if config.material == "lafortune":
         if config.brdf != "skin":
             inputs.append(config.brdf)
@@ -118,6 +120,56 @@ def idle_maps(sc) -> list[str]:
             out.append(f"{image} scales {scalar}, which is 0 in scene {sc.name!r}: the map "
                        f"changes nothing (set {scalar}, e.g. -D {scalar}=1)")
     return out
+
+
+# An edit's `at` further than this share of the mesh's bounding-box diagonal from every
+# vertex is refused (the built-in scenes' furthest: 0.15, the foot's instep); a direction
+# whose part in texture space is under this share of it is refused (it points across the
+# surface, or the planar projection's x-y plane: the texture sees almost nothing of it).
+EDIT_FAR, EDIT_ALONG_NORMAL = 0.25, 0.2
+
+
+def _check_edits(sc, config) -> None:
+    """Field edits that cannot mean what they say: `at` far from the mesh (it snapped to
+    whatever vertex was nearest), a direction along the surface normal (the furrows took
+    an arbitrary direction); both were accepted in silence (a trial)."""
+    import numpy as np
+
+    from . import texture
+
+    mesh, tmap = texture.mapped(config.texture.mesh, config.texture.projection,
+                                config.texture.size)
+    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    diagonal = float(np.linalg.norm(hi - lo))
+    for i, e in enumerate(config.texture.edits):
+        v = e.vertex
+        if v is None:
+            distance = np.linalg.norm(mesh.vertices - np.asarray(e.at), axis=1)
+            v = int(np.argmin(distance))
+            if distance[v] > EDIT_FAR * diagonal:
+                spans = ", ".join(f"{c} {a:.3g}..{b:.3g}" for c, a, b in zip("xyz", lo, hi,
+                                                                            strict=True))
+                raise InputError(f"the point is {distance[v]:.3g} from the mesh (its nearest "
+                                 f"vertex, {v}, is at {_vec(mesh.vertices[v])}); the mesh "
+                                 f"spans {spans}", sc.source, key=f"fields.edit[{i}].at")
+        for name, d in (("d1", e.d1), ("d2", e.d2)):
+            d = np.asarray(d, np.float64)
+            size = float(np.linalg.norm(d))
+            at_v = np.zeros_like(mesh.vertices)
+            at_v[v] = d
+            seen = float(np.linalg.norm(tmap.vectors(at_v)[v]))  # what the texture keeps
+            if size > 0 and seen < EDIT_ALONG_NORMAL * size:
+                plane = {"planar": "the x-y plane the planar projection keeps",
+                         "cylindrical": "the cylinder's surface"}.get(tmap.kind, "the surface")
+                raise InputError(f"{_vec(d)} at vertex {v} is almost perpendicular to "
+                                 f"{plane} (only {seen / size:.0%} of it lies along it): "
+                                 "the furrows would take an arbitrary direction; give a "
+                                 "direction along it", sc.source,
+                                 key=f"fields.edit[{i}].{name}")
+
+
+def _vec(a) -> str:
+    return "[" + ", ".join(f"{x:.3g}" for x in a) + "]"
 
 
 # A view that shows more than this share of a planar map's −z side gets a warning.

@@ -184,6 +184,13 @@ CASES = {
     "name-blank": lambda t: scene(t, 'name = " "\n'),
     "name-trailing-space": lambda t: scene(t, 'name = "hand "\n'),
     # made a folder whose name held a newline (a newcomer's trial)
+    # an edit pointing out of the planar projection's plane gave deep furrows in an
+    # arbitrary direction; a point 173 units away snapped to a vertex (a trial)
+    "edit-across-the-plane": lambda t: scene(t, '[mesh]\nfile = "hand"\n[[fields.edit]]\n'
+                                            'at = [0, 0.3, 0.15]\nd1 = [0, 0, 1.5]\n'
+                                            'd2 = [1, 0, 0]\n'),
+    "edit-far-away": lambda t: scene(t, '[mesh]\nfile = "hand"\n[[fields.edit]]\n'
+                                    'at = [100, 100, 100]\nd1 = [1, 0, 0]\nd2 = [0, 1, 0]\n'),
     "out-newline": lambda t: ["render", "hand", "-o", str(t / "new\nline"), *SMALL],
     # a link to nowhere, a link loop, a folder where the image goes: exit 1 after the
     # render (a trial)
@@ -456,6 +463,12 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
     ("mesh-missing", "s.toml: key 'mesh.file': expected a built-in mesh (hand, "),
     ("cli-noise-zero", "argument --noise: expected a finite number > 0"),
     ("name-blank", "' ' starts or ends with a space"),
+    ("edit-across-the-plane", "s.toml: key 'fields.edit[0].d1': [0, 0, 1.5] at vertex 268 is "
+                              "almost perpendicular to the x-y plane the planar projection "
+                              "keeps (only 0% of it lies along it)"),
+    ("edit-far-away", "s.toml: key 'fields.edit[0].at': the point is 173 from the mesh (its "
+                      "nearest vertex, 724, is at [0.312, 0.664, 0.116]); the mesh spans x "
+                      "-0.409..0.318, y -0.00246..0.942, z -0.0853..0.188"),
     ("out-newline", "-o: a folder to create must not contain control characters"),
     ("out-dangling-link", "dl: -o: a link to "),
     ("out-link-loop", "loop: -o: cannot use this folder (Too many levels of symbolic links)"),
