@@ -286,11 +286,13 @@ def _parser() -> argparse.ArgumentParser:
         "bump-mapped normal map) and DIR/<scene>_field.png (the mesh with d1 in red and d2 in "
         "green, as in the paper's fig. 3.4). With -D overrides the name gets "
         "_<key>-<value> for each (DIR/hand_material.melanin-0.5.png; past 120 characters "
-        "_D-<12 hex digits>, a digest of the overrides), a sweep "
+        "_D-<12 hex digits>, a digest of the overrides; -D name=NAME gives NAME alone), a "
+        "sweep "
         "_sweep-<index>_<key>-<value> with a zero-padded index (DIR/hand_sweep-02_"
         "material.melanin-0.25.png; --maps and --glb are written once, for the scene's own "
-        "value of the swept key). A scene name must be a plain file name (no '/', '..', "
-        "leading dot or control character) or it is refused. Everything is checked before "
+        "value of the swept key). A file of the same name in DIR is replaced (an input of the "
+        "run never is). A scene name must be a plain file name (no '/', leading dot or "
+        "control character) or it is refused. Everything is checked before "
         "anything is written: every scene, override, sweep, mesh, material, BRDF file, layer "
         "image and polygon, the output folder, that no output is an input, and that the "
         "render fits in memory. All scenes render in one process (or on a Dask cluster, "
@@ -611,15 +613,17 @@ def _parse_sweep(text: str, sc):
 
 def _base_name(sc, overrides, room: int = 16) -> str:
     """The scene's output name: its (checked) name, then `_<key>-<value>` per override (a
-    digest of them when that is long); `room`: the most characters the outputs add after
-    it (an extension, `_normal.png`, a sweep's `_sweep-NN_KEY-VALUE.png`). `InputError`
-    naming the scene's `name` when even the digest leaves no room."""
+    digest of them when that is long), unless one of them is `name=...`: then that name
+    alone (a user naming a comparison's images got `espresso_look_D-13e6f4956f9c.png`).
+    `room`: the most characters the outputs add after it (an extension, `_normal.png`, a
+    sweep's `_sweep-NN_KEY-VALUE.png`). `InputError` naming the scene's `name` when even
+    the digest leaves no room."""
     named = [item for item in overrides if item.partition("=")[0].strip() == "name"]
     base = check_name(sc.name, f"-D {named[-1]}" if named else sc.source, key="name")
     parts = []
     for item in overrides:
         key, _, value = (s.strip() for s in item.partition("="))
-        if key != "name":
+        if key != "name" and not named:  # `-D name=X` names the outputs X, nothing added
             parts.append(f"{slug(key)}-{slug(value)}")
     suffix = "_".join(parts)
 
@@ -778,7 +782,8 @@ def _write_maps(sc, planned: dict, outputs: Outputs, result: dict) -> None:
         outputs.done(planned["height"])
         maps.write_normals(result["normals"], s.mask, planned["normal"])
         outputs.done(planned["normal"])
-        maps.write_field_plot(s, planned["field"])
+        maps.write_field_plot(s, planned["field"], f"{sc.name} ({s.mesh.name}): d1 (red), "
+                              "d2 (green)")
         outputs.done(planned["field"])
 
 

@@ -38,7 +38,7 @@ height = 0                         # image pixels high; 0: square. A -D camera.s
                                    #   scales a height set here with it (same aspect)
 supersample = 2                    # 1–4 samples per pixel per axis (2: antialiased)
 fov = 30.0                         # perspective only, degrees
-rotate = [0.0, 0.0, 0.0]           # degrees about x, y, z: turns the mesh
+rotate = [0.0, 0.0, 0.0]           # degrees: turns the mesh about x, then y, then z (fixed axes)
 zoom = 1.0                         # 1–64: magnifies the frame about `center` (a close-up;
                                    #   raise texture.size with it to keep texels small)
 center = [0.0, 0.0]                # the point zoomed into, in fractions of the whole

@@ -299,6 +299,25 @@ def test_a_long_scene_name_gives_way_to_the_digest_or_names_the_scene(tmp_path, 
     assert len(err.splitlines()) == 1 and not (tmp_path / "p").exists()
 
 
+def test_a_name_given_with_D_is_the_whole_name(tmp_path, capsys):
+    """`-D name=espresso_look` with other -D values wrote espresso_look_D-13e6f4956f9c.png
+    (a trial comparing products): a name given with -D is the file's name, nothing added;
+    the same name for two scenes of one command is refused before any work."""
+    from jaxskin.cli import main
+
+    small = ["-D", "camera.size=32", "-D", "texture.size=32"]
+    assert main(["render", "hand", "-o", str(tmp_path / "o"), "-D", "name=espresso_look",
+                 "-D", "material.melanin=0.3", *small]) == 0
+    assert sorted(p.name for p in (tmp_path / "o").iterdir()) == ["espresso_look.png"]
+    assert main(["render", "hand", "-o", str(tmp_path / "o"), *small]) == 0  # no -D name
+    assert "hand_camera.size-32_texture.size-32.png" in {p.name for p in
+                                                        (tmp_path / "o").iterdir()}
+    assert main(["render", "hand", "foot", "-o", str(tmp_path / "q"), "-D", "name=x",
+                 *small]) == 2
+    assert "two outputs are both named 'x.png'" in capsys.readouterr().err
+    assert not (tmp_path / "q").exists()
+
+
 def test_renders_are_tagged_srgb_and_data_maps_are_not(tmp_path):
     """A render's PNG held sRGB-encoded values without saying so (a trial): it now has an
     sRGB chunk (perceptual intent) and PNG 1.2's gAMA of 1/2.2 right after IHDR, 8 and 16
