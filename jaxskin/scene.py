@@ -9,7 +9,7 @@ projection = "planar"              # planar | cylindrical | uv
 size = 512                         # texels across
 [wrinkles]
 enabled = true                     # false: no furrow program at all (a smooth surface)
-k_scale = 1.1                      # 0.5–2 (lengths, in texels; static)
+k_scale = 1.0                      # 0.5–2 (lengths, in texels; static)
 k_noise = 0.0                      # 0–1: noise added to the height field
 k_bump = 0.5                       # 0–1: depth of the bump mapping
 seed = 0                           # the furrows' random numbers

@@ -386,3 +386,28 @@ def test_a_biophysical_material_over_an_explicit_measured_skin_is_refused(tmp_pa
     assert load_scene("face", ["material.model=biophysical"]).skin_model == "biophysical"
     assert load_scene(scene, ["skin.model=biophysical"]).skin_model == "biophysical"
     assert load_scene(scene, ["material.model=spectral"]).skin_model == "nist"
+
+
+def test_the_modules_example_scene_shows_the_defaults():
+    """`render --help` sends readers to `python -m pydoc jaxskin.scene` for the defaults; its
+    example said `k_scale = 1.1` where the default is 1.0 (a trial). Every key of the
+    example that has a default shows it."""
+    import tomllib
+
+    from jaxskin import scene
+
+    example = tomllib.loads(scene.__doc__.split("```toml")[1].split("```")[0])
+
+    def flat(d, prefix=""):
+        for k, v in d.items():
+            if isinstance(v, dict):
+                yield from flat(v, f"{prefix}{k}.")
+            else:
+                yield prefix + k, v
+
+    shown = dict(flat(example))
+    checked = [k for k in shown if k in scene.SCHEMA and scene.SCHEMA[k].default is not None]
+    assert len(checked) >= 29
+    for key in checked:
+        default = scene.SCHEMA[key].default
+        assert shown[key] == (list(default) if isinstance(default, tuple) else default), key
