@@ -119,6 +119,7 @@ import dataclasses
 import difflib
 import functools
 import math
+import re
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -473,8 +474,19 @@ def load_scene(name_or_path, overrides=(), *, flag: str = "override") -> Scene:
     try:
         doc = tomllib.loads(toml_text(raw, path))
     except tomllib.TOMLDecodeError as e:
-        raise InputError(f"not valid TOML: {e}", path) from None
+        raise _toml_error(e, path) from None
     return parse_scene(doc, path, overrides, flag=flag)
+
+
+def _toml_error(e, path) -> InputError:
+    """tomllib's error as `file:line: not valid TOML: what (column C)`: the line in the
+    place every other error puts it (it said "… (at line 2, column 6)" at the end)."""
+    message = str(e.args[0]) if e.args else str(e)
+    m = re.search(r"\s*\(at line (\d+), column (\d+)\)$", message)
+    if m is None:
+        return InputError(f"not valid TOML: {message}", path)
+    return InputError(f"not valid TOML: {message[:m.start()]} (column {m[2]})", path,
+                      int(m[1]))
 
 
 def toml_text(raw: bytes, path) -> str:

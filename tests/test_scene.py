@@ -73,9 +73,11 @@ def test_bad_scene_files(tmp_path, what, text, key, words):
 
 def test_invalid_toml_and_unknown_scene(tmp_path):
     path = tmp_path / "broken.toml"
-    path.write_text("[mesh\n")
-    with pytest.raises(InputError, match="not valid TOML"):
+    path.write_text('name = "x"\n[mesh\n')
+    with pytest.raises(InputError) as info:  # the line where every error puts it (a trial)
         load_scene(path)
+    assert str(info.value) == (f"{path}:2: not valid TOML: Expected ']' at the end of a table "
+                               "declaration (column 6)")
     with pytest.raises(InputError, match="built-in scenes: hand, foot, arm"):
         load_scene("elbow")
 
