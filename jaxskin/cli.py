@@ -83,6 +83,7 @@ class _Terminated(BaseException):
 
 _SIGNAL_ERRORS = {signal.SIGINT: KeyboardInterrupt, signal.SIGTERM: _Terminated}
 _pending: list[int] = []  # a signal whose exception could not be raised where it arrived
+_received: list[int] = []  # every signal the command's handler took
 _collecting = [False]  # the garbage collector is running (and calling JAX's callback)
 
 
@@ -102,10 +103,28 @@ def _on_signal(signum, frame):
     and drop it, or inside an import, which some libraries wrap in `except BaseException`
     (trimesh's optional imports: the command ran on to exit 0; a trial): then it is kept
     and raised at the next `_raise_pending` (a stage change, or the command's end)."""
+    _received.append(signum)
     if _collecting[0] or _held_back(frame):
         _pending.append(signum)
         return
     raise _SIGNAL_ERRORS[signum]()
+
+
+def pending_signal() -> bool:
+    """Whether a signal is held back (`_on_signal`); it is taken off the list (still in
+    `raise_received`'s)."""
+    if _pending:
+        _pending.clear()
+        return True
+    return False
+
+
+def raise_received() -> None:
+    """Raise the last signal the command received, if any: for a command whose library
+    swallows the exception a signal raised (aiohttp's `run_app` returns on
+    KeyboardInterrupt), so that it still ends with 130 / 143 and its line."""
+    if _received:
+        raise _SIGNAL_ERRORS[_received[-1]]()
 
 
 def _held_back(frame) -> bool:
@@ -137,6 +156,7 @@ def _signals():
     warnings.formatwarning = _warning_line
     old = {sig: signal.getsignal(sig) for sig in _SIGNAL_ERRORS}
     _pending.clear()
+    _received.clear()
     # First and last of the collector's callbacks, so that JAX's (which runs Python code in
     # both phases) sits between them.
     gc.callbacks.insert(0, _gc_start)

@@ -180,6 +180,25 @@ def test_a_signal_inside_the_garbage_collector_is_not_lost(tmp_path, monkeypatch
     assert "while checking the inputs" in err
 
 
+@pytest.mark.parametrize("sig, code", [("SIGINT", 130), ("SIGTERM", 143)])
+def test_the_editor_stopped_by_a_signal_exits_as_documented(tmp_path, sig, code):
+    """`jaxskin edit` ended with 0 on Ctrl-C (aiohttp's run_app returns quietly on the
+    KeyboardInterrupt), where every command documents 130 (a trial)."""
+    import signal
+
+    pytest.importorskip("aiohttp")
+    proc = subprocess.Popen([sys.executable, "-m", "jaxskin", "edit", "hand", "--no-browser",
+                             "--port", "0", "-o", str(tmp_path)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    line = proc.stdout.readline()  # printed once it serves
+    assert "(Ctrl-C to stop)" in line, (line, proc.poll())
+    proc.send_signal(getattr(signal, sig))
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == code, err
+    word = "interrupted" if sig == "SIGINT" else "terminated"
+    assert err.splitlines()[-1] == f"jaxskin: {word} ({sig}) while serving; no file was written"
+
+
 def test_a_signal_inside_an_import_is_not_lost(tmp_path, monkeypatch, capsys):
     """trimesh wraps its optional imports in `except BaseException`: a SIGINT raised inside
     one was dropped and the render ran on to exit 0 (a trial). A signal that lands inside

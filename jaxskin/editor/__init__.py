@@ -75,6 +75,31 @@ def command(args, run) -> int:
         import webbrowser
 
         webbrowser.open(url)
-    web.run_app(make_app(session, log=lambda line: print(line, file=sys.stderr), local=local),
-                sock=sock, print=None, handle_signals=False)
+    from ..cli import pending_signal, raise_received
+
+    app = make_app(session, log=lambda line: print(line, file=sys.stderr), local=local)
+
+    async def watch(app):
+        """A signal held back (it came inside an import or the collector: `cli._on_signal`)
+        stops the server within 0.2 s. The task raises KeyboardInterrupt whatever the
+        signal, as asyncio lets only that (and SystemExit) out of the event loop;
+        `raise_received` below raises the signal's own exception."""
+        import asyncio
+
+        async def poll():
+            while True:
+                await asyncio.sleep(0.2)
+                if pending_signal():
+                    raise KeyboardInterrupt
+
+        app["signal_watch"] = asyncio.get_running_loop().create_task(poll())
+
+    app.on_startup.append(watch)
+    web.run_app(app, sock=sock, print=None, handle_signals=False)
+    task = app.get("signal_watch")
+    if task is not None and task.done() and not task.cancelled():
+        task.exception()  # retrieved: no "Task exception was never retrieved" traceback
+    # run_app returns quietly on the KeyboardInterrupt that stopped it (exit 0 for Ctrl-C,
+    # where the command line documents 130): the signal is raised again for `cli.main`.
+    raise_received()
     return 0
