@@ -27,6 +27,7 @@ import codecs
 import contextlib
 import csv
 import dataclasses
+import difflib
 import functools
 import json
 import math
@@ -418,6 +419,11 @@ def _is_measurement_table(path: Path) -> bool:
         return False
 
 
+# The other keys `jaxskin calibrate` writes (a misspelt required key is looked for among
+# the keys that are none of these).
+_MATERIAL_OTHER_KEYS = ("name", "model", "extrapolate", "identifiable", "rmse", "fit")
+
+
 def read_material(path) -> MaterialFile:
     """Read and check a material JSON (what `jaxskin calibrate` writes); a measurement CSV
     given instead is refused with a line saying to calibrate it first."""
@@ -444,14 +450,22 @@ def read_material(path) -> MaterialFile:
         raise InputError(f"expected \"kubelka-munk\" (or no model key), got {model!r}", path,
                          key="model")
     arrays = {}
-    for k in ("wavelength_nm", "S_per_mm", "K_per_mm"):
-        v = doc.get(k)
-        ok = isinstance(v, list) and len(v) >= 2 and all(
-            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-            for x in v)
-        if not ok:
+    known = ("wavelength_nm", "S_per_mm", "K_per_mm")
+    for k in known:
+        if k not in doc:  # a hand edit renamed it (S_per_mn): name both (a trial)
+            others = [o for o in doc if o not in known and o not in _MATERIAL_OTHER_KEYS]
+            near = difflib.get_close_matches(k, others, n=1, cutoff=0.6)
+            hint = f" (is {near[0]!r} a misspelling of it?)" if near else ""
+            raise InputError(f"missing{hint}; a material written by jaxskin calibrate has "
+                             f"{', '.join(known)}", path, key=k)
+        v = doc[k]
+        if not isinstance(v, list) or len(v) < 2:
             raise InputError("expected a list of at least two finite numbers (a material "
                              "written by jaxskin calibrate)", path, key=k)
+        for i, x in enumerate(v):
+            if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+                raise InputError(f"entry {i} is {json.dumps(x)}: expected a finite number",
+                                 path, key=k)
         arrays[k] = np.asarray(v, np.float64)
     wl, S, K = arrays["wavelength_nm"], arrays["S_per_mm"], arrays["K_per_mm"]
     if not (len(wl) == len(S) == len(K)):
@@ -465,7 +479,9 @@ def read_material(path) -> MaterialFile:
                          "given? write nm)", path, key="wavelength_nm")
     for k, v in (("S_per_mm", S), ("K_per_mm", K)):
         if np.any(v <= 0):
-            raise InputError("must be > 0 at every band", path, key=k)
+            i = int(np.flatnonzero(v <= 0)[0])
+            raise InputError(f"must be > 0 at every band; entry {i} ({wl[i]:g} nm) is "
+                             f"{v[i]:g}", path, key=k)
     extrapolate = doc.get("extrapolate")
     if extrapolate is not None and extrapolate not in EXTRAPOLATE:
         raise InputError(f"expected \"hold\" or \"linear\", got {extrapolate!r}", path,

@@ -259,6 +259,14 @@ CASES = {
     "material-negative": lambda t: material(t, {**good_material(), "K_per_mm": [
         -1.0] * len(good_material()["K_per_mm"])}),
     "material-nested": lambda t: material(t, "[" * 100000 + "]" * 100000),
+    # a hand edit: a renamed key said "expected a list", a bad entry named no index, a zero
+    # no band (a trial)
+    "material-key-misspelt": lambda t: material(t, {
+        ("S_per_mn" if k == "S_per_mm" else k): v for k, v in good_material().items()}),
+    "material-entry-text": lambda t: material(t, {**good_material(), "S_per_mm": [
+        1.0, "12,5", *good_material()["S_per_mm"][2:]]}),
+    "material-K-zero": lambda t: material(t, {**good_material(), "K_per_mm": [
+        1.0, 1.0, 0.0, *good_material()["K_per_mm"][3:]]}),
     # a fit-brdf output as a layer's material said 'wavelength_nm: expected a list', and a
     # "model" that is not Kubelka-Munk was not read at all (a trial)
     "material-is-a-lafortune-brdf": lambda t: material(t, {
@@ -451,6 +459,11 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
                                          "calibrate"),
     ("material-is-a-tab-measurement-as-dat", "blush.dat: a measurement table"),
     ("material-is-prose", "notes.txt:1: not a JSON material file"),
+    ("material-key-misspelt", "key 'S_per_mm': missing (is 'S_per_mn' a misspelling of it?); "
+                              "a material written by jaxskin calibrate has wavelength_nm, "
+                              "S_per_mm, K_per_mm"),
+    ("material-entry-text", "key 'S_per_mm': entry 1 is \"12,5\": expected a finite number"),
+    ("material-K-zero", "key 'K_per_mm': must be > 0 at every band; entry 2 ("),
     ("fit-brdf-header-typo", "typo.csv:2: column 'theta_in': unknown column (did you mean "
                              "'theta_in_deg'?)"),
     ("fit-brdf-header-typo-windows", "typo.csv:3: column 'theta_in': unknown column (did "

@@ -187,7 +187,7 @@ def test_shipped_material_on_a_grid():
 
 
 BAD_MATERIALS = [
-    ({"wavelength_nm": [400, 500], "S_per_mm": [1, 2]}, "K_per_mm", "a list"),
+    ({"wavelength_nm": [400, 500], "S_per_mm": [1, 2]}, "K_per_mm", "missing"),
     ({"wavelength_nm": [400, 500], "S_per_mm": [1, 2], "K_per_mm": [1, 2, 3]}, "S_per_mm",
      "lengths"),
     ({"wavelength_nm": [500, 400], "S_per_mm": [1, 2], "K_per_mm": [1, 1]}, "wavelength_nm",
