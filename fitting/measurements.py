@@ -97,7 +97,7 @@ class Measurement:
 
 
 def read_measurement(path, thickness_mm: float | None = None, percent: bool = False,
-                     ignore=()):
+                     ignore=(), white_reflectance: float | None = None):
     """Read and check one measurement CSV.
 
     **Arguments:**
@@ -107,6 +107,9 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
     - `percent`: reflectance columns are 0–100 instead of 0–1 (radiance columns unaffected).
       Without it, reflectances whose median is above 1.5 are read as percent (and must then
       lie in [0, 100]), with a note; otherwise anything above 1 is an error.
+    - `white_reflectance`: the white standard's reflectance in (0, 1] (a certified tile's
+      0.98): radiance columns give R = E / E_white × this; overrides the file's
+      `# white_reflectance:` line; default 1 (Huang et al.'s barium sulfate).
     - `ignore`: column names or `fnmatch` patterns (`SD_*`) of columns to skip, as the
       file's own `# ignore: NAME, NAME` line does; a name in that line that is no column
       is an error, a pattern here that matches nothing in this file is not.
@@ -151,7 +154,8 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
     try:
         table = read_table(path, is_wavelength_column, "wavelength_nm,R_<X>mm,...,R_inf,R_g",
                            min_rows=2, other_column=_is_reading,
-                           once=("name", "thickness_mm", "ignore"), on_header=on_header)
+                           once=("name", "thickness_mm", "ignore", "white_reflectance"),
+                           on_header=on_header)
     except InputError as e:
         if "no header row" in str(e) and (layout := _other_layout(path)) is not None:
             raise InputError(layout[1], path, layout[0]) from None
@@ -185,7 +189,19 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
                          "name their own thicknesses")
         elif thickness_mm is not None and thickness_mm != comment_thickness:
             notes.append(f"{said} is overridden by --thickness {thickness_mm:g}")
-    reflectance = _reflectances(data, header, columns, path, numbers, percent, notes)
+    white = 1.0
+    if "white_reflectance" in meta:
+        value, number = meta["white_reflectance"]
+        white = _fraction(value, path, number, "white_reflectance")
+        if white_reflectance is not None and white_reflectance != white:
+            notes.append(f"{path}:{number}: '# white_reflectance: {value}' is overridden by "
+                         f"--white-reflectance {white_reflectance:g}")
+    if white_reflectance is not None:
+        white = white_reflectance
+    if white != 1.0 and "white" not in {kind for kind, _ in columns.values()}:
+        notes.append(f"{path}: the white standard's reflectance is not used: no radiance "
+                     "columns (E_... with E_white)")
+    reflectance = _reflectances(data, header, columns, path, numbers, percent, notes, white)
     thin = sorted((x, name) for name, (kind, x) in columns.items() if kind == "thin")
     R = np.stack([reflectance[name] for _, name in thin])
     R_inf, R_g = reflectance["inf"], reflectance["g"]
@@ -381,7 +397,18 @@ def _classify(header, path, line, bare_thickness):
     return columns
 
 
-def _reflectances(data, header, columns, path, numbers, percent, notes):
+def _fraction(value, path, line, key) -> float:
+    """A `# key:` value that must be a reflectance in (0, 1]."""
+    try:
+        x = float(value)
+    except ValueError:
+        x = math.nan
+    if not (math.isfinite(x) and 0 < x <= 1):
+        raise InputError(f"expected a reflectance in (0, 1], got {value!r}", path, line, key)
+    return x
+
+
+def _reflectances(data, header, columns, path, numbers, percent, notes, white_R=1.0):
     """Reflectance per role (thin columns by name), checked to lie in [0, 1]. Reflectance
     columns are read as percent when `percent`, or when their median is above 1.5 (a note is
     added to `notes`)."""
@@ -416,8 +443,9 @@ def _reflectances(data, header, columns, path, numbers, percent, notes):
             continue
         values = data[:, index[name]]
         if _is_radiance(name):
-            values = values / white
-            what, scale = "R = E / E_white must be in [0, 1]", 1.0
+            values = values / white * white_R
+            what, scale = ("R = E / E_white must be in [0, 1]" if white_R == 1.0 else
+                           f"R = E / E_white × {white_R:g} must be in [0, 1]"), 1.0
         elif percent:
             what, scale = "reflectance in percent must be in [0, 100]", 100.0
         else:

@@ -270,6 +270,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="reflectance columns are in percent (0–100) instead of 0–1 (without "
                    "it, a file whose reflectances have a median above 1.5 is read as percent, "
                    "with a note)")
+    c.add_argument("--white-reflectance", type=_number(above=0.0, hi=1.0), metavar="R",
+                   help="the white standard's certified reflectance (0-1; overrides '# "
+                   "white_reflectance:'): radiance columns give R = E / E_white × R (default "
+                   "1, Huang et al.'s barium sulfate)")
     c.add_argument("--ignore", action="append", default=[], metavar="COLUMN",
                    help="skip this column in every file (repeatable; a pattern such as "
                    "'SD_*' in quotes skips all that match): standard deviations, counts, "
@@ -496,7 +500,7 @@ def _calibrate(args, run: _Run) -> int:
     measurements, paths = [], []
     for f in args.files:
         m = read_measurement(f, thickness_mm=args.thickness, percent=args.percent,
-                             ignore=args.ignore)
+                             ignore=args.ignore, white_reflectance=args.white_reflectance)
         check_name(m.name, f, key="name")
         json_path = outputs.plan(f"{m.name}.json", f)
         png_path = None if args.no_report else outputs.plan(f"{m.name}.png", f)
