@@ -177,16 +177,19 @@ HIDDEN_SIDE_WARN = 0.25
 
 
 def hidden_side(sc) -> list[str]:
-    """A warning when scene `sc`'s camera sees mostly the side of a planar map that does not
-    own its texels (`view.hidden_side_share`): the hand turned 180° was a flat, unlit
-    silhouette and nothing said why (a trial). Measured on a 64-pixel view of the camera."""
+    """A warning when scene `sc`'s camera sees much of the side of a planar map that does not
+    own its texels (`view.hidden_side_share`): a view from the side (the foot turned 70°),
+    where the texels the two sides share go to the side the camera faces more, and the rest
+    shows them lit wrongly (the hand turned 180° was once all such: `scene.planar_side`).
+    Measured on a 64-pixel view of the camera."""
     from . import texture
     from .view import hidden_side_share, make_view
 
     config = sc.config
-    if config.texture.projection != "planar":
+    if config.texture.projection not in ("planar", "planar-back"):
         return []
-    tmap = texture.mapped(config.texture.mesh, "planar", config.texture.size)[1]
+    tmap = texture.mapped(config.texture.mesh, config.texture.projection,
+                          config.texture.size)[1]
     height = max(1, round(64 * config.image_height / config.image)) if config.image_height \
         else 0
     view = make_view(tmap, 64, config.camera, 1, config.fov, config.rotate, height,
@@ -194,10 +197,10 @@ def hidden_side(sc) -> list[str]:
     share = hidden_side_share(tmap, view)
     if share <= HIDDEN_SIDE_WARN:
         return []
-    return [f"scene {sc.name!r}: {share:.0%} of the view is the mesh's side facing -z, which "
-            "the planar projection shades with the +z side's texels (their normals, their "
-            "light): it shows unlit or wrongly lit; view the +z side (camera.rotate about y "
-            "within ±90°) or use mesh.projection = \"cylindrical\""]
+    return [f"scene {sc.name!r}: {share:.0%} of the view is a side of the mesh that the "
+            "planar projection shades with the other side's texels (their normals, their "
+            "light): seen from the side, the two sides' texels interleave; view it more "
+            "nearly face on, or use mesh.projection = \"cylindrical\""]
 
 
 def unused_overrides(sc, overrides) -> list[str]:

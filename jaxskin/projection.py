@@ -1,8 +1,9 @@
 """Mapping a mesh and its direction fields to texture space (Bando 2001 §3.2).
 
 - planar: (x, y, z) → (x, y); vectors keep (dx, dy). Where both sides of a part project
-  onto the same texels (the palm under the back of the hand), the side facing the viewer
-  (+z) owns them.
+  onto the same texels (the palm under the back of the hand), the side facing the camera
+  owns them: +z, or −z ("planar-back", which a scene picks when its camera is turned to
+  see that side: `scene.planar_side`).
 - cylindrical (eq. 3.2): about the y axis, s = angle from +z (0 to 2π), t = y; a vector is
   rotated by −s about y and keeps (dx', dy'). Texels are square at the mean radius, so a
   long part gets a texture taller than wide. The seam at s = 0 wraps.
@@ -57,6 +58,9 @@ class TextureMap:
     # With `wrap_x`, the faces that straddle the cut `(F,)` (a UV map's seam faces); None:
     # every face wider than half the texture (the cylindrical projection's rule).
     seam: np.ndarray | None = None
+    # Planar: the side whose faces own the texels both sides project to, +1 (facing +z) or
+    # −1 (facing −z: "planar-back", for a camera that sees that side).
+    side: int = 1
 
     def gradients(self) -> np.ndarray:
         """Per vertex `(V, 2, 3)`: the surface gradients ∇s, ∇t of the texture coordinates
@@ -105,9 +109,10 @@ class TextureMap:
 
 
 def project(kind: str, mesh: Mesh, size: int) -> TextureMap:
-    """Map `mesh` to a texture `size` texels wide by `kind` ('planar', 'cylindrical', 'uv')."""
-    if kind == "planar":
-        return _planar(mesh, size)
+    """Map `mesh` to a texture `size` texels wide by `kind` ('planar', 'cylindrical', 'uv';
+    'planar-back': planar, the side facing −z owning the shared texels)."""
+    if kind in ("planar", "planar-back"):
+        return _planar(mesh, size, -1 if kind == "planar-back" else 1)
     if kind == "cylindrical":
         return _cylindrical(mesh, size)
     if kind == "uv":
@@ -115,7 +120,7 @@ def project(kind: str, mesh: Mesh, size: int) -> TextureMap:
     raise ValueError(f"projection must be one of {KINDS}, got {kind!r}")
 
 
-def _planar(mesh: Mesh, size: int) -> TextureMap:
+def _planar(mesh: Mesh, size: int, side: int = 1) -> TextureMap:
     p = mesh.vertices
     lo, hi = p[:, :2].min(axis=0), p[:, :2].max(axis=0)
     scale = size * (1 - 2 * MARGIN) / max(float(np.max(hi - lo)), 1e-300)
@@ -123,8 +128,9 @@ def _planar(mesh: Mesh, size: int) -> TextureMap:
     xy = np.stack([(p[:, 0] - centre[0]) * scale + size / 2,
                    size / 2 - (p[:, 1] - centre[1]) * scale], axis=1)
     M = np.broadcast_to(np.array([[1.0, 0, 0], [0, -1.0, 0]]), (len(p), 2, 3))
-    return TextureMap("planar", mesh, size, size, xy, -p[:, 2], False, np.array(M),
-                      texel=1.0 / scale, jacobian=np.array(M) * scale)
+    # The rasterizer keeps the least depth: the side facing `side` · z wins shared texels.
+    return TextureMap("planar", mesh, size, size, xy, -side * p[:, 2], False, np.array(M),
+                      texel=1.0 / scale, jacobian=np.array(M) * scale, side=side)
 
 
 def _cylindrical(mesh: Mesh, size: int) -> TextureMap:

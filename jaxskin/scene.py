@@ -241,6 +241,19 @@ class EditSpec:
     weight: float
 
 
+def planar_side(projection: str, rotate) -> str:
+    """The texture's projection for a scene's `mesh.projection` and `camera.rotate`: a
+    planar map whose camera sees the side facing −z (the hand turned round) gives that
+    side the texels the two sides share ("planar-back"), so that the side in view is
+    shaded with its own normals (it was the +z side's: a flat, unlit silhouette; a trial).
+    The camera looks down −z at the mesh turned by `view.rotation(rotate)` (x, then y, then
+    z): the mesh's direction toward it has z = cos(x) cos(y)."""
+    if projection != "planar":
+        return projection
+    ax, ay = (math.radians(float(a)) for a in tuple(rotate)[:2])
+    return "planar-back" if math.cos(ax) * math.cos(ay) < 0 else "planar"
+
+
 @dataclasses.dataclass(frozen=True)
 class TextureConfig:
     """What the texture-space maps depend on (the furrows are cached per one of these)."""
@@ -362,7 +375,8 @@ class Scene:
     def config(self) -> SceneConfig:
         """The static part of the scene, hashable: the jit cache key."""
         v = self.values
-        tex = TextureConfig(v["mesh.file"], v["mesh.projection"], v["texture.size"],
+        tex = TextureConfig(v["mesh.file"], planar_side(v["mesh.projection"],
+                                                        v["camera.rotate"]), v["texture.size"],
                             v["wrinkles.enabled"], v["wrinkles.k_scale"], v["wrinkles.seed"],
                             self.edits,
                             furrow_method(v["wrinkles.method"], v["texture.size"]))

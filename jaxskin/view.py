@@ -144,14 +144,13 @@ def make_view(tmap: TextureMap, size: int, projection: str = "orthographic",
 
 def hidden_side_share(tmap: TextureMap, view: View) -> float:
     """The share of the samples `view` shades that see the side of a planar map's mesh
-    facing −z: the planar projection gives its texels to the side facing +z (the back of
-    the hand over the palm), so the other side shows that side's shading, lit as if it
-    faced the other way. 0 for the other projections."""
+    that does not own the texels the two sides share (`TextureMap.side`): it shows the
+    other side's shading, lit as if it faced the other way. 0 for the other projections."""
     if tmap.kind != "planar" or view.raster is None:
         return 0.0
     mesh = tmap.mesh
     a, b, c = (mesh.vertices[mesh.faces[:, i]] for i in range(3))
-    faces_minus_z = np.cross(b - a, c - a)[:, 2] < 0
+    faces_minus_z = tmap.side * np.cross(b - a, c - a)[:, 2] < 0  # not the owning side
     shaded = view.shaded
     seen = int(shaded.sum())
     if seen == 0:

@@ -270,3 +270,24 @@ def test_arm_render_gradients_through_the_frame_bump(x64):
     values = [params["wrinkles.k_bump"], params["wrinkles.k_noise"], params["light.direction"]]
     assert np.all(np.isfinite(f(*values)))
     check_grads_scaled(f, values, [0.05, 0.02, 0.05], order=1, eps=1e-4, atol=1e-5, rtol=1e-4)
+
+
+def test_eq_4_10_on_the_side_facing_minus_z():
+    """A planar map's −z side (the palm, "planar-back") is the surface z = −h(x, y) below
+    the plane: its outward normal is (−h_x, −h_y, −1)/|…| — the same tangential tilt as the
+    +z side's (−h_x, −h_y, 1)/|…|, which eq. 4.10's cross products give for n = ∓z alike
+    (derived by hand; here against that closed form)."""
+    import jax.numpy as jnp
+
+    from jaxskin.bump import bump_normals, height_gradient
+
+    y, x = np.mgrid[0:16, 0:16].astype(np.float32)
+    h = jnp.asarray(0.3 * np.sin(x / 3.0) + 0.2 * np.cos(y / 4.0))
+    hs, ht = (np.asarray(g) for g in height_gradient(h))
+    k = 0.5
+    for sign in (1.0, -1.0):
+        n = jnp.zeros((16, 16, 3)).at[..., 2].set(sign)
+        got = np.asarray(bump_normals(n, h, k))
+        want = np.stack([-k * hs, -k * ht, np.full_like(hs, sign)], axis=-1)
+        want /= np.linalg.norm(want, axis=-1, keepdims=True)
+        np.testing.assert_allclose(got, want, atol=1e-6)
