@@ -484,7 +484,8 @@ def _list(args) -> int:
         rows.append(("illuminant", name, f"CIE illuminant {name} (spectral.illuminant)"))
     for step in spectral.STEPS:
         n = len(spectral.Grid(step).wavelengths)
-        rows.append(("step", f"{step} nm", f"{n} bands, 380-780 nm (spectral.step)"))
+        rows.append(("step", f"{step}", f"{step} nm: {n} bands, 380-780 nm "
+                     f"(spectral.step = {step})"))
     for kind, name, text in rows:
         print(f"{kind:<10} {name:<20} {text}")
     return 0
