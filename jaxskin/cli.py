@@ -685,7 +685,7 @@ def _render(args, run: _Run) -> int:
     import numpy as np
 
     from . import maps
-    from .scene import _parse_override, load_scene
+    from .scene import BUILTIN_SCENES, _parse_override, load_scene
 
     if args.format == "exr" and not maps.exr_available():
         raise InputError("--format exr needs the OpenEXR bindings: pip install 'jaxskin[exr]'")
@@ -700,6 +700,9 @@ def _render(args, run: _Run) -> int:
     for name in args.scenes:
         with reading(name):
             scenes.append(load_scene(name, args.overrides, flag="-D"))
+        if name in BUILTIN_SCENES and Path(name).is_file():  # the built-in one wins (a trial)
+            _say(f"jaxskin: warning: '{name}' is the built-in scene; the file {name} here is "
+                 f"not read (give ./{name} for it)")
     _warn_repeated(args.overrides)
     plans = []
     for sc in scenes:

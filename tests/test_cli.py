@@ -430,3 +430,16 @@ def test_a_render_that_sees_no_mesh_is_warned_about(tmp_path, capsys):
     assert not iio.imread(png).any()
     assert main(["render", "hand", "-o", str(tmp_path), *SMALL]) == 0
     assert "not in view" not in capsys.readouterr().err
+
+
+def test_a_file_named_like_a_builtin_scene_is_named_in_a_warning(tmp_path, monkeypatch, capsys):
+    """`jaxskin render hand` with a file `hand` in the folder rendered the built-in hand and
+    said nothing of the file (a trial): a warning names it and how to render it."""
+    (tmp_path / "hand").write_text('name = "mine"\n')
+    monkeypatch.chdir(tmp_path)
+    assert main(["render", "hand", "-o", "o", "-D", "camera.size=32", "-D",
+                 "texture.size=64"]) == 0
+    assert ("jaxskin: warning: 'hand' is the built-in scene; the file hand here is not read "
+            "(give ./hand for it)") in capsys.readouterr().err
+    assert [p.name for p in (tmp_path / "o").iterdir()] == [
+        "hand_camera.size-32_texture.size-64.png"]
