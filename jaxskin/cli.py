@@ -374,7 +374,7 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--mask", metavar="M.png", help="weights in [0, 1] per pixel (grey; 0: "
                    "ignore), the target's size")
     f.add_argument("--steps", type=_number(int, 1, 100000), default=100, metavar="N",
-                   help="at most N optimiser steps (100)")
+                   help="at most N optimiser steps, 1-100000 (100)")
     f.add_argument("--smooth", type=_number(lo=0.0, hi=1e6), default=1e-6, metavar="W",
                    help="weight of the maps' total-variation prior (1e-6; 1e-5 pulled the "
                    "makeup maps flat at noise 0.01)")
@@ -402,10 +402,10 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--lobes", type=_number(int, 1, 16), default=3, metavar="N",
                    help="lobes per channel, 1-16 (3)")
     b.add_argument("--starts", type=_number(int, 1, 1024), default=8, metavar="S",
-                   help="starts per channel, half from typical lobe shapes, half random (8); "
-                   "the best finite fit wins")
+                   help="starts per channel, 1-1024, half from typical lobe shapes, half "
+                   "random (8); the best finite fit wins")
     b.add_argument("--seed", type=_number(int, 0, 2147483647), default=0,
-                   help="seed of the random starts (0)")
+                   help="seed of the random starts, 0-2147483647 (0)")
     b.add_argument("--no-report", action="store_true", help="write the JSON only, no PNG")
     cluster.add_option(b, "RGB channel")
 
@@ -424,9 +424,9 @@ def _parser() -> argparse.ArgumentParser:
     k.add_argument("-o", "--output", required=True, metavar="DIR",
                    help="folder for fit.csv and fit.png (created if missing)")
     k.add_argument("--starts", type=_number(int, 1, 256), default=4, metavar="S",
-                   help="starts per spectrum: the default skin, then random (4)")
+                   help="starts per spectrum, 1-256: the default skin, then random (4)")
     k.add_argument("--seed", type=_number(int, 0, 2147483647), default=0,
-                   help="seed of the random starts (0)")
+                   help="seed of the random starts, 0-2147483647 (0)")
     k.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
                    help="hold a parameter at a value, e.g. --fix epidermis_mm=0.06 "
                    "(repeatable)")
