@@ -15,7 +15,6 @@ diverges, gives NaN, stops unconverged — never sinks the fit.
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import functools
 import math
@@ -73,21 +72,10 @@ def _misspelt_header(path: Path):
     """`(line, cell)` of the first header cell that is not a column name, where the first
     row that is not a comment names columns (most of its cells are the format's names, or
     close to them) but no row was taken as the header; else None."""
-    from jaxskin.formats import DELIMITERS, _split, read_text
+    from jaxskin.formats import text_rows
 
-    try:
-        lines = read_text(path, fallback="cp1252").splitlines()
-    except InputError:
-        return None
     names = (*ANGLES, *VECTORS, *RGB, "weight")
-    for number, raw in enumerate(lines, start=1):
-        line = raw.strip()
-        if not line or line.startswith("#"):
-            continue
-        try:
-            cells = max((_split(line, d) for d in DELIMITERS), key=len)
-        except csv.Error:
-            return None
+    for number, cells in text_rows(path):
         near = [c for c in cells if c in names or _nearest(c)]
         unknown = [c for c in cells if c not in names]
         if len(cells) >= 4 and len(near) >= len(cells) - 1 and unknown:

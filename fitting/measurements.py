@@ -24,7 +24,6 @@ Anything else is an `InputError` naming the file, the line and the column.
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import fnmatch
 import math
@@ -234,20 +233,9 @@ def _other_layout(path):
     """`(line, message)` when a table with no header row is laid out in a way the format
     is not: wavelengths along a row (one row per sample, as some instruments export), or
     the wavelength column after another (a sample name first); else None."""
-    from jaxskin.formats import DELIMITERS, _split, read_text
+    from jaxskin.formats import text_rows
 
-    try:
-        lines = read_text(path, fallback="cp1252").splitlines()
-    except InputError:
-        return None
-    for number, raw in enumerate(lines, start=1):
-        line = raw.strip()
-        if not line or line.startswith("#"):
-            continue
-        try:
-            cells = max((_split(line, d) for d in DELIMITERS), key=len)
-        except csv.Error:
-            return None
+    for number, cells in text_rows(path):
         along = [c for c in cells[1:] if _WAVELENGTH_CELL.fullmatch(c)
                  and 200 <= float(c.lower().removesuffix("nm")) <= 3000]
         if len(cells) >= 5 and len(along) >= 0.8 * (len(cells) - 1):

@@ -142,6 +142,25 @@ def _split(line: str, delimiter: str) -> list[str]:
     return cells
 
 
+def text_rows(path):
+    """`(line number, cells)` of each row of a text table that is not blank or a comment,
+    split at whichever delimiter gives the most cells; nothing for a file that cannot be
+    read as text, and no more rows from the first that is not CSV. For messages that
+    guess what a file that failed to read was meant to be."""
+    try:
+        lines = read_text(path, fallback="cp1252").splitlines()
+    except InputError:
+        return
+    for number, raw in enumerate(lines, start=1):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        try:
+            yield number, max((_split(line, d) for d in DELIMITERS), key=len)
+        except csv.Error:
+            return
+
+
 def _header_row(line: str, first_column, other_column=None):
     """`(cells, delimiter)` if `line` is a table's header row (its first cell accepted by
     `first_column` and, with `other_column`, a later cell by that), else None; of several
