@@ -122,6 +122,24 @@ def idle_maps(sc) -> list[str]:
     return out
 
 
+# A cosmetic layer thicker than this (mm) gets a warning: films are µm to a tenth of a mm.
+THICK_LAYER_MM = 1.0
+
+
+def thick_layers(sc) -> list[str]:
+    """Warnings for cosmetic layers of scene `sc` thicker than `THICK_LAYER_MM`: 10 meant as
+    10 µm is accepted (the key allows up to 10 mm) and renders an opaque mask of the
+    product's colour (a trial)."""
+    out = []
+    for layer in sc.layers:
+        key = f"layer.{layer.name}.thickness_mm"
+        x = float(sc.values.get(key, 0.0))
+        if x > THICK_LAYER_MM:
+            out.append(f"{key} = {x:g} mm: cosmetic films are about 0.001-0.1 mm thick (10 µm "
+                       "is 0.01); at this thickness most products are opaque")
+    return out
+
+
 # An edit's `at` further than this share of the mesh's bounding-box diagonal from every
 # vertex is refused (the built-in scenes' furthest: 0.15, the foot's instep); a direction
 # whose part in texture space is under this share of it is refused (it points across the

@@ -35,7 +35,7 @@ import warnings
 from pathlib import Path
 
 from . import __version__, cluster
-from .checks import check_scene, hidden_side, idle_maps, reading, unused_overrides
+from .checks import check_scene, hidden_side, idle_maps, reading, thick_layers, unused_overrides
 from .io import FitError, InputError
 from .outputs import MAX_NAME, MAX_NAME_BYTES, Outputs, check_name, slug
 
@@ -737,7 +737,7 @@ def _render(args, run: _Run) -> int:
         for item in unused_overrides(sc, args.overrides):
             _say(f"jaxskin: warning: -D {item} changes nothing in scene {sc.name!r} (its "
                  "material model or settings do not use it)")
-        for line in idle_maps(sc) + hidden_side(sc):
+        for line in idle_maps(sc) + hidden_side(sc) + thick_layers(sc):
             _say(f"jaxskin: warning: {line}")
     run.outputs.append(outputs)
     # The units of work: a scene's sweep in batches of cluster.SWEEP_BATCH values (one

@@ -413,3 +413,15 @@ def test_the_modules_example_scene_shows_the_defaults():
     for key in checked:
         default = scene.SCHEMA[key].default
         assert shown[key] == (list(default) if isinstance(default, tuple) else default), key
+
+
+def test_a_cosmetic_layer_millimetres_thick_is_warned():
+    """`-D layer.foundation.thickness_mm=10` meant as 10 µm was accepted (the key allows up
+    to 10 mm) and rendered an opaque mask, silently (a trial)."""
+    from jaxskin.checks import thick_layers
+
+    assert thick_layers(load_scene("makeup")) == []
+    assert thick_layers(load_scene("makeup", ["layer.foundation.thickness_mm=0.9"])) == []
+    assert thick_layers(load_scene("makeup", ["layer.foundation.thickness_mm=10"])) == [
+        "layer.foundation.thickness_mm = 10 mm: cosmetic films are about 0.001-0.1 mm thick "
+        "(10 µm is 0.01); at this thickness most products are opaque"]
