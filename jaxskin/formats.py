@@ -120,6 +120,9 @@ def read_text(path, fallback: str | None = None, expected: str = "a CSV table (e
     if kind is not None:  # a file of a kind users pick by mistake: say which
         raise InputError(f"{kind}, not text: expected {expected}", path)
     if b"\0" in raw:
+        text = _utf16_without_mark(raw)
+        if text is not None:  # Windows "Unicode" saved without the mark (a trial)
+            return text
         line = raw[:raw.index(b"\0")].count(b"\n") + 1
         raise InputError("a binary file (a NUL byte), expected UTF-8 text", path, line)
     try:
@@ -132,6 +135,24 @@ def read_text(path, fallback: str | None = None, expected: str = "a CSV table (e
         nor = "" if fallback is None else f" nor {fallback}"
         raise InputError(f"not UTF-8{nor} text (byte 0x{raw[e.start]:02x})", path,
                          line) from None
+
+
+def _utf16_without_mark(raw: bytes) -> str | None:
+    """`raw` decoded as UTF-16 when it has no byte-order mark but is plainly UTF-16 text:
+    an even length, every other byte NUL in its first 2 KiB (Latin text: the high bytes)
+    and none of the others, and it decodes with no NUL character; else None."""
+    head = raw[:2048]
+    if len(raw) % 2 or len(head) < 4:
+        return None
+    for order, zeros, rest in (("utf-16-le", head[1::2], head[0::2]),
+                               ("utf-16-be", head[0::2], head[1::2])):
+        if zeros.count(0) >= 0.9 * len(zeros) and rest.count(0) == 0:
+            try:
+                text = raw.decode(order)
+            except UnicodeDecodeError:
+                return None
+            return None if "\0" in text else text
+    return None
 
 
 def _split(line: str, delimiter: str) -> list[str]:

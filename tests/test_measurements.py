@@ -494,3 +494,19 @@ def test_a_white_standards_certified_reflectance_scales_radiance(tmp_path):
     unused = read_measurement(write(tmp_path, GOOD, "r.csv"), white_reflectance=0.98)
     np.testing.assert_array_equal(unused.R, read_measurement(write(tmp_path, GOOD)).R)
     assert any("the white standard's reflectance is not used" in n for n in unused.notes)
+
+
+@pytest.mark.parametrize("order", ["utf-16-le", "utf-16-be"])
+def test_utf16_without_a_byte_order_mark_is_read(tmp_path, order):
+    """Windows' "Unicode" saved without its mark was "a binary file (a NUL byte)" (a trial):
+    plainly UTF-16 text (every other byte NUL, none of the rest) is read as it; a binary
+    file with NULs is still refused."""
+    plain = read_measurement(write(tmp_path, GOOD, "plain.csv"))
+    path = tmp_path / "u16.csv"
+    path.write_bytes(GOOD.replace("\n", "\r\n").encode(order))
+    m = read_measurement(path)
+    np.testing.assert_array_equal(m.R, plain.R)
+    assert m.name == plain.name
+    (tmp_path / "bin.csv").write_bytes(b"wavelength_nm\x00\x01\x02" * 40)
+    with pytest.raises(InputError, match="a binary file"):
+        read_measurement(tmp_path / "bin.csv")
