@@ -204,7 +204,9 @@ class _Run:
         self._stage = text
 
     def finished(self) -> str:
-        written = [p for o in self.outputs for p in o.written]
+        # each file once, where it was last written (the editor saves one name again)
+        written = list(reversed(dict.fromkeys(
+            reversed([p for o in self.outputs for p in o.written]))))
         if not written:
             return "no file was written"
         folders = sorted({str(p.parent) for p in written})
@@ -645,11 +647,13 @@ def _base_name(sc, overrides, room: int = 16) -> str:
     the digest leaves no room."""
     named = [item for item in overrides if item.partition("=")[0].strip() == "name"]
     base = check_name(sc.name, f"-D {named[-1]}" if named else sc.source, key="name")
-    parts = []
+    last = {}  # a key given twice: its last value, which is the one used (a trial)
     for item in overrides:
         key, _, value = (s.strip() for s in item.partition("="))
-        if key != "name" and not named:  # `-D name=X` names the outputs X, nothing added
-            parts.append(f"{slug(key)}-{slug(value)}")
+        last.pop(key, None)
+        last[key] = value
+    parts = [f"{slug(key)}-{slug(value)}" for key, value in last.items()
+             if key != "name" and not named]  # `-D name=X` names the outputs X, nothing added
     suffix = "_".join(parts)
 
     def too_long(text):  # with `room` added, in characters and in UTF-8 bytes
@@ -697,6 +701,11 @@ def _render(args, run: _Run) -> int:
     # Everything checked before any output: every scene, its inputs, the sweep, memory,
     # the output names (distinct, safe, not an input).
     scenes = []
+    named = [item for item in args.overrides if item.partition("=")[0].strip() == "name"]
+    if named and len(args.scenes) > 1:  # every scene's outputs would take the one name
+        raise InputError(f"gives all {len(args.scenes)} scenes of the command one name: render "
+                         "one scene per command with -D name, or set name in each scene file",
+                         f"-D {named[-1]}")
     for name in args.scenes:
         with reading(name):
             scenes.append(load_scene(name, args.overrides, flag="-D"))

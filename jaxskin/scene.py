@@ -745,6 +745,7 @@ def _edit(i, e, path) -> EditSpec:
     where = f"fields.edit[{i}]"
     if not isinstance(e, dict):
         raise InputError("expected a table with at (or vertex), d1, d2, weight", path, key=where)
+    e = {k: v for k, v in e.items() if v is not None}  # JSON's null (the editor's state)
     _known(e, EDIT_KEYS, path, where)
     if ("at" in e) == ("vertex" in e):
         raise InputError("give exactly one of 'at' (a point) or 'vertex' (an index)", path,

@@ -302,7 +302,8 @@ def test_a_long_scene_name_gives_way_to_the_digest_or_names_the_scene(tmp_path, 
 def test_a_name_given_with_D_is_the_whole_name(tmp_path, capsys):
     """`-D name=espresso_look` with other -D values wrote espresso_look_D-13e6f4956f9c.png
     (a trial comparing products): a name given with -D is the file's name, nothing added;
-    the same name for two scenes of one command is refused before any work."""
+    the same name for two scenes of one command is refused before any work, naming -D
+    (it said "give the inputs distinct names")."""
     from jaxskin.cli import main
 
     small = ["-D", "camera.size=32", "-D", "texture.size=32"]
@@ -314,8 +315,14 @@ def test_a_name_given_with_D_is_the_whole_name(tmp_path, capsys):
                                                         (tmp_path / "o").iterdir()}
     assert main(["render", "hand", "foot", "-o", str(tmp_path / "q"), "-D", "name=x",
                  *small]) == 2
-    assert "two outputs are both named 'x.png'" in capsys.readouterr().err
+    assert ("jaxskin: error: -D name=x: gives all 2 scenes of the command one name"
+            in capsys.readouterr().err)
     assert not (tmp_path / "q").exists()
+    # a key given twice names the file by the value used, the last (both were in the name)
+    assert main(["render", "hand", "-o", str(tmp_path / "r"), "-D", "material.melanin=0.1",
+                 "-D", "material.melanin=0.9", *small]) == 0
+    assert [p.name for p in (tmp_path / "r").iterdir()] == [
+        "hand_material.melanin-0.9_camera.size-32_texture.size-32.png"]
 
 
 def test_renders_are_tagged_srgb_and_data_maps_are_not(tmp_path):

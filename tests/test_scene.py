@@ -425,3 +425,21 @@ def test_a_cosmetic_layer_millimetres_thick_is_warned():
     assert thick_layers(load_scene("makeup", ["layer.foundation.thickness_mm=10"])) == [
         "layer.foundation.thickness_mm = 10 mm: cosmetic films are about 0.001-0.1 mm thick "
         "(10 µm is 0.01); at this thickness most products are opaque"]
+
+
+def test_an_edit_with_null_for_the_missing_key_is_read():
+    """The editor's /api/state lists each edit with `"vertex": null` (or `"at": null`);
+    posting that list back was "give exactly one of 'at' or 'vertex'" (a trial). JSON's
+    null is no value: the edit reads as without that key."""
+    from jaxskin.scene import parse_scene
+
+    edits = [{"at": [0.0, 0.4, 0.1], "vertex": None, "d1": [1.0, 0.0, 0.0],
+              "d2": [0.0, 1.0, 0.0]},
+             {"at": None, "vertex": 5, "d1": [1.0, 0.0, 0.0], "d2": [0.0, 1.0, 0.0],
+              "weight": None}]
+    sc = parse_scene({"mesh": {"file": "hand"}, "fields": {"edit": edits}}, "s.toml")
+    assert [(e.at, e.vertex, e.weight) for e in sc.edits] == [((0.0, 0.4, 0.1), None, 1.0),
+                                                             (None, 5, 1.0)]
+    with pytest.raises(InputError, match="give exactly one of 'at'"):
+        parse_scene({"fields": {"edit": [{"at": None, "vertex": None, "d1": [1, 0, 0],
+                                          "d2": [0, 1, 0]}]}}, "s.toml")
