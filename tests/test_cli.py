@@ -413,6 +413,11 @@ def test_the_last_line_after_a_stop_names_only_the_last_files():
                     + "; no partial file is left"), line
     run.outputs[0].written = run.outputs[0].written[:9]
     assert run.finished().count(".png") == 9 and "more" not in run.finished()
+    # the editor saving one name twice listed its files twice (a trial): each once, where
+    # it was last written
+    run.outputs[0].written = [Path("/o/a.toml"), Path("/o/b.png"), Path("/o/a.toml")]
+    assert run.finished() == ("2 file(s) complete in /o: b.png, a.toml; no partial file is "
+                              "left")
 
 
 def test_a_render_that_sees_no_mesh_is_warned_about(tmp_path, capsys):
