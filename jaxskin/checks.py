@@ -190,8 +190,9 @@ def _vec(a) -> str:
     return "[" + ", ".join(f"{x:.3g}" for x in a) + "]"
 
 
-# A view that shows more than this share of a planar map's −z side gets a warning.
-HIDDEN_SIDE_WARN = 0.25
+# A view more than this share of whose samples show the other side's texels is warned (the
+# hand turned 60° about y: 18 %, streaks along the fingers; 30°: 4.5 %).
+HIDDEN_SIDE_WARN = 0.1
 
 
 def hidden_side(sc) -> list[str]:

@@ -143,20 +143,25 @@ def make_view(tmap: TextureMap, size: int, projection: str = "orthographic",
 
 
 def hidden_side_share(tmap: TextureMap, view: View) -> float:
-    """The share of the samples `view` shades that see the side of a planar map's mesh
-    that does not own the texels the two sides share (`TextureMap.side`): it shows the
-    other side's shading, lit as if it faced the other way. 0 for the other projections."""
+    """The share of the samples `view` shades whose texel belongs to a triangle facing the
+    other way along z than the sample's own (a planar map gives the texels both sides of a
+    part project to to one side, `TextureMap.side`): those show the other side's shading,
+    lit as if they faced the other way. 0 for the other projections."""
     if tmap.kind != "planar" or view.raster is None:
         return 0.0
-    mesh = tmap.mesh
-    a, b, c = (mesh.vertices[mesh.faces[:, i]] for i in range(3))
-    faces_minus_z = tmap.side * np.cross(b - a, c - a)[:, 2] < 0  # not the owning side
     shaded = view.shaded
     seen = int(shaded.sum())
     if seen == 0:
         return 0.0
-    return float((faces_minus_z[np.where(view.raster.tri >= 0, view.raster.tri, 0)]
-                  & shaded).sum() / seen)
+    mesh = tmap.mesh
+    a, b, c = (mesh.vertices[mesh.faces[:, i]] for i in range(3))
+    facing = np.cross(b - a, c - a)[:, 2] >= 0  # per face: toward +z
+    own = view.raster.tri[shaded]
+    x = np.clip(view.tex[shaded][:, 0].astype(int), 0, tmap.width - 1)
+    y = np.clip(view.tex[shaded][:, 1].astype(int), 0, tmap.height - 1)
+    owner = tmap.raster.tri[y, x]
+    other = (owner >= 0) & (facing[np.maximum(owner, 0)] != facing[own])
+    return float(other.sum() / seen)
 
 
 def _pinhole(c, focal: float, aspect: float):
