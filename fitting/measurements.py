@@ -189,7 +189,8 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
         elif thickness_mm is not None and thickness_mm != comment_thickness:
             notes.append(f"{said} is overridden by --thickness {thickness_mm:g}")
     white = 1.0
-    if "white_reflectance" in meta:
+    radiance = "white" in {kind for kind, _ in columns.values()}
+    if "white_reflectance" in meta and radiance:
         value, number = meta["white_reflectance"]
         white = _fraction(value, path, number, "white_reflectance")
         if white_reflectance is not None and white_reflectance != white:
@@ -197,10 +198,15 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
                          f"--white-reflectance {white_reflectance:g}")
     if white_reflectance is not None:
         white = white_reflectance
-    if white != 1.0 and "white" not in {kind for kind, _ in columns.values()}:
+    if not radiance and (white != 1.0 or "white_reflectance" in meta):
         notes.append(f"{path}: the white standard's reflectance is not used: no radiance "
                      "columns (E_... with E_white)")
-    reflectance = _reflectances(data, header, columns, path, numbers, percent, notes, white)
+    said = [n for n in columns if _PERCENT_UNIT.search(n) and not _is_radiance(n)]
+    if said and not percent:  # the header says so: not left to the median's guess
+        percent = True
+        notes.append(f"{path}: column '{said[0]}' says %: reflectances read as percent (/ 100)")
+    reflectance = _reflectances(data, header, columns, path, numbers, percent, notes, white,
+                                guessed=not said)
     thin = sorted((x, name) for name, (kind, x) in columns.items() if kind == "thin")
     R = np.stack([reflectance[name] for _, name in thin])
     R_inf, R_g = reflectance["inf"], reflectance["g"]
@@ -322,9 +328,10 @@ def _is_float(text: str) -> bool:
 
 
 def _positive(value, path, line, column, scale=1.0) -> float:
-    """A thickness in mm (`value` times `scale`: 1e-3 for µm), checked."""
+    """A thickness in mm (`value` times `scale`: 1e-3 for µm), checked; a decimal comma is
+    read as a point (one number alone: no column break to confuse it with)."""
     try:
-        x = float(value) * scale
+        x = float(_one_number(value)) * scale
     except ValueError:
         x = math.nan
     if not (math.isfinite(x) and 0 < x <= MAX_THICKNESS_MM):
@@ -333,10 +340,14 @@ def _positive(value, path, line, column, scale=1.0) -> float:
     return x
 
 
+# A percent unit after a reading column's name: "R_inf (%)", "R_g [%]", "R_g %".
+_PERCENT_UNIT = re.compile(r"\s*[(\[]\s*%\s*[)\]]$|\s*%$")
+
+
 def _canonical(name: str) -> str:
     """A reading column's name in the format's spelling: spaces as `_` (`R 0.05 mm` →
     `R_0.05_mm`), `E_R_…` as `E_…`, `∞` as `inf`."""
-    short = re.sub(r"\s*[(\[]\s*%\s*[)\]]$|\s*%$", "", name.strip())  # "R_inf (%)"
+    short = _PERCENT_UNIT.sub("", name.strip())  # "R_inf (%)"
     short = re.sub(r"\s+", "_", short).replace("∞", "inf")
     short = "E_" + short[4:] if short.startswith("E_R_") else short
     return {"Rinf": "R_inf", "Rg": "R_g", "Einf": "E_inf", "Eg": "E_g"}.get(short, short)
@@ -365,8 +376,8 @@ def _classify(header, path, line, bare_thickness):
                     "or pass --thickness", path, line, name,
                 )
             role = ("thin", bare_thickness)
-        elif (m := _THIN.match(short)) and _is_float(m["x"]):
-            role = ("thin", _positive(m["x"], path, line, name,
+        elif (m := _THIN.match(short)) and _is_float(m["x"].replace(",", ".")):
+            role = ("thin", _positive(m["x"].replace(",", "."), path, line, name,
                                       1.0 if m["unit"] == "mm" else 1e-3))
         else:
             raise InputError(f"unknown column; {expected}", path, line, name)
@@ -385,10 +396,16 @@ def _classify(header, path, line, bare_thickness):
     return columns
 
 
+def _one_number(text: str) -> str:
+    """A lone number's text with a decimal comma made a point (`0,05`)."""
+    text = text.strip()
+    return text.replace(",", ".") if re.fullmatch(r"[+-]?\d*,\d+", text) else text
+
+
 def _fraction(value, path, line, key) -> float:
     """A `# key:` value that must be a reflectance in (0, 1]."""
     try:
-        x = float(value)
+        x = float(_one_number(value))
     except ValueError:
         x = math.nan
     if not (math.isfinite(x) and 0 < x <= 1):
@@ -396,7 +413,8 @@ def _fraction(value, path, line, key) -> float:
     return x
 
 
-def _reflectances(data, header, columns, path, numbers, percent, notes, white_R=1.0):
+def _reflectances(data, header, columns, path, numbers, percent, notes, white_R=1.0,
+                  guessed=True):
     """Reflectance per role (thin columns by name), checked to lie in [0, 1]. Reflectance
     columns are read as percent when `percent`, or when their median is above 1.5 (a note is
     added to `notes`)."""
@@ -404,7 +422,8 @@ def _reflectances(data, header, columns, path, numbers, percent, notes, white_R=
     for name in columns:
         if _is_radiance(name):
             values = data[:, index[name]]
-            bad = np.flatnonzero((values < 0) | (values > MAX_RADIANCE))
+            # below 0 is left to R = E / E_white's test: a dark-corrected reading's noise
+            bad = np.flatnonzero(np.abs(values) > MAX_RADIANCE)
             if bad.size:
                 raise InputError(f"radiance must be in [0, {MAX_RADIANCE:g}], got "
                                  f"{values[bad[0]]:g}", path, numbers[bad[0]], name)
@@ -417,7 +436,7 @@ def _reflectances(data, header, columns, path, numbers, percent, notes, white_R=
             raise InputError(f"the white standard must be > 0, got {white[bad[0]]:g}",
                              path, numbers[bad[0]], white_name)
     plain = [index[n] for n in columns if not _is_radiance(n)]
-    if plain and percent:
+    if plain and percent and guessed:
         check_percent(data[:, plain], path)
     if plain and not percent:
         values = data[:, plain]

@@ -17,7 +17,7 @@ Everything numeric follows the dtype of its inputs; rendering defaults to float3
 (`jaxskin.DEFAULT_DTYPE`), fitting (`fitting`) runs in float64.
 """
 
-import importlib
+import importlib as _importlib
 
 from .io import InputError
 
@@ -31,9 +31,13 @@ def __getattr__(name: str):
     does not import JAX (about a second), so that the `jaxskin` command can take SIGINT
     from its first moment (`_console`)."""
     if name in ("km", "spectral"):
-        return importlib.import_module(f".{name}", __name__)
+        return _importlib.import_module(f".{name}", __name__)
     if name == "DEFAULT_DTYPE":
         import jax.numpy as jnp
 
         return jnp.float32
     raise AttributeError(f"module 'jaxskin' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted({*globals(), "DEFAULT_DTYPE", "km", "spectral"})

@@ -14,11 +14,15 @@ import sys
 
 def main(argv=None) -> int:
     early: list[int] = []
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda signum, frame: early.append(signum))
-    from jaxskin import cli  # JAX and the rest: about a second
+    old = {sig: signal.signal(sig, lambda signum, frame: early.append(signum))
+           for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        from jaxskin import cli  # JAX and the rest: about a second
 
-    return cli.main(argv, early=early)
+        return cli.main(argv, early=early)
+    finally:  # Python's own again for the exit (atexit, threads joined): not swallowed
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
 
 
 if __name__ == "__main__":

@@ -135,8 +135,8 @@ def thick_layers(sc) -> list[str]:
         key = f"layer.{layer.name}.thickness_mm"
         x = float(sc.values.get(key, 0.0))
         if x > THICK_LAYER_MM:
-            out.append(f"{key} = {x:g} mm: cosmetic films are about 0.001-0.1 mm thick (10 µm "
-                       "is 0.01); at this thickness most products are opaque")
+            out.append(f"{key} = {x:g} mm: cosmetic films are 0.1 µm to 1 mm thick (10 µm is "
+                       "0.01 mm); at this thickness most products are opaque")
     return out
 
 
@@ -170,12 +170,16 @@ def _check_edits(sc, config) -> None:
                 raise InputError(f"the point is {distance[v]:.3g} from the mesh (its nearest "
                                  f"vertex, {v}, is at {_vec(mesh.vertices[v])}); the mesh "
                                  f"spans {spans}", sc.source, key=f"fields.edit[{i}].at")
+        n = mesh.normals[v]
         for name, d in (("d1", e.d1), ("d2", e.d2)):
             d = np.asarray(d, np.float64)
             size = float(np.linalg.norm(d))
-            at_v = np.zeros_like(mesh.vertices)
-            at_v[v] = d
-            seen = float(np.linalg.norm(tmap.vectors(at_v)[v]))  # what the texture keeps
+            if tmap.keep_magnitude:  # uv: the map keeps |d|; what counts is the tangent part
+                seen = float(np.linalg.norm(d - np.dot(d, n) * n))
+            else:  # planar, cylindrical: what the texture keeps of it
+                at_v = np.zeros_like(mesh.vertices)
+                at_v[v] = d
+                seen = float(np.linalg.norm(tmap.vectors(at_v)[v]))
             if size > 0 and seen < EDIT_ALONG_NORMAL * size:
                 plane = {"planar": "the x-y plane the planar projection keeps",
                          "cylindrical": "the cylinder's surface"}.get(tmap.kind, "the surface")

@@ -911,6 +911,13 @@ def main(argv=None, early=None) -> int:
 def _main(argv, early: list) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
+    if early and args.command in (None, "list"):  # no `_signals` on these paths
+        sig = early[0]
+        word, code = (("interrupted", EXIT_SIGINT) if sig == signal.SIGINT else
+                      ("terminated", EXIT_SIGTERM))
+        _say(f"jaxskin: {word} ({signal.Signals(sig).name}) while starting; no file was "
+             "written")
+        return code
     if args.command is None:  # the help, on stderr, and the exit code of a usage error
         parser.print_help(sys.stderr)
         return 2

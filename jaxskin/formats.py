@@ -48,6 +48,7 @@ MAX_BYTES = 256 * 2**20  # a spectrum at 0.01 nm with 50 columns is ~40 MB
 WAVELENGTH_RANGE_NM = (200.0, 3000.0)  # what a spectroradiometer can measure, generously
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 _DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+(?:[eE][+-]?\d+)?")
+_THOUSANDS = re.compile(r"[1-9]\d{0,2}(?:,\d{3})+")  # 1,050: 1050, or 1.05 (µm)?
 _NAMES = {"\t": "tab", ",": "comma", ";": "semicolon"}
 DECIMAL_COMMA_NOTE = "numbers with a decimal comma (18,65) read as 18.65"
 
@@ -271,8 +272,8 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
         if len(cells) != len(header):
             if not _NUMBER.fullmatch(cells[0]) and not _DECIMAL_COMMA.fullmatch(cells[0]):
                 shown = line if len(line) <= 40 else line[:37] + "..."
-                raise InputError(f"a row that is not data ({shown!r}) after the table: "
-                                 "delete it, or start it with '#' to make it a comment",
+                raise InputError(f"a row that is not data ({shown!r}): delete it, or start "
+                                 "it with '#' to make it a comment (one table a file)",
                                  path, number)
             others = [_NAMES[d] for d in DELIMITERS if d != delimiter and d in line]
             hint = (f" (the header is {_NAMES[delimiter]}-separated; this row has "
@@ -284,6 +285,11 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
                              path, number)
         if delimiter != ",":  # then 18,65 can only be a decimal comma (Excel in Europe)
             for c in kept:
+                if c == 0 and _THOUSANDS.fullmatch(cells[c]):  # a wavelength: 1050 or 1.05?
+                    raise InputError(f"{cells[c]!r} reads as a thousands separator (a "
+                                     "wavelength over 1000) or a decimal comma: export the "
+                                     "wavelengths without thousands separators", path,
+                                     number, header[0])
                 if _DECIMAL_COMMA.fullmatch(cells[c]):
                     cells[c] = cells[c].replace(",", ".")
                     decimal_comma = True

@@ -55,8 +55,9 @@ def check_name(name: str, where=None, key: str | None = "name") -> str:
                f"{MAX_NAME_BYTES} a file name may take here (letters such as é take 2 bytes, "
                "most CJK 3)")
     if why is not None:
-        raise InputError(f"an output name must be one plain file name (no '/', '..', leading "
-                         f"dot, control characters or spaces at the ends); {name!r} {why}",
+        raise InputError(f"an output name must be one plain file name (no '/' or '\\', no "
+                         f"leading dot, control characters or spaces at the ends); {name!r} "
+                         f"{why}",
                          where, key=key)
     return name
 

@@ -232,7 +232,6 @@ def test_a_signal_while_the_command_line_loads_ends_it(tmp_path, sig, code):
     """A signal in the first second (JAX importing) went Python's way: a traceback, an
     ImportError, a crash, or nothing at all, the command running to exit 0 (a trial). The
     entry point notes it, and the command ends before any work: one line, 130 / 143."""
-    import signal
 
     script = ("import os, signal, sys\n"
               "from jaxskin import _console\n"
@@ -253,7 +252,15 @@ def test_a_signal_while_the_command_line_loads_ends_it(tmp_path, sig, code):
     assert proc.stderr == (f"jaxskin: {word} ({sig}) while checking the inputs; no file was "
                            "written\n"), proc.stderr
     assert not (tmp_path / "out").exists()
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    # after the command, Python's own handlers again (the noting ones swallowed a signal
+    # for the rest of the process: a review)
+    after = subprocess.run(
+        [sys.executable, "-c", "import signal\nfrom jaxskin import _console\n"
+         "_console.main(['list'])\n"
+         "print(signal.getsignal(signal.SIGINT) is signal.default_int_handler,"
+         " signal.getsignal(signal.SIGTERM) == signal.SIG_DFL)"],
+        capture_output=True, text=True, timeout=300)
+    assert after.stdout.splitlines()[-1] == "True True", after
 
 
 @pytest.mark.slow

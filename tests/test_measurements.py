@@ -343,8 +343,8 @@ def test_descending_wavelengths_are_read_in_order_and_a_negative_reading_is_name
     "wavelength_nm,R_50um,R_150µm,R inf,R_g",        # micrometres, a space
     "wavelength_nm,R 0.05 mm,R_0.15_mm,R_∞,R_g",     # spaces, underscores, ∞
     "wavelength_nm,R0.05mm,R_0.15mm,R_inf,R_g",      # no separator
-    "wavelength_nm,R_0.05mm (%),R_0.15mm [%],R∞,Rg",  # a unit after the name; R∞, Rg
-    "wavelength_nm,R_0.05mm %,R_0.15mm,Rinf,R_g %",
+    "wavelength_nm,R_0.05mm,R_0.15mm,R∞,Rg",         # R∞, Rg
+    "wavelength_nm,R_0.05mm,R_0.15mm,Rinf,R_g",
 ])
 def test_other_spellings_of_the_columns_read_like_the_format(tmp_path, header):
     """`R_3um`, `R 0.05 mm` and the like were 'unknown column' (a trial): they are the
@@ -421,8 +421,7 @@ def test_spreadsheet_exports_decimal_commas_empty_rows_and_a_footer(tmp_path):
     empty_rows = read_measurement(write(tmp_path, GOOD + ",,,,\n,,,,\n", "rows.csv"))
     np.testing.assert_array_equal(empty_rows.R, plain.R)
     with pytest.raises(InputError, match=r"foot.csv:6: a row that is not data \('End of "
-                                         r"data'\) after the table: delete it, or start it "
-                                         r"with '#'"):
+                                         r"data'\): delete it, or start it with '#'"):
         read_measurement(write(tmp_path, GOOD + "End of data\n", "foot.csv"))
     with pytest.raises(InputError, match=r"column 'R_inf': expected a number with a decimal "
                                          r"point, got '0,45' \(in a comma-separated file"):
@@ -510,3 +509,51 @@ def test_utf16_without_a_byte_order_mark_is_read(tmp_path, order):
     (tmp_path / "bin.csv").write_bytes(b"wavelength_nm\x00\x01\x02" * 40)
     with pytest.raises(InputError, match="a binary file"):
         read_measurement(tmp_path / "bin.csv")
+
+
+def test_a_header_that_says_percent_reads_percent(tmp_path):
+    """`R_inf (%)` was read once its unit was stripped, but as fractions unless the median
+    guessed percent: dark percent data came out 100× too high (a review). A header that
+    says % reads its file as percent, with a note, even where every reading is below 1."""
+    plain = read_measurement(write(tmp_path, GOOD, "plain.csv"))
+    head, rows = GOOD.split("R_g\n")
+    scaled = "\n".join(",".join([r.split(",")[0], *(f"{float(v) * 100:g}" for v in
+                                                    r.split(",")[1:])])
+                       for r in rows.strip().splitlines()) + "\n"
+    for header in ("wavelength_nm,R_0.05mm (%),R_0.15mm [%],R_inf %,R_g (%)",
+                   "wavelength_nm,R_0.05mm (%),R_0.15mm,R_inf,R_g"):
+        m = read_measurement(write(tmp_path, head.split("\n")[0] + "\n" + header + "\n" +
+                                   scaled, "pc.csv"))
+        np.testing.assert_allclose(m.R, plain.R, rtol=1e-12)
+        np.testing.assert_allclose(m.R_g, plain.R_g, rtol=1e-12)
+        assert any("says %: reflectances read as percent" in n for n in m.notes), m.notes
+    dark = read_measurement(write(tmp_path, "wavelength_nm,R_0.05mm (%),R_inf (%),R_g (%)\n"
+                                  "400,0.2,0.5,0.1\n410,0.3,0.6,0.1\n", "dark.csv"))
+    np.testing.assert_allclose(dark.R_inf, [0.005, 0.006], rtol=1e-12)
+
+
+def test_thousands_separators_and_lone_decimal_commas(tmp_path):
+    """In a ';' file a wavelength written 1,050 read as 1.05 (a review): refused, naming
+    both readings; a decimal comma in a '# thickness_mm:' or '# white_reflectance:' line
+    (one number: nothing to confuse it with) is read as a point; a '# white_reflectance:'
+    line is only checked where radiance columns use it."""
+    text = ("wavelength_nm;R_0.05mm;R_inf;R_g\n1,000;0,3;0,4;0,04\n1,050;0,3;0,4;0,04\n")
+    with pytest.raises(InputError, match=r"t.csv:2: column 'wavelength_nm': '1,000' reads as a "
+                                         r"thousands separator"):
+        read_measurement(write(tmp_path, text, "t.csv"))
+    micro = read_measurement(write(tmp_path, text.replace("1,000", "0,400").replace(
+        "1,050", "0,410").replace("R_0.05mm", "R_0,05mm"), "um.csv"))
+    np.testing.assert_allclose(micro.wavelength_nm, [400, 410])
+    np.testing.assert_allclose(micro.thickness_mm, [0.05])  # a decimal comma in the header
+    bare = read_measurement(write(tmp_path, "# thickness_mm: 0,05\n" + GOOD.replace(
+        "R_0.05mm", "R"), "bare.csv"))
+    np.testing.assert_allclose(bare.thickness_mm, [0.05, 0.15])
+    # not radiance: the line is not read (a bad value there fails nothing), with a note
+    m = read_measurement(write(tmp_path, "# white_reflectance: 98\n" + GOOD, "w.csv"))
+    assert any("the white standard's reflectance is not used" in n for n in m.notes)
+    rad = ("# white_reflectance: 0,98\nwavelength_nm,E_0.1mm,E_inf,E_g,E_white\n"
+           "400,1.0,2.0,-0.002,4.0\n410,1.5,3.0,0.3,6.0\n")
+    r = read_measurement(write(tmp_path, rad, "rad.csv"))
+    # E_g's -0.002 (R = -0.0005: dark-corrected noise) is read as 0, as a reflectance is
+    np.testing.assert_allclose(r.R_g, [0.0, 0.049], rtol=1e-12)
+    np.testing.assert_allclose(r.R[0], [0.245, 0.245], rtol=1e-12)

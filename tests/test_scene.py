@@ -423,8 +423,8 @@ def test_a_cosmetic_layer_millimetres_thick_is_warned():
     assert thick_layers(load_scene("makeup")) == []
     assert thick_layers(load_scene("makeup", ["layer.foundation.thickness_mm=0.9"])) == []
     assert thick_layers(load_scene("makeup", ["layer.foundation.thickness_mm=10"])) == [
-        "layer.foundation.thickness_mm = 10 mm: cosmetic films are about 0.001-0.1 mm thick "
-        "(10 µm is 0.01); at this thickness most products are opaque"]
+        "layer.foundation.thickness_mm = 10 mm: cosmetic films are 0.1 µm to 1 mm thick "
+        "(10 µm is 0.01 mm); at this thickness most products are opaque"]
 
 
 def test_an_edit_with_null_for_the_missing_key_is_read():
