@@ -243,7 +243,9 @@ def write_normals(n, mask, path) -> None:
 
 def write_field_plot(setup, path, title: str = "") -> None:
     """The mesh seen from +z (orthographic), d1 in red and d2 in green at the vertices that
-    face the viewer, edited vertices in blue: the paper's "edit vectors" view (fig. 3.4)."""
+    face the viewer, edited vertices in blue: the paper's "edit vectors" view (fig. 3.4).
+    Seen from −z, mirrored, where a planar texture belongs to that side ("planar-back":
+    the camera sees the palm)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -251,8 +253,10 @@ def write_field_plot(setup, path, title: str = "") -> None:
     from matplotlib.collections import PolyCollection
 
     mesh = setup.mesh
-    v, f = mesh.vertices, mesh.faces
-    fn = mesh.face_normals()
+    side = getattr(setup.tmap, "side", 1)
+    flip = np.array([side, 1.0, side])  # seen from −z: x and z mirrored (a turn about y)
+    v, f = mesh.vertices * flip, mesh.faces
+    fn = mesh.face_normals() * flip
     front = fn[:, 2] > 0
     order = np.argsort(v[f].mean(axis=1)[:, 2])  # painter's order, back to front
     order = order[front[order]]
@@ -260,10 +264,10 @@ def write_field_plot(setup, path, title: str = "") -> None:
     shade = 0.55 + 0.45 * np.clip(fn[order, 2], 0, 1)
     ax.add_collection(PolyCollection(v[f[order]][..., :2], facecolors=np.repeat(
         shade[:, None], 3, axis=1), edgecolors=(0.6, 0.6, 0.6), linewidths=0.3))
-    visible = mesh.normals[:, 2] > 0.2
+    visible = side * mesh.normals[:, 2] > 0.2
     edges = v[f[:, [1, 2, 0]]] - v[f]
     scale = 1.2 * float(np.mean(np.linalg.norm(edges, axis=-1)))  # per unit of |d|
-    for d, colour in ((setup.d1, "red"), (setup.d2, "green")):
+    for d, colour in ((setup.d1 * flip, "red"), (setup.d2 * flip, "green")):
         ax.quiver(v[visible, 0], v[visible, 1], d[visible, 0], d[visible, 1], color=colour,
                   angles="xy", scale_units="xy", scale=1 / scale, width=0.002, headwidth=3)
     edited = np.array([e.vertex for e in setup.edits], int)
