@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxskin.formats import (
+    _DECIMAL_COMMA,
     DECIMAL_COMMA_NOTE,
     PERCENT_MEDIAN,
     WAVELENGTH_RANGE_NM,
@@ -399,7 +400,7 @@ def _classify(header, path, line, bare_thickness):
 def _one_number(text: str) -> str:
     """A lone number's text with a decimal comma made a point (`0,05`)."""
     text = text.strip()
-    return text.replace(",", ".") if re.fullmatch(r"[+-]?\d*,\d+", text) else text
+    return text.replace(",", ".") if _DECIMAL_COMMA.fullmatch(text) else text
 
 
 def _fraction(value, path, line, key) -> float:
