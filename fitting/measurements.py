@@ -220,7 +220,7 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
     if not name:
         name = _name_from_stem(path, notes)
     elif not _NAME.fullmatch(name):
-        safe = re.sub(r"[^\w.+-]+", "_", name.lower()).strip("_.+-")
+        safe = _safe_name(name)
         hint = f", e.g. '# name: {safe}'" if safe else ""
         raise InputError(
             f"name {name!r} must be letters, digits, '.', '_', '+' or '-' (it names "
@@ -259,6 +259,12 @@ def _other_layout(path):
     return None
 
 
+def _safe_name(text: str) -> str:
+    """`text` as a material name: lowercase, each run of characters other than letters,
+    digits, `.`, `+`, `-` one `_`, none of `_.+-` at the ends (may be empty)."""
+    return re.sub(r"[^\w.+-]+", "_", text.lower()).strip("_.+-")
+
+
 def _name_from_stem(path, notes) -> str:
     """The file's stem as the material name; one that the name rule refuses
     (`Lipstick Red (batch 5)`) is made safe: lowercase, runs of characters other than
@@ -267,7 +273,7 @@ def _name_from_stem(path, notes) -> str:
     stem = path.stem
     name = stem
     if not _NAME.fullmatch(stem) or stem.startswith("."):
-        name = re.sub(r"[^\w.+-]+", "_", stem.lower()).strip("_.+-")
+        name = _safe_name(stem)
     if not name:
         raise InputError(f"the file name {path.name!r} has no letters or digits to name the "
                          "material: add a line '# name: NAME' to the file", path)
@@ -377,8 +383,8 @@ def _classify(header, path, line, bare_thickness):
                     "or pass --thickness", path, line, name,
                 )
             role = ("thin", bare_thickness)
-        elif (m := _THIN.match(short)) and _is_float(m["x"].replace(",", ".")):
-            role = ("thin", _positive(m["x"].replace(",", "."), path, line, name,
+        elif (m := _THIN.match(short)) and _is_float(_one_number(m["x"])):
+            role = ("thin", _positive(m["x"], path, line, name,
                                       1.0 if m["unit"] == "mm" else 1e-3))
         else:
             raise InputError(f"unknown column; {expected}", path, line, name)
