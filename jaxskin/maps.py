@@ -253,7 +253,7 @@ def write_field_plot(setup, path, title: str = "") -> None:
     from matplotlib.collections import PolyCollection
 
     mesh = setup.mesh
-    side = getattr(setup.tmap, "side", 1)
+    side = setup.tmap.side
     flip = np.array([side, 1.0, side])  # seen from −z: x and z mirrored (a turn about y)
     v, f = mesh.vertices * flip, mesh.faces
     fn = mesh.face_normals() * flip

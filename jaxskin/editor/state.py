@@ -42,6 +42,7 @@ from ..scene import (
     LayerSpec,
     Scene,
     SceneConfig,
+    _toml_error,
     builtin_scenes,
     check_value,
     parse_scene,
@@ -116,7 +117,7 @@ class Session:
         except OSError as e:
             raise EditorError(f"{path}: cannot read ({e.__class__.__name__})", 400) from None
         except tomllib.TOMLDecodeError as e:
-            raise EditorError(f"{path}: not valid TOML: {e}", 400) from None
+            raise EditorError(str(_toml_error(e, path)), 400) from None
         except InputError as e:
             raise EditorError(str(e), 400, e.key) from None
         self._check(scene_obj)
