@@ -85,6 +85,7 @@ _SIGNAL_ERRORS = {signal.SIGINT: KeyboardInterrupt, signal.SIGTERM: _Terminated}
 _pending: list[int] = []  # a signal whose exception could not be raised where it arrived
 _received: list[int] = []  # every signal the command's handler took
 _collecting = [False]  # the garbage collector is running (and calling JAX's callback)
+_holding = [False]  # every signal is held (`holding_signals`)
 
 
 def _gc_start(phase, info):
@@ -102,12 +103,29 @@ def _on_signal(signum, frame):
     the garbage collector's callbacks or a finaliser, where Python would print the exception
     and drop it, or inside an import, which some libraries wrap in `except BaseException`
     (trimesh's optional imports: the command ran on to exit 0; a trial): then it is kept
-    and raised at the next `_raise_pending` (a stage change, or the command's end)."""
+    and raised at the next `_raise_pending` (a stage change, or the command's end), or
+    taken by `pending_signal` (the editor's event loop, `holding_signals`)."""
     _received.append(signum)
-    if _collecting[0] or _held_back(frame):
+    if _holding[0] and _pending and not _collecting[0]:  # the loop has not taken the first
+        raise _SIGNAL_ERRORS[signum]()
+    if _collecting[0] or _holding[0] or _held_back(frame):
         _pending.append(signum)
         return
     raise _SIGNAL_ERRORS[signum]()
+
+
+@contextlib.contextmanager
+def holding_signals():
+    """Hold every signal (`pending_signal` takes it) for the duration: for an asyncio event
+    loop, which an exception raised anywhere in it can leave half made or half closed (a
+    SIGTERM inside `new_event_loop` left a loop without its self-pipe, whose finaliser
+    printed an AttributeError after the command's last line; CI). A second signal while
+    one is held is raised where it arrives: Ctrl-C twice stops a loop that does not poll."""
+    _holding[0] = True
+    try:
+        yield
+    finally:
+        _holding[0] = False
 
 
 def pending_signal() -> bool:

@@ -75,15 +75,16 @@ def command(args, run) -> int:
         import webbrowser
 
         webbrowser.open(url)
-    from ..cli import pending_signal, raise_received
+    from ..cli import holding_signals, pending_signal, raise_received
 
     app = make_app(session, log=lambda line: print(line, file=sys.stderr), local=local)
 
     async def watch(app):
-        """A signal held back (it came inside an import or the collector: `cli._on_signal`)
-        stops the server within 0.2 s. The task raises KeyboardInterrupt whatever the
-        signal, as asyncio lets only that (and SystemExit) out of the event loop;
-        `raise_received` below raises the signal's own exception."""
+        """Signals are held while the loop is made, runs and closes (`holding_signals`:
+        raised inside asyncio's own code, one left a half-made loop); a held one stops the
+        server within 0.2 s. The task raises KeyboardInterrupt whatever the signal, as
+        asyncio lets only that (and SystemExit) out of the event loop; `raise_received`
+        below raises the signal's own exception."""
         import asyncio
 
         async def poll():
@@ -95,7 +96,8 @@ def command(args, run) -> int:
         app["signal_watch"] = asyncio.get_running_loop().create_task(poll())
 
     app.on_startup.append(watch)
-    web.run_app(app, sock=sock, print=None, handle_signals=False)
+    with holding_signals():
+        web.run_app(app, sock=sock, print=None, handle_signals=False)
     task = app.get("signal_watch")
     if task is not None and task.done() and not task.cancelled():
         task.exception()  # retrieved: no "Task exception was never retrieved" traceback
