@@ -606,7 +606,7 @@ def _warn_repeated(overrides) -> None:
         key, value = (s.strip() for s in item.partition("=")[::2])
         seen.setdefault(key, []).append(value)
     for key, values in seen.items():
-        if len(set(values)) > 1:
+        if len({_name_value(v) for v in values}) > 1:
             _say(f"jaxskin: warning: -D {key} is given {len(values)} times ("
                  f"{', '.join(values)}): the last, {values[-1]}, is used")
 
@@ -670,7 +670,7 @@ def _base_name(sc, overrides, room: int = 16) -> str:
         key, _, value = (s.strip() for s in item.partition("="))
         last.pop(key, None)
         last[key] = value
-    parts = [f"{slug(key)}-{slug(value)}" for key, value in last.items()
+    parts = [f"{slug(key)}-{slug(_name_value(value))}" for key, value in last.items()
              if key != "name" and not named]  # `-D name=X` names the outputs X, nothing added
     suffix = "_".join(parts)
 
@@ -680,7 +680,8 @@ def _base_name(sc, overrides, room: int = 16) -> str:
 
     # many overrides, or a long name: a digest keeps runs apart and names short
     if len(suffix) > 120 or (suffix and too_long(f"{base}_{suffix}")):
-        suffix = "D-" + hashlib.sha1("\0".join(overrides).encode()).hexdigest()[:12]
+        used = "\0".join(f"{key}={_name_value(value)}" for key, value in last.items())
+        suffix = "D-" + hashlib.sha1(used.encode()).hexdigest()[:12]
     full = f"{base}_{suffix}" if suffix else base
     if too_long(full):
         raise InputError(f"the scene's name is {len(base)} characters; with what this run "
@@ -689,6 +690,18 @@ def _base_name(sc, overrides, room: int = 16) -> str:
                          f"{MAX_NAME} characters or {MAX_NAME_BYTES} bytes: shorten it (or "
                          "-D name=...)", f"-D {named[-1]}" if named else sc.source, key="name")
     return full
+
+
+def _name_value(value: str) -> str:
+    """A -D value as output names spell it: a number in its shortest exact form, so that
+    `-D k=0.1`, `k=1e-1` and `k=0.10` (one render) name one file (a trial); `512.0` and
+    `512` both `512`. Anything else as given."""
+    try:
+        number = float(value)
+    except ValueError:
+        return value
+    text = repr(number)
+    return text[:-2] if text.endswith(".0") else text
 
 
 def _sweep_suffixes(sweep, ext: str) -> list[str]:

@@ -405,6 +405,28 @@ def test_a_key_given_twice_with_D_is_warned_about(capsys):
         "jaxskin: warning: -D camera.size is given 2 times (64, 32): the last, 32, is used"]
 
 
+def test_one_number_spelt_two_ways_names_one_file(capsys):
+    """`-D material.melanin=1e-1` and `=0.1` render the same image, and were two files (a
+    trial): a number is named in its shortest exact form; other values as given."""
+    from types import SimpleNamespace
+
+    from jaxskin.cli import _base_name, _warn_repeated
+
+    sc = SimpleNamespace(name="hand", source="hand")
+    names = {_base_name(sc, [f"material.melanin={v}"]) for v in ("0.1", "1e-1", "0.10", ".1")}
+    assert names == {"hand_material.melanin-0.1"}, names
+    assert _base_name(sc, ["texture.size=512.0"]) == "hand_texture.size-512"
+    assert _base_name(sc, ["material.melanin=0.1234567"]) != _base_name(
+        sc, ["material.melanin=0.1234568"])  # not rounded to 6 digits, as :g would
+    assert _base_name(sc, ["material.model=blinn"]) == "hand_material.model-blinn"
+    many = [f"key{i}=0.5" for i in range(40)]  # long: a digest, the same for either spelling
+    assert _base_name(sc, many).startswith("hand_D-")
+    assert _base_name(sc, many) == _base_name(sc, [f"key{i}=5e-1" for i in range(40)])
+    assert _base_name(sc, many) != _base_name(sc, [f"key{i}=0.6" for i in range(40)])
+    _warn_repeated(["material.melanin=0.1", "material.melanin=1e-1"])
+    assert capsys.readouterr().err == ""
+
+
 def test_the_last_line_after_a_stop_names_only_the_last_files():
     """A long sweep stopped halfway: the last line counts every file written and names the
     last 8 (it listed all, a line of 19 KB for 190 renders); 9 or fewer are all named."""
