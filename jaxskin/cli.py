@@ -363,7 +363,8 @@ def _parser() -> argparse.ArgumentParser:
                    "value's image has the same bytes in any sweep), e.g. --sweep "
                    "material.melanin=0:1:5; writes "
                    "DIR/<scene>_sweep-<i>_<key>-<value>.png. One --sweep a command (a grid "
-                   "of two keys: one command per value of the second, with -D)")
+                   "of two keys: one command per value of the second, with -D); of several "
+                   "scenes, one without the key is rendered once, with a warning")
     r.add_argument("-D", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene value, e.g. -D wrinkles.k_scale=1.3 or -D "
                    "layer.blush.material=foundation_dark (a shipped material or a calibrate "
@@ -636,7 +637,7 @@ def _parse_sweep(text: str, sc):
         raise InputError(f"count must be in [1, 1000], got {count}", f"--sweep {text}",
                          key=key)
     params = sc.params
-    if key not in params or getattr(params[key], "ndim", 1) != 0:
+    if not _sweeps(sc, text):
         import difflib
 
         from .scene import SCHEMA
@@ -654,6 +655,12 @@ def _parse_sweep(text: str, sc):
     for value in (start, stop):
         check_value(key, value, f"--sweep {text}", layers)
     return key, np.linspace(start, stop, count)
+
+
+def _sweeps(sc, text: str) -> bool:
+    """Whether the --sweep `text`'s key is a scalar parameter of scene `sc`."""
+    key = text.partition("=")[0].strip()
+    return key in sc.params and getattr(sc.params[key], "ndim", 1) == 0
 
 
 def _base_name(sc, overrides, room: int = 16) -> str:
@@ -744,10 +751,14 @@ def _render(args, run: _Run) -> int:
             _say(f"jaxskin: warning: '{name}' is the built-in scene; the file {name} here is "
                  f"not read (give ./{name} for it)")
     _warn_repeated(args.overrides)
+    # A sweep over a parameter some of the scenes have: the others are rendered once, with
+    # a warning, as -D does (it stopped the batch; a trial). None has it: the error.
+    swept = [bool(args.sweep) and _sweeps(sc, args.sweep[0]) for sc in scenes]
+    unswept = [bool(args.sweep) and not here and any(swept) for here in swept]
     plans = []
-    for sc in scenes:
-        sweep = [_parse_sweep(text, sc) for text in args.sweep]
-        for (key, _), text in zip(sweep, args.sweep, strict=True):
+    for sc, skip in zip(scenes, unswept, strict=True):
+        sweep = [] if skip else [_parse_sweep(text, sc) for text in args.sweep]
+        for (key, _), text in zip(sweep, args.sweep[:len(sweep)], strict=True):
             for item in args.overrides:
                 if _parse_override(item)[0] == key:
                     raise InputError(f"--sweep {text} sets {key}, so -D {item} would be "
@@ -773,10 +784,13 @@ def _render(args, run: _Run) -> int:
             for kind in ("height", "normal", "field"):
                 planned[kind] = outputs.plan(f"{base}_{kind}.png", sc.source)
         files.append(planned)
-    for sc in scenes:  # after every check: a warning, not an error (-D serves every scene)
-        for item in unused_overrides(sc, args.overrides):
+    for sc, skip in zip(scenes, unswept, strict=True):  # after every check: warnings, not
+        for item in unused_overrides(sc, args.overrides):  # errors (-D serves every scene)
             _say(f"jaxskin: warning: -D {item} changes nothing in scene {sc.name!r} (its "
                  "material model or settings do not use it)")
+        if skip:
+            _say(f"jaxskin: warning: --sweep {args.sweep[0]} changes nothing in scene "
+                 f"{sc.name!r} (not one of its parameters): it is rendered once, unswept")
         for line in idle_maps(sc) + hidden_side(sc) + thick_layers(sc):
             _say(f"jaxskin: warning: {line}")
     run.outputs.append(outputs)

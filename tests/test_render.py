@@ -165,6 +165,32 @@ def test_render_command_with_a_vmapped_sweep(tmp_path):
     assert bad.returncode == 2 and "not a scalar parameter" in bad.stderr
 
 
+def test_a_sweep_over_a_key_one_scene_lacks_renders_that_scene_once(tmp_path):
+    """`render hand face --sweep material.shininess=…` stopped the whole command on the
+    face (spectral: no shininess), where -D warns and renders (a trial). The face is now
+    rendered once, with a warning naming it; a key no scene has is still an error."""
+    out = tmp_path / "out"
+    small = ["-D", "texture.size=64", "-D", "camera.size=32"]
+    proc = subprocess.run([sys.executable, "-m", "jaxskin.cli", "render", "hand", "face", "-o",
+                           str(out), *small, "--sweep", "material.shininess=20:40:2"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert ("jaxskin: warning: --sweep material.shininess=20:40:2 changes nothing in scene "
+            "'face' (not one of its parameters): it is rendered once, unswept") in proc.stderr
+    assert sorted(p.name for p in out.iterdir()) == [
+        "face_texture.size-64_camera.size-32.png",
+        "hand_texture.size-64_camera.size-32_sweep-01_material.shininess-20.png",
+        "hand_texture.size-64_camera.size-32_sweep-02_material.shininess-40.png"]
+    a, b = (iio.imread(out / f"hand_texture.size-64_camera.size-32_sweep-0{i}_material."
+                       f"shininess-{v}.png") for i, v in ((1, 20), (2, 40)))
+    assert not np.array_equal(a, b)  # the hand's sweep did sweep
+    bad = subprocess.run([sys.executable, "-m", "jaxskin.cli", "render", "hand", "face", "-o",
+                          str(tmp_path / "bad"), "--sweep", "material.shinines=20:40:2"],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and "did you mean 'material.shininess'" in bad.stderr
+    assert not (tmp_path / "bad").exists()
+
+
 def test_glb_export_reloads_with_textures(tmp_path):
     import trimesh
 
