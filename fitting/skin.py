@@ -23,6 +23,7 @@ import dataclasses
 import functools
 import math
 import sys
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -258,7 +259,7 @@ def _covariance(c, p, R, free):
 
 
 def write_csv(result: SkinFit, path) -> None:
-    """`fit.csv`, one row per spectrum: name, the six parameters, rms, dE2000, converged,
+    """`<spectra>_fit.csv`, one row per spectrum: name, the six parameters, rms, dE2000, converged,
     steps, then each parameter's linearised standard deviation (`<name>_sd`) and the
     melanin–epidermis correlation."""
     header = ["name", *bp.PARAMS, "rms", "dE2000", "converged", "steps",
@@ -281,7 +282,7 @@ def _cell(text: str) -> str:
 
 
 def write_report(result: SkinFit, path, samples: int = 6) -> None:
-    """`fit.png`: measured vs fitted spectra for `samples` spectra spread over the ΔE2000
+    """`<spectra>_fit.png`: measured vs fitted spectra for `samples` spectra spread over the ΔE2000
     ranking (the best, the worst and between), and histograms of every parameter and of
     ΔE2000."""
     import matplotlib
@@ -361,7 +362,7 @@ def command(args, run) -> int:
     from tqdm import tqdm
 
     from jaxskin.formats import read_spectra
-    from jaxskin.outputs import Outputs
+    from jaxskin.outputs import Outputs, slug
 
     outputs = Outputs(args.output, [args.file])
     fixed = _fixed(args.fix)
@@ -374,8 +375,9 @@ def command(args, run) -> int:
     if wavelengths[0] > NEEDED[0] or wavelengths[-1] < NEEDED[1]:
         raise InputError(f"the spectra cover {wavelengths[0]:g}-{wavelengths[-1]:g} nm; the "
                          f"fit needs at least {NEEDED[0]:g}-{NEEDED[1]:g} nm", args.file)
-    csv_path = outputs.plan("fit.csv", "the fit")
-    png_path = None if args.no_report else outputs.plan("fit.png", "the report")
+    stem = f"{slug(Path(args.file).stem)}_fit"  # by the input: two fits in one folder
+    csv_path = outputs.plan(f"{stem}.csv", "the fit")  # keep both (fit.csv; a trial)
+    png_path = None if args.no_report else outputs.plan(f"{stem}.png", "the report")
     run.outputs.append(outputs)
     for note in notes:
         print(f"jaxskin: note: {note}", file=sys.stderr)

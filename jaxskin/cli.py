@@ -438,12 +438,13 @@ def _parser() -> argparse.ArgumentParser:
         "(material.model = \"biophysical\") to each spectrum of a CSV: a wide table "
         "(wavelength_nm, then one column per spectrum, 0-1) or the NIST skin file's layout "
         "(each subject's Average). Fits 380-780 nm (needs at least 400-700). Writes "
-        "DIR/fit.csv (name, parameters, RMS reflectance error, dE2000 under D65 between "
-        "measured and fitted spectra) and DIR/fit.png (a sample of fits, histograms).",
+        "DIR/<SPECTRA>_fit.csv (name, parameters, RMS reflectance error, dE2000 under D65 "
+        "between measured and fitted spectra) and DIR/<SPECTRA>_fit.png (a sample of fits, "
+        "histograms), named by the CSV's stem.",
     )
     k.add_argument("file", metavar="SPECTRA.csv", help="reflectance spectra")
     k.add_argument("-o", "--output", required=True, metavar="DIR",
-                   help="folder for fit.csv and fit.png (created if missing)")
+                   help="folder for <SPECTRA>_fit.csv and .png (created if missing)")
     k.add_argument("--starts", type=_number(int, 1, 256), default=4, metavar="S",
                    help="starts per spectrum, 1-256: the default skin, then random (4)")
     k.add_argument("--seed", type=_number(int, 0, 2147483647), default=0,
@@ -454,7 +455,7 @@ def _parser() -> argparse.ArgumentParser:
     k.add_argument("--percent", action="store_true",
                    help="reflectance is in percent (0-100) instead of 0-1 (without it, spectra "
                    "whose median is above 1.5 are read as percent, with a note)")
-    k.add_argument("--no-report", action="store_true", help="write fit.csv only, no PNG")
+    k.add_argument("--no-report", action="store_true", help="write the CSV only, no PNG")
     cluster.add_option(k, "chunk of 10 spectra")
 
     e = sub.add_parser(

@@ -182,7 +182,7 @@ def test_fit_brdf_on_the_cluster_matches_the_local_bytes(tmp_path, capsys, dask_
 
 @pytest.mark.slow  # a float64 LM compile on each worker: about a minute under load
 def test_fit_skin_on_the_cluster_matches_the_local_bytes(tmp_path, capsys, dask_cluster):
-    """12 NIST subjects, two chunks of 10 (the second padded): two tasks; the same fit.csv."""
+    """12 NIST subjects, two chunks of 10 (the second padded): two tasks; the same twelve_fit.csv."""
     from jaxskin import formats
 
     lc, _ = dask_cluster
@@ -195,8 +195,8 @@ def test_fit_skin_on_the_cluster_matches_the_local_bytes(tmp_path, capsys, dask_
         assert main(["fit-skin", str(tmp_path / "twelve.csv"), "--starts", "2", "--no-report",
                      "-o", str(tmp_path / where), *extra]) == 0
         outs.append(digests(tmp_path / where))
-    assert list(outs[0]) == ["fit.csv"] and outs[0] == outs[1]
-    assert (tmp_path / "local" / "fit.csv").read_text().count("\n") == 13
+    assert list(outs[0]) == ["twelve_fit.csv"] and outs[0] == outs[1]
+    assert (tmp_path / "local" / "twelve_fit.csv").read_text().count("\n") == 13
     capsys.readouterr()
 
 

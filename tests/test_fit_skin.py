@@ -49,7 +49,7 @@ def fitted(tmp_path_factory):
 @pytest.mark.slow
 def test_fit_skin_on_nist_subjects(fitted):
     out, names = fitted
-    with (out / "fit.csv").open() as fh:
+    with (out / "five_fit.csv").open() as fh:
         rows = list(csv.DictReader(fh))
     assert [r["name"] for r in rows] == names
     assert list(rows[0]) == ["name", *bp.PARAMS, "rms", "dE2000", "converged", "steps",
@@ -63,7 +63,7 @@ def test_fit_skin_on_nist_subjects(fitted):
         for p in bp.PARAMS:
             lo, hi = bp.RANGES[p]
             assert lo <= float(r[p]) <= hi
-    assert (out / "fit.png").stat().st_size > 20_000
+    assert (out / "five_fit.png").stat().st_size > 20_000
     assert not list(out.glob(".*"))  # no temporary file left
 
 
