@@ -461,6 +461,25 @@ def test_camera_size_alone_keeps_the_frame_as_render_dash_d_does(tmp_path):
     assert "height" not in square.document().get("camera", {})
 
 
+def test_the_page_shows_the_render_commands_warnings_on_what_it_shows(session, tmp_path):
+    """The foot turned 70° showed texel blocks on the page with no word, where `jaxskin
+    render` warns (a trial): the state carries the same warnings, as long as they hold."""
+    foot = Session("foot", tmp_path)
+    assert foot.state()["warnings"] == []
+    foot.set({"camera.rotate": [0, -70, 0]})
+    side = foot.state()["warnings"]
+    assert len(side) == 1 and "of the view is a side of the mesh that the planar " \
+        "projection shades with the other side's texels" in side[0], side
+    foot.set({"camera.rotate": None})
+    assert foot.state()["warnings"] == []
+    session.set({"layer.blush.thickness_mm": 2.0})
+    assert session.state()["warnings"] == [
+        "layer.blush.thickness_mm = 2 mm: cosmetic films are 0.1 µm to 1 mm thick (10 µm is "
+        "0.01 mm); at this thickness most products are opaque"]
+    session.set({"layer.blush.thickness_mm": None})
+    assert session.state()["warnings"] == []
+
+
 def test_a_mistyped_mesh_name_says_what_was_expected(tmp_path):
     """A built-in scene's mesh.file typed as `hnad`: not 'outside the folders' (a path
     escape's message) but the built-in meshes, under the key's field."""
@@ -678,6 +697,22 @@ def test_edit_in_the_browser_then_render_the_saved_scene(tmp_path, browser):
                          "new Event('change'))", box)
         v = wait_idle(d, v)
         assert d.execute_script("return S.values['camera.rotate']")[1] == 270
+        # A layer thick as a mask: the page warns as `render` does, while it holds.
+        shown = ("const w = document.getElementById('warnings'); "
+                 "return [S.warnings, w.hidden, w.textContent]")
+        assert d.execute_script(shown) == [[], True, ""]
+        box = d.find_element(By.CSS_SELECTOR, '.param[data-key="layer.blush.thickness_mm"] '
+                                              'input[type=number]')
+        for value in ("2", "0.03"):
+            d.execute_script(f"arguments[0].value = '{value}'; arguments[0].dispatchEvent("
+                             "new Event('change'))", box)
+            v = wait_idle(d, v)
+            warnings, hidden, text = d.execute_script(shown)
+            if value == "2":
+                assert len(warnings) == 1 and "thickness_mm = 2 mm" in warnings[0], warnings
+                assert not hidden and text == f"warning: {warnings[0]}"
+            else:
+                assert (warnings, hidden) == ([], True)
 
         # Save, then the CLI renders the saved scene: the page's last image, byte for byte.
         name = d.find_element(By.ID, "save-name")

@@ -91,6 +91,7 @@ class Session:
         self.roots += [Path(r).resolve() for r in roots]
         self._keys: dict = {}  # signature → the configuration compiled for it
         self._cover_cache: tuple | None = None
+        self._side: tuple | None = None  # (configuration, its hidden-side warning)
         self._prepared: list[SceneConfig] = []  # configurations prepared, newest first
         self.version = 0  # bumped on every change of what the view shows
         self.timings: dict[str, float] = {}
@@ -697,7 +698,18 @@ class Session:
                 "painted": sorted(self.paint), "modified": self.modified(),
                 "undo": len(self.undo_stack),
                 "redo": len(self.redo_stack), "output": str(self.output),
-                "saved_as": self.saved_as, "schema": schema()}
+                "saved_as": self.saved_as, "warnings": self.warnings(), "schema": schema()}
+
+    def warnings(self) -> list[str]:
+        """The render command's warnings about what the page shows (a view from the side of
+        a planar map, a layer thick as a mask); the side's share measured once a
+        configuration."""
+        from ..checks import hidden_side, thick_layers
+
+        config = self.scene.config
+        if self._side is None or self._side[0] != config:
+            self._side = (config, hidden_side(self.scene))
+        return self._side[1] + thick_layers(self.scene)
 
     def modified(self) -> bool:
         """Whether the page differs from its scene file: a change, or paint not saved."""

@@ -128,6 +128,10 @@ function adopt(state) {
     $("save-name").value = state.name;
     $("save-name").dataset.auto = "1";
   }
+  // the render command's warnings on what the view shows, as long as they hold
+  const warnings = state.warnings || [];
+  $("warnings").textContent = warnings.map((w) => `warning: ${w}`).join(" · ");
+  $("warnings").hidden = !warnings.length;
   $("undo-btn").disabled = !state.undo;
   $("redo-btn").disabled = !state.redo;
   if (selected >= state.edits.length) selected = -1;
