@@ -204,10 +204,11 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
                      "columns (E_... with E_white)")
     said = [n for n in columns if _PERCENT_UNIT.search(n) and not _is_radiance(n)]
     if said and not percent:  # the header says so: not left to the median's guess
-        percent = True
-        notes.append(f"{path}: column '{said[0]}' says %: reflectances read as percent (/ 100)")
+        these = "', '".join(said)
+        notes.append(f"{path}: column{'s' if len(said) > 1 else ''} '{these}' say"
+                     f"{'' if len(said) > 1 else 's'} %: read as percent (/ 100)")
     reflectance = _reflectances(data, header, columns, path, numbers, percent, notes, white,
-                                guessed=not said)
+                                marked=said)
     thin = sorted((x, name) for name, (kind, x) in columns.items() if kind == "thin")
     R = np.stack([reflectance[name] for _, name in thin])
     R_inf, R_g = reflectance["inf"], reflectance["g"]
@@ -421,10 +422,13 @@ def _fraction(value, path, line, key) -> float:
 
 
 def _reflectances(data, header, columns, path, numbers, percent, notes, white_R=1.0,
-                  guessed=True):
+                  marked=()):
     """Reflectance per role (thin columns by name), checked to lie in [0, 1]. Reflectance
-    columns are read as percent when `percent`, or when their median is above 1.5 (a note is
-    added to `notes`)."""
+    columns are read as percent when `percent` (`--percent`), when their header says % (the
+    `marked` ones, each alone, even where all its readings are below 1, as a black card's
+    can be; one `R_inf (%)` once made every column percent, a review), or when the median of
+    the others is above 1.5 (a note is added to `notes`). `--percent` on readings all at
+    most 1 is refused (`check_percent`)."""
     index = {name: i + 1 for i, name in enumerate(header[1:])}
     for name in columns:
         if _is_radiance(name):
@@ -442,8 +446,8 @@ def _reflectances(data, header, columns, path, numbers, percent, notes, white_R=
         if bad.size:
             raise InputError(f"the white standard must be > 0, got {white[bad[0]]:g}",
                              path, numbers[bad[0]], white_name)
-    plain = [index[n] for n in columns if not _is_radiance(n)]
-    if plain and percent and guessed:
+    plain = [index[n] for n in columns if not _is_radiance(n) and n not in marked]
+    if plain and percent:
         check_percent(data[:, plain], path)
     if plain and not percent:
         values = data[:, plain]
@@ -460,7 +464,7 @@ def _reflectances(data, header, columns, path, numbers, percent, notes, white_R=
             values = values / white * white_R
             what, scale = ("R = E / E_white must be in [0, 1]" if white_R == 1.0 else
                            f"R = E / E_white × {white_R:g} must be in [0, 1]"), 1.0
-        elif percent:
+        elif percent or name in marked:
             what, scale = "reflectance in percent must be in [0, 100]", 100.0
         else:
             what, scale = "reflectance must be in [0, 1]", 1.0
@@ -474,7 +478,8 @@ def _reflectances(data, header, columns, path, numbers, percent, notes, white_R=
             values = np.where(noise, 0.0, values)
         bad = np.flatnonzero((values < 0) | (values > 1))
         if bad.size:
-            hint = "" if percent or _is_radiance(name) else " (percent data? use --percent)"
+            hint = ("" if percent or name in marked or _is_radiance(name)
+                    else " (percent data? use --percent)")
             if values[bad[0]] < 0:  # the percent hint was wrong for a reading of -0.0012
                 hint = (f" (below the -{NEGATIVE_NOISE * scale:g} read as noise: "
                         "reflectances cannot be negative)")

@@ -526,10 +526,19 @@ def test_a_header_that_says_percent_reads_percent(tmp_path):
                                    scaled, "pc.csv"))
         np.testing.assert_allclose(m.R, plain.R, rtol=1e-12)
         np.testing.assert_allclose(m.R_g, plain.R_g, rtol=1e-12)
-        assert any("says %: reflectances read as percent" in n for n in m.notes), m.notes
+        assert any("%: read as percent (/ 100)" in n for n in m.notes), m.notes
     dark = read_measurement(write(tmp_path, "wavelength_nm,R_0.05mm (%),R_inf (%),R_g (%)\n"
                                   "400,0.2,0.5,0.1\n410,0.3,0.6,0.1\n", "dark.csv"))
     np.testing.assert_allclose(dark.R_inf, [0.005, 0.006], rtol=1e-12)
+    # One column says %, the others are fractions: only that one is divided (every column
+    # once was: R 0.0012 and R_g 0.0004 from 0.12 and 0.04, with exit 0).
+    mixed = read_measurement(write(tmp_path, "wavelength_nm,R_0.05mm,R_inf (%),R_g\n"
+                                   "400,0.12,35,0.04\n410,0.13,36,0.05\n", "mixed.csv"))
+    np.testing.assert_allclose(mixed.R[0], [0.12, 0.13], rtol=1e-12)
+    np.testing.assert_allclose(mixed.R_inf, [0.35, 0.36], rtol=1e-12)
+    np.testing.assert_allclose(mixed.R_g, [0.04, 0.05], rtol=1e-12)
+    assert list(mixed.notes) == [f"{tmp_path / 'mixed.csv'}: column 'R_inf (%)' says %: read as "
+                           "percent (/ 100)"], mixed.notes
 
 
 def test_thousands_separators_and_lone_decimal_commas(tmp_path):
