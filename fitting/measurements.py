@@ -155,7 +155,7 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
         table = read_table(path, is_wavelength_column, "wavelength_nm,R_<X>mm,...,R_inf,R_g",
                            min_rows=2, other_column=_is_reading,
                            once=("name", "thickness_mm", "ignore", "white_reflectance"),
-                           on_header=on_header)
+                           on_header=on_header, wavelength_first=True)
     except InputError as e:
         if "no header row" in str(e) and (layout := _other_layout(path)) is not None:
             raise InputError(layout[1], path, layout[0]) from None

@@ -197,7 +197,8 @@ def _header_row(line: str, first_column, other_column=None):
 
 
 def read_table(path, first_column, expected_header: str, min_rows: int = 1,
-               other_column=None, once: tuple[str, ...] = (), on_header=None) -> Table:
+               other_column=None, once: tuple[str, ...] = (), on_header=None,
+               wavelength_first: bool = False) -> Table:
     """Read a numeric CSV table.
 
     **Arguments:**
@@ -214,6 +215,8 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
     - `on_header`: called with `(header, meta, header line)` once the header is found,
       before any row is read (it may check the header and raise); returns the names of
       columns to skip (not parsed, not returned: standard deviations, counts, notes).
+    - `wavelength_first`: the first column is wavelengths in nm: in a `;` or tab file,
+      `1,050` (1050 nm, or 1.05 with a decimal comma?) is refused; `380,000` is 380 nm.
 
     **Returns:** a `Table`. **Raises:** `InputError` on anything malformed.
     """
@@ -285,7 +288,8 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
                              path, number)
         if delimiter != ",":  # then 18,65 can only be a decimal comma (Excel in Europe)
             for c in kept:
-                if c == 0 and _THOUSANDS.fullmatch(cells[c]):  # a wavelength: 1050 or 1.05?
+                if (c == 0 and wavelength_first and _THOUSANDS.fullmatch(cells[c])
+                        and int(cells[c].replace(",", "")) <= 3000):  # 1050 nm or 1.05?
                     raise InputError(f"{cells[c]!r} reads as a thousands separator (a "
                                      "wavelength over 1000) or a decimal comma: export the "
                                      "wavelengths without thousands separators", path,
@@ -603,7 +607,7 @@ def read_spectra(path, percent: bool | None = False, notes: list | None = None
         header_line, line_of, wl_name = header_at + 1, None, header[0]
     else:
         t = read_table(path, lambda c: c.lower() in _WAVELENGTH_NAMES,
-                       "wavelength_nm,<spectrum name>,...", min_rows=2)
+                       "wavelength_nm,<spectrum name>,...", min_rows=2, wavelength_first=True)
         if len(t.header) < 2:
             raise t.error("no spectra: expected wavelength_nm and one column per spectrum")
         names, wavelengths, R = t.header[1:], t.data[:, 0], t.data[:, 1:].T

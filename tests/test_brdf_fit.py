@@ -155,3 +155,15 @@ def test_a_channel_stuck_far_above_the_others_is_warned_about(fitted):
     assert [s[:9] for s in said] == ["channel G", "channel B"], said
     assert said[0].startswith("channel G fits at 54.0% against R's 4.3%") and \
         "--starts (e.g. 32)" in said[0], said
+
+
+def test_samples_from_a_european_spreadsheet_read_as_the_shipped_ones(tmp_path):
+    """The shipped samples saved by Excel in Europe (';' between cells, decimal commas):
+    `55,701` in the first column was refused as a thousands separator of a wavelength (a
+    review); they read as the same numbers."""
+    lines = SAMPLES.read_text().splitlines()
+    euro = [lines[0]] + [line.replace(",", ";").replace(".", ",") for line in lines[1:]]
+    samples = brdf.read_samples(write(tmp_path, "\n".join(euro) + "\n"))
+    plain = brdf.read_samples(SAMPLES)
+    for name in ("wi", "wo", "f", "weight"):
+        np.testing.assert_array_equal(getattr(samples, name), getattr(plain, name))

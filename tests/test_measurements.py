@@ -553,6 +553,10 @@ def test_thousands_separators_and_lone_decimal_commas(tmp_path):
     micro = read_measurement(write(tmp_path, text.replace("1,000", "0,400").replace(
         "1,050", "0,410").replace("R_0.05mm", "R_0,05mm"), "um.csv"))
     np.testing.assert_allclose(micro.wavelength_nm, [400, 410])
+    # three decimals: 380000 nm is no wavelength, so 380,000 is 380 nm (it was refused)
+    three = read_measurement(write(tmp_path, text.replace("1,000", "380,000").replace(
+        "1,050", "390,000"), "three.csv"))
+    np.testing.assert_allclose(three.wavelength_nm, [380, 390])
     np.testing.assert_allclose(micro.thickness_mm, [0.05])  # a decimal comma in the header
     bare = read_measurement(write(tmp_path, "# thickness_mm: 0,05\n" + GOOD.replace(
         "R_0.05mm", "R"), "bare.csv"))
