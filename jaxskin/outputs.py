@@ -91,6 +91,9 @@ def check_folder(path, option: str = "-o") -> Path:
                          path) from None
     probe = path
     while not probe.exists():  # the nearest existing ancestor must take a new folder
+        if os.path.islink(probe):  # -o dangling/sub: the link leads nowhere (exit 1 after)
+            raise InputError(f"{option}: {probe} is a link to {os.readlink(probe)!r}, which "
+                             "does not exist; create it or give another folder", path)
         if probe.parent == probe:
             break
         probe = probe.parent

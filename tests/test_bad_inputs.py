@@ -197,6 +197,9 @@ CASES = {
     "out-dangling-link": lambda t: ["render", "hand", "-o", _link(t / "dl", t / "nowhere"),
                                     *SMALL],
     "out-link-loop": lambda t: ["render", "hand", "-o", _link(t / "loop", t / "loop"), *SMALL],
+    "out-under-dangling-link": lambda t: ["render", "hand", "-o",
+                                          str(Path(_link(t / "dl", t / "nowhere")) / "sub"),
+                                          *SMALL],
     "out-folder-in-the-way": lambda t: ["render", "hand", "-o", _folder_at(
         t / "o" / "hand_texture.size-64_camera.size-32.png"), *SMALL],
     # 120 two-byte letters: 200 characters allowed, but with the suffixes over 255 bytes
@@ -485,6 +488,7 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
     ("out-newline", "-o: a folder to create must not contain control characters"),
     ("out-dangling-link", "dl: -o: a link to "),
     ("out-link-loop", "loop: -o: cannot use this folder (Too many levels of symbolic links)"),
+    ("out-under-dangling-link", "sub: -o: "),
     ("out-folder-in-the-way", "a folder is where the output 'hand_texture.size-64_camera"
                               ".size-32.png' goes; move it or choose another -o"),
 ])
