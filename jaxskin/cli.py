@@ -866,7 +866,7 @@ def _write_maps(sc, planned: dict, outputs: Outputs, result: dict) -> None:
         maps.write_normals(result["normals"], s.mask, planned["normal"])
         outputs.done(planned["normal"])
         maps.write_field_plot(s, planned["field"], f"{sc.name} ({s.mesh.name}): d1 (red), "
-                              "d2 (green)")
+                              "d2 (green)", sc.config.rotate)
         outputs.done(planned["field"])
 
 

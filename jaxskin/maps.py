@@ -241,11 +241,25 @@ def write_normals(n, mask, path) -> None:
     _write(path, png_bytes(np.round((n * 0.5 + 0.5) * 255).clip(0, 255).astype(np.uint8)))
 
 
-def write_field_plot(setup, path, title: str = "") -> None:
+def plot_flip(side: int, rotate=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """The field plot's axes: +z's side as the mesh is (x right, y up); the −z side
+    ("planar-back") turned half round the axis the camera's turn `rotate` (degrees, as
+    `camera.rotate`) turned it about, so that the plot shows it as the render does:
+    x mirrored for a turn about y (the hand turned round), y for a turn about x (it was x
+    for both, the plot upside down against the render; a review)."""
+    if side > 0:
+        return np.ones(3)
+    from .view import rotation
+
+    R = rotation(rotate)
+    return np.array([-1.0, 1.0, -1.0]) if R[0, 0] <= R[1, 1] else np.array([1.0, -1.0, -1.0])
+
+
+def write_field_plot(setup, path, title: str = "", rotate=(0.0, 0.0, 0.0)) -> None:
     """The mesh seen from +z (orthographic), d1 in red and d2 in green at the vertices that
     face the viewer, edited vertices in blue: the paper's "edit vectors" view (fig. 3.4).
-    Seen from −z, mirrored, where a planar texture belongs to that side ("planar-back":
-    the camera sees the palm)."""
+    Seen from −z, where a planar texture belongs to that side ("planar-back": the camera
+    sees the palm), turned as the camera's `rotate` turns it (`plot_flip`)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -254,7 +268,7 @@ def write_field_plot(setup, path, title: str = "") -> None:
 
     mesh = setup.mesh
     side = setup.tmap.side
-    flip = np.array([side, 1.0, side])  # seen from −z: x and z mirrored (a turn about y)
+    flip = plot_flip(side, rotate)
     v, f = mesh.vertices * flip, mesh.faces
     fn = mesh.face_normals() * flip
     front = fn[:, 2] > 0

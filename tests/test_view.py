@@ -212,3 +212,26 @@ def test_a_planar_scene_seen_from_behind_is_lit_and_a_side_view_warned():
         spreads.append(skin.std(0))
     np.testing.assert_allclose(means[1], means[0], rtol=0.05)
     assert np.all(spreads[1] > 0.7 * spreads[0]), spreads  # shaded, not a flat silhouette
+
+
+@pytest.mark.parametrize("rotate", [(0, 180, 0), (180, 0, 0), (0, 180, 30), (170, 10, 0),
+                                    (0, 0, 0), (0, 0, 90)])
+def test_the_field_plot_shows_the_back_side_the_way_the_render_does(rotate):
+    """The hand seen from −z: the field plot mirrored x for every such view, so a turn
+    about x (upside down in the render) came out turned half round against it (a review).
+    The plot's x and y of a point have the signs the render's rotation gives them."""
+    from jaxskin.maps import plot_flip
+    from jaxskin.scene import planar_side
+    from jaxskin.view import rotation
+
+    side = -1 if planar_side("planar", rotate) == "planar-back" else 1
+    flip = plot_flip(side, rotate)
+    assert np.prod(flip) == 1  # a turn, not a mirror image
+    if side > 0:
+        assert flip.tolist() == [1, 1, 1]  # the front: the mesh's own axes
+        return
+    p = np.array([1.0, 1.0, 0.0])
+    seen = rotation(rotate) @ p
+    r = np.radians(rotate[2])  # an in-plane turn last: compare before it
+    seen = np.array([[np.cos(r), np.sin(r), 0], [-np.sin(r), np.cos(r), 0], [0, 0, 1]]) @ seen
+    assert np.array_equal(np.sign(flip[:2] * p[:2]), np.sign(seen[:2])), (flip, seen)
