@@ -481,8 +481,9 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _list(args) -> int:
+def _list(args, run: _Run) -> int:
     """One line per built-in scene, mesh, material, BRDF preset, illuminant, spectral step."""
+    run.stage = "listing"
     from . import cosmetics, spectral
     from .mesh import BUILTIN as MESHES
     from .scene import builtin_scenes
@@ -957,7 +958,7 @@ def main(argv=None, early=None) -> int:
 def _main(argv, early: list) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
-    if early and args.command in (None, "list"):  # no `_signals` on these paths
+    if early and args.command is None:  # no `_signals` on this path
         sig = early[0]
         word, code = (("interrupted", EXIT_SIGINT) if sig == signal.SIGINT else
                       ("terminated", EXIT_SIGTERM))
@@ -967,12 +968,13 @@ def _main(argv, early: list) -> int:
     if args.command is None:  # the help, on stderr, and the exit code of a usage error
         parser.print_help(sys.stderr)
         return 2
-    if args.command == "list":
-        return _list(args)
-    _enable_compilation_cache()
+    if args.command != "list":
+        _enable_compilation_cache()
     run = _Run()
+    # `list` too: it loads JAX and the spectral tables (1-4 s), where a signal was only
+    # noted and the list printed on to exit 0 (a review)
     commands = {"calibrate": _calibrate, "fit-brdf": _fit_brdf, "render": _render,
-                "fit-skin": _fit_skin, "edit": _edit, "fit-image": _fit_image}
+                "fit-skin": _fit_skin, "edit": _edit, "fit-image": _fit_image, "list": _list}
     with _signals(), _pipe_safe_stdout():
         try:
             _pending.extend(early)  # what arrived before `_signals`: ends it here

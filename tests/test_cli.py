@@ -505,3 +505,27 @@ def test_the_editor_loop_holds_signals_and_a_second_one_goes_through():
     assert not cli._holding[0]
     with pytest.raises(KeyboardInterrupt):
         cli.raise_received()  # the command's end raises the last one received
+
+
+def test_a_signal_while_listing_ends_it(monkeypatch, capsys):
+    """`jaxskin list` loads JAX and the spectral tables (1-4 s); a SIGTERM then was noted
+    and dropped, the list printed on to exit 0 (a review). It ends the command as it does
+    every other: one line, 143."""
+    import signal
+
+    from jaxskin import scene
+
+    real = scene.builtin_scenes
+
+    def builtin_scenes():
+        os.kill(os.getpid(), signal.SIGTERM)
+        for _ in range(1000):  # the handler runs between bytecodes, here
+            pass
+        return real()
+
+    monkeypatch.setattr(scene, "builtin_scenes", builtin_scenes)
+    assert main(["list"]) == 143
+    out, err = capsys.readouterr()
+    assert "scene " not in out
+    assert err == "jaxskin: terminated (SIGTERM) while listing; no file was written\n", err
+    assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL  # Python's again after
