@@ -33,6 +33,7 @@ import threading
 import time
 import warnings
 from pathlib import Path
+from typing import NoReturn
 
 from . import __version__, cluster
 from .checks import check_scene, hidden_side, idle_maps, reading, thick_layers, unused_overrides
@@ -106,8 +107,6 @@ def _on_signal(signum, frame):
     and raised at the next `_raise_pending` (a stage change, or the command's end), or
     taken by `pending_signal` (the editor's event loop, `holding_signals`)."""
     _received.append(signum)
-    if _holding[0] and _pending and not _collecting[0]:  # the loop has not taken the first
-        raise _SIGNAL_ERRORS[signum]()
     if _collecting[0] or _holding[0] or _held_back(frame):
         _pending.append(signum)
         return
@@ -119,13 +118,35 @@ def holding_signals():
     """Hold every signal (`pending_signal` takes it) for the duration: for an asyncio event
     loop, which an exception raised anywhere in it can leave half made or half closed (a
     SIGTERM inside `new_event_loop` left a loop without its self-pipe, whose finaliser
-    printed an AttributeError after the command's last line; CI). A second signal while
-    one is held is raised where it arrives: Ctrl-C twice stops a loop that does not poll."""
+    printed an AttributeError after the command's last line; CI; a third Ctrl-C raised
+    inside aiohttp's shutdown, a review)."""
     _holding[0] = True
     try:
         yield
     finally:
         _holding[0] = False
+
+
+def signals_received() -> int:
+    """How many signals the command has received."""
+    return len(_received)
+
+
+def _signal_words(sig: int) -> tuple[str, int]:
+    return ("interrupted", EXIT_SIGINT) if sig == signal.SIGINT else ("terminated", EXIT_SIGTERM)
+
+
+def exit_now(run: _Run) -> NoReturn:
+    """For a second signal while a command waits on work a signal cannot stop (the editor's
+    render in its worker thread): the command's last line, then the process ends at once,
+    not waiting for that work (it writes nothing; a Save caught halfway may leave its
+    temporary file)."""
+    sig = _received[-1]
+    word, code = _signal_words(sig)
+    _say(f"jaxskin: {word} ({signal.Signals(sig).name}) while {run.stage}; {run.finished()}")
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
 
 
 def pending_signal() -> bool:
@@ -960,8 +981,7 @@ def _main(argv, early: list) -> int:
     args = parser.parse_args(argv)
     if early and args.command is None:  # no `_signals` on this path
         sig = early[0]
-        word, code = (("interrupted", EXIT_SIGINT) if sig == signal.SIGINT else
-                      ("terminated", EXIT_SIGTERM))
+        word, code = _signal_words(sig)
         _say(f"jaxskin: {word} ({signal.Signals(sig).name}) while starting; no file was "
              "written")
         return code

@@ -278,11 +278,11 @@ def builtin_names() -> str:
     import contextlib
     import io
 
-    from jaxskin.cli import _list
+    from jaxskin.cli import _list, _Run
 
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
-        _list(None)
+        _list(None, _Run())
     return out.getvalue()
 
 

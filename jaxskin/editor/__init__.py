@@ -75,7 +75,14 @@ def command(args, run) -> int:
         import webbrowser
 
         webbrowser.open(url)
-    from ..cli import holding_signals, pending_signal, raise_received
+    from ..cli import (
+        _SIGNAL_ERRORS,
+        exit_now,
+        holding_signals,
+        pending_signal,
+        raise_received,
+        signals_received,
+    )
 
     app = make_app(session, log=lambda line: print(line, file=sys.stderr), local=local)
 
@@ -101,6 +108,16 @@ def command(args, run) -> int:
     task = app.get("signal_watch")
     if task is not None and task.done() and not task.cancelled():
         task.exception()  # retrieved: no "Task exception was never retrieved" traceback
+    work = app["work"]
+    if signals_received() and work.running:  # a render in its thread, which no signal stops
+        if signals_received() > 1:  # Ctrl-C twice: not waiting (it was 8 s at 1024², and a
+            exit_now(run)  # third one raised inside the interpreter's wait; a review)
+        print("jaxskin: stopping once the render in progress ends; Ctrl-C again stops at once",
+              file=sys.stderr, flush=True)
+        try:
+            work.pool.shutdown(wait=True)
+        except tuple(_SIGNAL_ERRORS.values()):
+            exit_now(run)
     # run_app returns quietly on the KeyboardInterrupt that stopped it (exit 0 for Ctrl-C,
     # where the command line documents 130): the signal is raised again for `cli.main`.
     raise_received()

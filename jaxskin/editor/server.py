@@ -121,10 +121,19 @@ class _Worker:
 
     def __init__(self):
         self.pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="jaxskin-edit")
+        self.running = 0  # a call in progress (the command waits for it when stopped)
 
     async def __call__(self, fn, *args, **kwargs):
         loop = asyncio.get_running_loop()
-        return await loop.run_in_executor(self.pool, functools.partial(fn, *args, **kwargs))
+        return await loop.run_in_executor(self.pool, self._run,
+                                          functools.partial(fn, *args, **kwargs))
+
+    def _run(self, call):
+        self.running += 1
+        try:
+            return call()
+        finally:
+            self.running -= 1
 
 
 async def _body(request) -> dict:
@@ -279,4 +288,5 @@ def make_app(session: Session, log=print, local: bool = True) -> web.Application
     async def close(app):
         work.pool.shutdown(wait=False, cancel_futures=True)
     app.on_cleanup.append(close)
+    app["work"] = work
     return app
