@@ -35,6 +35,7 @@ import numpy as np
 from jaxskin.formats import (
     _DECIMAL_COMMA,
     DECIMAL_COMMA_NOTE,
+    NEGATIVE_NOISE,
     PERCENT_MEDIAN,
     WAVELENGTH_RANGE_NM,
     check_percent,
@@ -55,9 +56,6 @@ _WAVELENGTH = re.compile(
     r"\s*[)\]]?)?|nm")
 _NAME = re.compile(r"[\w.+-]+")  # a material name (it names the output files)
 MAX_THICKNESS_MM = 100.0  # a cosmetic layer is µm to a few mm; beyond this it is a typo
-# Reflectances down to this below 0 are a dark-corrected instrument's noise: read as 0,
-# with a note (a black card's reading of -0.0004 refused the whole file; a trial).
-NEGATIVE_NOISE = 0.005
 # Thin-layer thicknesses outside this are named in a note: cosmetic films are µm to a
 # tenth of a mm; R_3mm for R_3um fits as well with S, K 1000× too small (a trial).
 USUAL_THICKNESS_MM = (1e-4, 1.0)

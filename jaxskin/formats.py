@@ -337,6 +337,9 @@ def _number(cell: str, path, line: int, column: str) -> float:
 # fit-skin): no skin or cosmetic reflects more than 1 at most bands, and no percent
 # reading of them has a median of 1.5 % (fractions are at most 1).
 PERCENT_MEDIAN = 1.5
+# Reflectances down to this below 0 are a dark-corrected instrument's noise: read as 0,
+# with a note (a black card's reading of -0.0004 refused the whole file; a trial).
+NEGATIVE_NOISE = 0.005
 
 
 def check_percent(values, path) -> None:
@@ -633,11 +636,19 @@ def read_spectra(path, percent: bool | None = False, notes: list | None = None
     if percent:
         R = R / 100.0
     top = 100.0 if percent else 1.0
+    noise = (R < 0) & (R >= -NEGATIVE_NOISE)  # as calibrate reads them (it refused -0.001)
+    for k in np.flatnonzero(noise.any(axis=1)):
+        notes.append(f"{path}: spectrum '{names[k]}': {int(noise[k].sum())} reading"
+                     f"{'s' if noise[k].sum() > 1 else ''} below 0 (down to "
+                     f"{R[k][noise[k]].min() * top:g}, within the {NEGATIVE_NOISE * top:g} of "
+                     "noise) read as 0")
+    R = np.where(noise, 0.0, R)
     for k, name in enumerate(names):
         bad = np.flatnonzero((R[k] < 0) | (R[k] > 1.0))
         if bad.size:
             raise InputError(f"reflectance must be in [0, {top:g}]"
-                             + (" (a dark-corrected reading below 0? set it to 0 in the file)"
+                             + (f" (below the -{NEGATIVE_NOISE * top:g} read as noise: "
+                                "reflectances cannot be negative)"
                                 if R[k, bad[0]] < 0 else
                                 "" if percent else " (use --percent for 0-100)")
                              + f", got {R[k, bad[0]] * top:g} at {wavelengths[bad[0]]:g} nm",

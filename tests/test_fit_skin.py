@@ -189,7 +189,8 @@ BAD = [
     ("percent above 100", "wavelength_nm,a\n" + _good_rows(value="145"), [],
      "reflectance must be in [0, 100], got 145"),
     ("negative", "wavelength_nm,a\n" + _good_rows(value="-0.1"), [],
-     "must be in [0, 1] (a dark-corrected reading below 0? set it to 0 in the file), got -0.1"),
+     "must be in [0, 1] (below the -0.005 read as noise: reflectances cannot be negative), "
+     "got -0.1"),
     # the column named as the header spells it (it said 'wavelength' for wavelength_nm)
     ("not increasing", "wavelength_nm,a\n500,0.4\n490,0.4\n" + _good_rows(), [],
      "column 'wavelength_nm': wavelengths must increase (or all decrease)"),
@@ -273,3 +274,20 @@ def test_fits_at_the_ends_of_the_range_or_not_converged_are_named():
     assert fit_warnings(result) == ["haemoglobin ends at the upper end of its range (0.1) "
                                     "for 1 spectrum (s4): the best fit may lie outside the "
                                     "model's range; check their rms and dE2000"]
+
+
+def test_dark_noise_below_zero_reads_as_zero_as_calibrate_does(tmp_path):
+    """fit-skin refused a spectrum with a reading of -0.001 ("set it to 0 in the file")
+    where calibrate reads noise down to -0.005 as 0 (a review): the same rule, a note."""
+    rows = "".join(f"{w},{-0.001 if w == 380 else -0.004 if w == 390 else 0.4},0.3\n"
+                   for w in range(380, 790, 10))
+    notes = []
+    names, wl, R = formats.read_spectra(_spectra_file(tmp_path, "wavelength_nm,a,b\n" + rows),
+                                        notes=notes)
+    assert R[0, :3].tolist() == [0.0, 0.0, 0.4] and np.all(R[1] == 0.3)
+    assert notes == [f"{tmp_path / 's.csv'}: spectrum 'a': 2 readings below 0 (down to "
+                     "-0.004, within the 0.005 of noise) read as 0"], notes
+    pc = formats.read_spectra(_spectra_file(tmp_path, "wavelength_nm,a\n" + "".join(
+        f"{w},{-0.3 if w == 380 else 40}\n" for w in range(380, 790, 10)), "pc.csv"),
+        percent=True)[2]
+    assert pc[0, 0] == 0.0 and pc[0, 1] == pytest.approx(0.4)
