@@ -143,7 +143,7 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
         seen["comment"] = None
         if "thickness_mm" in meta:
             value, number = meta["thickness_mm"]
-            seen["comment"] = _positive(value, path, number, "thickness_mm")
+            seen["comment"] = _positive(value, path, number, key="thickness_mm")
         bare = thickness_mm if thickness_mm is not None else seen["comment"]
         seen["columns"] = _classify([n for n in header if n not in ignored], path, line, bare)
         seen["ignored"] = ignored
@@ -333,16 +333,17 @@ def _is_float(text: str) -> bool:
     return True
 
 
-def _positive(value, path, line, column, scale=1.0) -> float:
+def _positive(value, path, line, column=None, scale=1.0, key=None) -> float:
     """A thickness in mm (`value` times `scale`: 1e-3 for µm), checked; a decimal comma is
-    read as a point (one number alone: no column break to confuse it with)."""
+    read as a point (one number alone: no column break to confuse it with). `column`: the
+    header's, or `key`: a `# key:` line's."""
     try:
         x = float(_one_number(value)) * scale
     except ValueError:
         x = math.nan
     if not (math.isfinite(x) and 0 < x <= MAX_THICKNESS_MM):
         raise InputError(f"thickness must be a positive number of mm (at most "
-                         f"{MAX_THICKNESS_MM:g}), got {value!r}", path, line, column)
+                         f"{MAX_THICKNESS_MM:g}), got {value!r}", path, line, column, key)
     return x
 
 
@@ -415,7 +416,8 @@ def _fraction(value, path, line, key) -> float:
     except ValueError:
         x = math.nan
     if not (math.isfinite(x) and 0 < x <= 1):
-        raise InputError(f"expected a reflectance in (0, 1], got {value!r}", path, line, key)
+        raise InputError(f"expected a reflectance in (0, 1], got {value!r}", path, line,
+                         key=key)  # a `# key:` line's, not a column
     return x
 
 

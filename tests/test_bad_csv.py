@@ -72,7 +72,7 @@ CASES = [
     ("thickness 0", GOOD.replace("R_0.05mm", "R_0mm"), 2, "R_0mm", "positive"),
     ("thickness negative", GOOD.replace("R_0.05mm", "R_-0.05mm"), 2, "R_-0.05mm", "positive"),
     ("thickness huge", GOOD.replace("R_0.05mm", "R_1e9mm"), 2, "R_1e9mm", "at most 100"),
-    ("thickness comment not a number", "# thickness_mm: thin\n" + GOOD, 1, "thickness_mm",
+    ("thickness comment not a number", "# thickness_mm: thin\n" + GOOD, 1, "key 'thickness_mm'",
      "positive"),
     ("E columns without E_white", RADIANCE.replace(",E_white", "").replace(",4\n", "\n")
      .replace(",6\n", "\n"), 1, "E_0.1mm", "E_white"),
@@ -158,7 +158,8 @@ def test_bad_csv_is_one_line_exit_2_nothing_written(tmp_path, capsys, contents, 
     where = f"jaxskin: error: {path}:{line}: " if line else f"jaxskin: error: {path}: "
     assert lines[0].startswith(where), lines[0]
     if column is not None:
-        assert f"column '{column}'" in lines[0], lines[0]
+        named = column if column.startswith("key ") else f"column '{column}'"
+        assert named in lines[0], lines[0]
     assert words in lines[0], lines[0]
     assert len(lines[0]) < 400  # one readable line, even for a 10 MB input line
 

@@ -146,7 +146,7 @@ BAD = [
         "bad thickness comment",
         lambda t: "# thickness_mm: thin\n" + t,
         1,
-        "thickness_mm",
+        "key 'thickness_mm'",  # a `# key:` line, not a column
         "positive",
     ),
     ("no data", lambda t: t.split("400")[0], 2, None, "needs at least 2 data rows"),
@@ -179,7 +179,8 @@ def test_bad_input_names_file_line_and_column(tmp_path, what, breaker, line, col
     assert "\n" not in message
     assert message.startswith(f"{path}:{line}:" if line else f"{path}: "), message
     if column is not None:
-        assert f"column '{column}'" in message, message
+        named = column if column.startswith("key ") else f"column '{column}'"
+        assert named in message, message
     assert words in message, message
 
 
@@ -487,7 +488,7 @@ def test_a_white_standards_certified_reflectance_scales_radiance(tmp_path):
     np.testing.assert_allclose(flag.R_g, [0.045, 0.045], rtol=1e-15)
     assert any("'# white_reflectance: 0.98' is overridden by --white-reflectance 0.9" in n
                for n in flag.notes), flag.notes
-    with pytest.raises(InputError, match=r"bad.csv:1: column 'white_reflectance': expected a "
+    with pytest.raises(InputError, match=r"bad.csv:1: key 'white_reflectance': expected a "
                                          r"reflectance in \(0, 1\], got '98'"):
         read_measurement(write(tmp_path, "# white_reflectance: 98\n" + rad, "bad.csv"))
     unused = read_measurement(write(tmp_path, GOOD, "r.csv"), white_reflectance=0.98)
