@@ -30,7 +30,7 @@ def command(args, run) -> int:
         raise InputError("jaxskin edit needs aiohttp: pip install 'jaxskin[edit]'") from None
     from aiohttp import web
 
-    from .server import make_app
+    from .server import WATCH, WORK, make_app
     from .state import EditorError, Session
 
     host = args.host
@@ -100,15 +100,15 @@ def command(args, run) -> int:
                 if pending_signal():
                     raise KeyboardInterrupt
 
-        app["signal_watch"] = asyncio.get_running_loop().create_task(poll())
+        app[WATCH] = asyncio.get_running_loop().create_task(poll())
 
     app.on_startup.append(watch)
     with holding_signals():
         web.run_app(app, sock=sock, print=None, handle_signals=False)
-    task = app.get("signal_watch")
+    task = app.get(WATCH)
     if task is not None and task.done() and not task.cancelled():
         task.exception()  # retrieved: no "Task exception was never retrieved" traceback
-    work = app["work"]
+    work = app[WORK]
     if signals_received() and work.running:  # a render in its thread, which no signal stops
         if signals_received() > 1:  # Ctrl-C twice: not waiting (it was 8 s at 1024², and a
             exit_now(run)  # third one raised inside the interpreter's wait; a review)

@@ -45,6 +45,8 @@ __all__ = ["MAX_BODY", "make_app"]
 MAX_BODY = 1 << 20  # bytes: the largest request body (a long paint stroke is ~100 kB)
 STATIC = ("index.html", "editor.js", "editor.css")
 LOG = web.AppKey("log", object)
+WORK = web.AppKey("work", object)  # the `_Worker` (the command waits for it when stopped)
+WATCH = web.AppKey("signal_watch", object)  # the command's signal poll (an asyncio task)
 
 
 def _static_dir() -> Path:
@@ -288,5 +290,5 @@ def make_app(session: Session, log=print, local: bool = True) -> web.Application
     async def close(app):
         work.pool.shutdown(wait=False, cancel_futures=True)
     app.on_cleanup.append(close)
-    app["work"] = work
+    app[WORK] = work
     return app
