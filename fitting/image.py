@@ -882,16 +882,25 @@ def write_report(result: ImageFit, target, w, maps: dict, path, title: str = "")
     ax.grid(alpha=0.3)
     for a in axes[0, :3]:
         a.set_axis_off()
+    titles = []
     for i, (key, (values, tmask, unit)) in enumerate(maps.items()):
         a = axes[1 + i // ncol, i % ncol]
         im = a.imshow(np.where(tmask, values, np.nan), cmap="viridis")
-        a.set_title(f"{key} ({unit})")
+        # Key and unit on two lines: on one, "skin.melanin_fraction_map (skin.melanin_fraction)"
+        # was wider than its panel and cut off at the figure's left edge.
+        titles.append((a, a.set_title(f"{key}\n({unit})")))
         a.set_axis_off()
         fig.colorbar(im, ax=a, shrink=0.8)
     for j in range(len(maps), (rows - 1) * ncol):
         axes[1 + j // ncol, j % ncol].set_axis_off()
     if title:
         fig.suptitle(title)
+    if titles:  # a line still wider than its panel (a layer's name is the user's): smaller
+        fig.canvas.draw()  # lays the panels out, so their widths are known
+        for a, t in titles:
+            over = t.get_window_extent().width / a.get_window_extent().width
+            if over > 1:
+                t.set_fontsize(t.get_fontsize() / over)
     with atomic_write(path, "wb") as fh:
         fig.savefig(fh, format="png", dpi=90)
     plt.close(fig)

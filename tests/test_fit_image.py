@@ -218,6 +218,33 @@ def test_degenerate_pairs_warn():
         fi.fit_keys(face, "skin.melanin,layer.foundation.map")
 
 
+def test_report_map_titles_fit_their_panels(tmp_path, monkeypatch):
+    """The report's map titles lie inside the figure and within their panels' width: on one
+    line, "skin.melanin_fraction_map (skin.melanin_fraction)" ran off the figure's left
+    edge; a long layer name is shrunk to fit."""
+    import matplotlib.pyplot as plt
+
+    figures = []
+    monkeypatch.setattr(plt, "close", figures.append)  # keep the figure to measure it
+    image = np.full((32, 32, 3), 0.5)
+    result = fi.ImageFit(params={}, values={}, history=[1.0, 0.5], rms=0.01, steps=2,
+                         seconds=1.0, solver="gn", image=image)
+    tmask = np.ones((16, 16), bool)
+    shown = {"skin.melanin_fraction_map": (np.ones((16, 16)), tmask, "skin.melanin_fraction"),
+             "layer.a_foundation_with_a_very_long_name.map":
+                 (np.ones((16, 16)), tmask, "mm")}
+    fi.write_report(result, image, np.ones((32, 32)), shown, tmp_path / "r.png", "title")
+    fig, = figures
+    width = fig.bbox.width
+    panels = fig.axes[4:]  # target, fit, residual, loss, then the maps and their colour bars
+    titles = [(a, a.title) for a in panels if a.title.get_text()]
+    assert all(t.get_text().startswith(key) for (_, t), key in zip(titles, shown, strict=True))
+    for a, t in titles:
+        box = t.get_window_extent()
+        assert 0 <= box.x0 and box.x1 <= width, (t.get_text(), box)
+        assert box.width <= a.get_window_extent().width + 1, (t.get_text(), box)
+
+
 def test_image_map_reads_16_bit_at_full_scale(tmp_path):
     """A 16-bit map whose values stay below 256 is still on the 65535 scale."""
     from jaxskin.maps import read_grey
