@@ -47,7 +47,7 @@ center = [0.0, 0.0]                # the point zoomed into, in fractions of the 
 mode = "wrinkles"                  # wrinkles | overview (no wrinkles) | height
 [[fields.edit]]                    # any number; none: the initial fields
 at = [0.0, 0.4, 0.1]               # the vertex nearest to this point ...
-vertex = 123                       # ... or a vertex index (give one of the two)
+# vertex = 123                     # ... or a vertex index instead (give one of the two)
 d1 = [0.6, 1.0, 0.0]               # direction and magnitude (|d| <= 2) of the first field
 d2 = [-0.8, 0.5, 0.0]              # ... and of the second
 weight = 1.0                       # λ, 0–10

@@ -67,11 +67,13 @@ def test_toml_descriptions_follow_continued_comments():
         x = 1        # the x,
                      #   continued
         y = 2        # why
+        # w = 4      # or w instead of y
         [[t]]        # a table
         z = 3        # zed
         ```''')
     assert reference.toml_descriptions(doc) == {
-        "a": "", "a.x": "the x, continued", "a.y": "why", "t": "a table", "t.z": "zed"}
+        "a": "", "a.x": "the x, continued", "a.y": "why", "a.w": "or w instead of y",
+        "t": "a table", "t.z": "zed"}
 
 
 def test_the_cli_page_has_every_command_and_option():

@@ -390,15 +390,18 @@ def test_a_biophysical_material_over_an_explicit_measured_skin_is_refused(tmp_pa
     assert load_scene(scene, ["material.model=spectral"]).skin_model == "nist"
 
 
-def test_the_modules_example_scene_shows_the_defaults():
+def test_the_modules_example_scene_shows_the_defaults(tmp_path):
     """`render --help` sends readers to `python -m pydoc jaxskin.scene` for the defaults; its
     example said `k_scale = 1.1` where the default is 1.0 (a trial). Every key of the
-    example that has a default shows it."""
+    example that has a default shows it, and the example is a valid scene: its edit gave
+    both `at` and `vertex`, which the parser refuses (a trial)."""
     import tomllib
 
     from jaxskin import scene
 
     example = tomllib.loads(scene.__doc__.split("```toml")[1].split("```")[0])
+    parsed = scene.parse_scene(example, tmp_path / "example.toml")
+    assert parsed.name == "hand" and len(parsed.edits) == 1
 
     def flat(d, prefix=""):
         for k, v in d.items():

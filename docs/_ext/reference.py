@@ -110,13 +110,17 @@ def missing_docstrings(package: str = "jaxskin", search_paths=(ROOT,)) -> list[s
 def toml_descriptions(doc: str) -> dict[str, str]:
     """`{dotted key: comment}` from the commented TOML examples in a docstring. A comment
     starting with more than one space continues the previous one; a table header's comment
-    describes the table (`fields.edit`, `layer`, `layer.ellipse`)."""
+    describes the table (`fields.edit`, `layer`, `layer.ellipse`). A key commented out
+    (`# vertex = 123  # ...`: an alternative to the key above it, which a valid example
+    cannot also give) is described as if it were not."""
     out: dict[str, str] = {}
     last = None
     prefix = ""
     for block in re.findall(r"```toml\n(.*?)```", doc, re.S):
         for line in block.splitlines():
             code, _, comment = line.partition("#")
+            if not code.strip() and re.match(r" \w+\s*=[^#]*#", comment):
+                code, _, comment = comment.partition("#")
             code = code.strip()
             header = re.fullmatch(r"\[\[?([\w.]+)\]\]?", code)
             key = re.match(r"([\w]+)\s*=", code)
