@@ -361,7 +361,7 @@ def command(args, run) -> int:
 
     from tqdm import tqdm
 
-    from jaxskin.formats import read_spectra
+    from jaxskin.formats import read_spectra, wavelength_gaps
     from jaxskin.outputs import Outputs, slug
 
     outputs = Outputs(args.output, [args.file])
@@ -381,6 +381,8 @@ def command(args, run) -> int:
     run.outputs.append(outputs)
     for note in notes:
         print(f"jaxskin: note: {note}", file=sys.stderr)
+    for line in wavelength_gaps(wavelengths):
+        print(f"jaxskin: warning: {args.file}: {line}", file=sys.stderr)
     run.stage = f"fitting {len(names)} spectra"
     t0 = time.perf_counter()
     if args.cluster:

@@ -556,7 +556,7 @@ def _calibrate(args, run: _Run) -> int:
     run.outputs.append(outputs)
 
     from jaxskin.fitting.report import write_report
-    from jaxskin.formats import write_json
+    from jaxskin.formats import wavelength_gaps, write_json
     from jaxskin.spectral import Grid
 
     grid = Grid().wavelengths
@@ -568,6 +568,8 @@ def _calibrate(args, run: _Run) -> int:
             print(f"jaxskin: warning: {m.path}: covers {wl[0]:g}-{wl[-1]:g} nm, not the "
                   f"renderer's {grid[0]:g}-{grid[-1]:g} nm: the material will be refused at "
                   "render time; pass --extrapolate hold|linear to allow it", file=sys.stderr)
+        for line in wavelength_gaps(wl):
+            print(f"jaxskin: warning: {m.path}: {line}", file=sys.stderr)
         for line in fit_km.suspect_labels(m, noise):
             print(f"jaxskin: warning: {line}", file=sys.stderr)
     if args.thickness is not None and not any({"R", "E"} & set(m.columns)

@@ -342,6 +342,28 @@ PERCENT_MEDIAN = 1.5
 NEGATIVE_NOISE = 0.005
 
 
+# A step between readings wider than both of these (nm, and times the file's median step)
+# is a hole in the data: the fits bridge it with a straight line (a 110 nm hole across the
+# greens turned a red lipstick orange with no word; a trial).
+GAP_MIN_NM, GAP_STEPS = 20.0, 3.0
+
+
+def wavelength_gaps(wavelengths, lo: float = 380.0, hi: float = 780.0) -> list[str]:
+    """Warnings (one line each) for holes in increasing `wavelengths` that reach into
+    [`lo`, `hi`] nm (the render grid, what the fits use): a step wider than `GAP_MIN_NM`
+    and `GAP_STEPS` times the median step."""
+    wl = np.asarray(wavelengths, np.float64)
+    if wl.size < 3:
+        return []
+    steps = np.diff(wl)
+    typical = float(np.median(steps))
+    wide = (steps > GAP_MIN_NM) & (steps > GAP_STEPS * typical) & (wl[1:] > lo) & (wl[:-1] < hi)
+    return [f"no readings between {wl[i]:g} and {wl[i + 1]:g} nm ({steps[i]:g} nm, where the "
+            f"file's step is {typical:g} nm): the fit bridges them with a straight line, so "
+            "the colour there is a guess; measure them, or check for rows lost"
+            for i in np.flatnonzero(wide)]
+
+
 def check_percent(values, path) -> None:
     """`InputError` naming `path` when readings given as percent (`--percent`) are all at
     most 1: nothing measured (skin, a film, its background) is below 1 % at every band,

@@ -571,3 +571,30 @@ def test_thousands_separators_and_lone_decimal_commas(tmp_path):
     # E_g's -0.002 (R = -0.0005: dark-corrected noise) is read as 0, as a reflectance is
     np.testing.assert_allclose(r.R_g, [0.0, 0.049], rtol=1e-12)
     np.testing.assert_allclose(r.R[0], [0.245, 0.245], rtol=1e-12)
+
+
+def test_a_hole_in_the_wavelengths_is_warned_about(tmp_path, capsys):
+    """A 110 nm hole across the greens (rows lost) was bridged by a straight line in silence
+    and a red lipstick rendered orange (a trial): calibrate warns, naming the hole; regular
+    steps, a small hole at 1 nm steps and a hole outside 380-780 nm are not warned about."""
+    from jaxskin.cli import main
+    from jaxskin.formats import wavelength_gaps
+
+    assert wavelength_gaps(np.arange(380, 781, 5)) == []
+    assert wavelength_gaps(np.arange(380, 781, 20)) == []  # a coarse instrument: its step
+    one = np.arange(380, 781, 1.0)
+    assert wavelength_gaps(one[(one < 500) | (one > 510)]) == []  # 11 nm: under 20 nm
+    far = np.r_[np.arange(380, 781, 5), 900, 1000]
+    assert wavelength_gaps(far) == []  # beyond the render grid
+    hole = np.r_[np.arange(380, 496, 5), np.arange(605, 781, 5)]
+    lines = wavelength_gaps(hole)
+    assert len(lines) == 1 and lines[0].startswith(
+        "no readings between 495 and 605 nm (110 nm, where the file's step is 5 nm)"), lines
+    src = data_dir() / "measurements" / "lipstick_red.csv"
+    kept = [line for line in src.read_text().splitlines()
+            if not (line[:3].isdigit() and 500 <= float(line.split(",")[0]) <= 600)]
+    gap = write(tmp_path, "\n".join(kept) + "\n", "gap.csv")
+    assert main(["calibrate", str(gap), "-o", str(tmp_path / "out"), "--no-report"]) == 0
+    err = capsys.readouterr().err
+    assert (f"jaxskin: warning: {gap}: no readings between 495 and 605 nm (110 nm, where the "
+            "file's step is 5 nm)") in err, err
