@@ -37,6 +37,7 @@ from jaxskin.formats import (
     DECIMAL_COMMA_NOTE,
     NEGATIVE_NOISE,
     PERCENT_MEDIAN,
+    WAVELENGTH_HEADER,
     WAVELENGTH_RANGE_NM,
     check_percent,
     read_table,
@@ -49,11 +50,6 @@ __all__ = ["Measurement", "is_wavelength_column", "read_measurement"]
 # A thin layer's column, after `_canonical`: R_0.05mm, R_0.05_mm (from "R 0.05 mm"),
 # R0.05mm, R_50um, R_50µm; E_… for radiance.
 _THIN = re.compile(r"^(?:R|E)_?(?P<x>.+?)_?(?P<unit>mm|um|µm|μm)$")
-# The first column: wavelength_nm (the format's name) or what instrument software writes:
-# "Wavelength", "Wavelength (nm)", "wavelength [µm]", "lambda", "wl", "nm", ...
-_WAVELENGTH = re.compile(
-    r"(?i)(?:wave\s*length|wl|lambda|λ)(?:\s*[_(\[]\s*(?P<unit>nm|um|µm|micron|microns)"
-    r"\s*[)\]]?)?|nm")
 _NAME = re.compile(r"[\w.+-]+")  # a material name (it names the output files)
 MAX_THICKNESS_MM = 100.0  # a cosmetic layer is µm to a few mm; beyond this it is a typo
 # Thin-layer thicknesses outside this are named in a note: cosmetic films are µm to a
@@ -64,7 +60,7 @@ MAX_RADIANCE = 1e30  # any unit of radiance or counts; beyond this it is an over
 
 def is_wavelength_column(name: str) -> bool:
     """Whether a header cell names the wavelength column (what starts a measurement's table)."""
-    return _WAVELENGTH.fullmatch(name.strip()) is not None
+    return WAVELENGTH_HEADER.fullmatch(name.strip()) is not None
 
 
 def _is_reading(name: str) -> bool:
@@ -288,7 +284,7 @@ def _name_from_stem(path, notes) -> str:
 def _wavelengths_nm(wl, column, path, numbers):
     """The wavelength column in nm (µm when all under 10 or the header says so), checked."""
     notes = []
-    unit = (_WAVELENGTH.fullmatch(column)["unit"] or "").lower()
+    unit = (WAVELENGTH_HEADER.fullmatch(column)["unit"] or "").lower()
     micrometres = unit not in ("", "nm")
     if not micrometres and np.all(wl < 10):
         micrometres = True

@@ -46,6 +46,14 @@ __all__ = ["MaterialFile", "Table", "nist_reflectance", "nist_spectrum", "read_j
 DELIMITERS = (",", "\t", ";")
 MAX_BYTES = 256 * 2**20  # a spectrum at 0.01 nm with 50 columns is ~40 MB
 WAVELENGTH_RANGE_NM = (200.0, 3000.0)  # what a spectroradiometer can measure, generously
+# The first column: wavelength_nm (the format's name) or what instrument software and
+# spreadsheets write: "Wavelength", "Wavelength (nm)", "Wavelength nm", "wavelength/nm",
+# "wavelength [µm]", "lambda", "λ", "wl", "nm", and in German, French, Spanish, Italian,
+# Portuguese and Dutch ("Wellenlänge (nm)" was refused as no header; a trial).
+WAVELENGTH_HEADER = re.compile(
+    r"(?i)(?:wave\s*length|wl|lambda|λ|wellenl(?:ä|ae|a)nge|longueur\s*d['’]?\s*onde"
+    r"|longitud\s*de\s*onda|lunghezza\s*d['’]?\s*onda|comprimento\s*de\s*onda|golflengte)"
+    r"(?:(?:\s*[_(\[/]\s*|\s+)(?P<unit>nm|um|µm|μm|micron|microns)\s*[)\]]?)?|nm")
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 _DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+(?:[eE][+-]?\d+)?")
 _THOUSANDS = re.compile(r"[1-9]\d{0,2}(?:,\d{3})+")  # 1,050: 1050, or 1.05 (µm)?
@@ -228,11 +236,14 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
     meta: dict[str, tuple[str, int]] = {}
     header = delimiter = None
     header_line = 0
+    first = None  # the first line that is not a comment: (number, its first cell)
     try:
         for number, raw in enumerate(lines, start=1):
             line = raw.strip()
             if not line:
                 continue
+            if first is None and not line.startswith("#"):
+                first = (number, re.split(r"[,;\t]", line, maxsplit=1)[0].strip().strip('"'))
             if line.startswith("#"):
                 if ":" in line:
                     key, value = line[1:].split(":", 1)
@@ -250,8 +261,12 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
     except csv.Error as e:
         raise InputError(f"not CSV ({e})", path, number) from None
     if header is None:
+        seen = ""
+        if first is not None and first[1] and not _NUMBER.fullmatch(first[1]):
+            seen = (f" (line {first[0]} begins with {first[1][:40]!r}, not a name this "
+                    f"reader knows for the first column: name it {expected_header.split(',')[0]})")
         raise InputError(f"no header row; expected a row '{expected_header}' (comma, tab or "
-                         "semicolon separated) after any preamble", path)
+                         f"semicolon separated) after any preamble{seen}", path)
     for i, name in enumerate(header):
         if name == "":
             raise InputError(f"header cell {i + 1} is empty", path, header_line)
@@ -579,7 +594,11 @@ def haemoglobin_table() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return t.column("wavelength_nm"), t.column("e_HbO2"), t.column("e_Hb")
 
 
-_WAVELENGTH_NAMES = ("wavelength_nm", "wavelength (nm)", "wavelength", "lambda_nm", "nm")
+def _nm_column(cell: str) -> bool:
+    """Whether a header cell names a wavelength column in nm (`WAVELENGTH_HEADER` with nm
+    or no unit: fit-skin's spectra are in nm)."""
+    m = WAVELENGTH_HEADER.fullmatch(cell.strip())
+    return m is not None and (m["unit"] or "nm").lower() == "nm"
 
 
 def read_spectra(path, percent: bool | None = False, notes: list | None = None
@@ -600,7 +619,7 @@ def read_spectra(path, percent: bool | None = False, notes: list | None = None
     header_at = None
     for i, raw in enumerate(lines):
         cells = _split(raw.strip(), ",") if raw.strip() and not raw.startswith("#") else []
-        if cells and cells[0].strip().lower() in _WAVELENGTH_NAMES:
+        if cells and _nm_column(cells[0]):
             header_at = i
             break
     t = None
@@ -631,7 +650,7 @@ def read_spectra(path, percent: bool | None = False, notes: list | None = None
         wavelengths, R = np.asarray(wl), np.asarray(rows).T
         header_line, line_of, wl_name = header_at + 1, None, header[0]
     else:
-        t = read_table(path, lambda c: c.lower() in _WAVELENGTH_NAMES,
+        t = read_table(path, _nm_column,
                        "wavelength_nm,<spectrum name>,...", min_rows=2, wavelength_first=True)
         if len(t.header) < 2:
             raise t.error("no spectra: expected wavelength_nm and one column per spectrum")

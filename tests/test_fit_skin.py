@@ -291,3 +291,13 @@ def test_dark_noise_below_zero_reads_as_zero_as_calibrate_does(tmp_path):
         f"{w},{-0.3 if w == 380 else 40}\n" for w in range(380, 790, 10)), "pc.csv"),
         percent=True)[2]
     assert pc[0, 0] == 0.0 and pc[0, 1] == pytest.approx(0.4)
+
+
+@pytest.mark.parametrize("name", ["Wellenlänge (nm)", "Wavelength nm", "wavelength/nm",
+                                  "λ (nm)", "Longueur d'onde (nm)"])
+def test_spectra_read_the_wavelength_column_by_its_other_names(tmp_path, name):
+    """fit-skin knew five spellings of the wavelength column; it reads what calibrate
+    reads (nm only: a µm header is not one of its spectra's)."""
+    names, wl, R = formats.read_spectra(_spectra_file(tmp_path, f"{name};a\n" + "".join(
+        f"{w};0,4\n" for w in range(380, 790, 10))))
+    assert names == ["a"] and wl[0] == 380 and wl[-1] == 780 and np.all(R == 0.4)

@@ -227,6 +227,12 @@ STYLES = {
     # the header (it was: 'unknown column 400-420').
     "a preamble row starting 'Wavelength'": _export(["Wavelength (nm)", *NAMES], ",",
                                                     "Wavelength,400-420\nPoints,3\n"),
+    # What spreadsheets in other languages and the SI style write (refused as "no header
+    # row"; a trial).
+    **{f"header {name!r}": _export([name, *NAMES], ";") for name in (
+        "Wellenlänge (nm)", "Wellenlaenge [nm]", "Wavelength nm", "wavelength/nm",
+        "Longueur d onde (nm)", "Longueur d'onde (nm)", "Longitud de onda (nm)",
+        "Lunghezza d'onda (nm)", "Comprimento de onda (nm)", "Golflengte (nm)")},
 }
 
 
@@ -240,6 +246,15 @@ def test_instrument_exports_read_like_the_plain_format(tmp_path, style):
     for a in ("R", "R_inf", "R_g", "thickness_mm"):
         np.testing.assert_array_equal(getattr(m, a), getattr(plain, a))
     assert m.notes == ()  # nothing inferred: the header said the unit
+
+
+def test_no_header_names_what_the_first_row_begins_with(tmp_path):
+    """"no header row" left the user to guess which cell was not understood (a trial)."""
+    path = write(tmp_path, "Golden;R_0,05mm;R_inf;R_g\n400;0,3;0,4;0,04\n", "g.csv")
+    with pytest.raises(InputError, match=r"g.csv: no header row; .* after any preamble \(line "
+                                         r"1 begins with 'Golden', not a name this reader knows "
+                                         r"for the first column: name it wavelength_nm\)$"):
+        read_measurement(path)
 
 
 def test_micrometres_and_percent_are_detected_with_a_note(tmp_path):
