@@ -396,6 +396,12 @@ def _classify(header, path, line, bare_thickness):
     if radiance and "white" not in roles:
         raise InputError("radiance columns need E_white (the white standard)", path, line,
                          radiance[0])
+    reflectance = [n for n in columns if not _is_radiance(n)]
+    if radiance and reflectance:  # an E column relabelled R_inf fitted "perfectly" (a trial)
+        raise InputError("a reflectance among radiance columns (E_..., E_white): a file's "
+                         "readings are all of one kind; name it E_... if it holds radiance, "
+                         "or give reflectances (R = E / E_white) throughout", path, line,
+                         reflectance[0])
     return columns
 
 

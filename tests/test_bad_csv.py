@@ -77,6 +77,9 @@ CASES = [
     ("E columns without E_white", RADIANCE.replace(",E_white", "").replace(",4\n", "\n")
      .replace(",6\n", "\n"), 1, "E_0.1mm", "E_white"),
     ("E_white zero", RADIANCE.replace(",4\n", ",0\n"), 2, "E_white", "> 0"),
+    # an E column relabelled R_inf: its radiance fitted as a reflectance, "perfectly" (a trial)
+    ("R among E columns", RADIANCE.replace("E_inf", "R_inf"), 1, "R_inf",
+     "a reflectance among radiance columns"),
     ("radiance 1e308", RADIANCE.replace("1.5,", "1e308,"), 3, "E_0.1mm", "radiance"),
     ("preamble without a header", "Spectrometer: ASD FieldSpec\nIntegration,100\nSome text\n",
      None, None, "no header row"),
