@@ -40,6 +40,7 @@ from jaxskin.formats import (
     WAVELENGTH_HEADER,
     WAVELENGTH_RANGE_NM,
     check_percent,
+    drop_repeats,
     read_table,
 )
 from jaxskin.io import InputError
@@ -156,12 +157,14 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
         raise
     meta, header, header_line = table.meta, table.header, table.header_line
     comment_thickness, columns, ignored = seen["comment"], seen["columns"], seen["ignored"]
-    data, numbers = table.data, table.lines
+    repeats = []
+    data, numbers = drop_repeats(table.data, table.lines, path, repeats)
     descending = len(data) > 1 and bool(np.all(np.diff(data[:, 0]) < 0))
     if descending:  # some instruments export the long wavelengths first
         data, numbers = data[::-1], list(numbers)[::-1]
 
     wl, notes = _wavelengths_nm(data[:, 0], header[0], path, numbers)
+    notes += repeats
     if table.decimal_comma:
         notes.append(f"{path}: {DECIMAL_COMMA_NOTE}")
     if ignored:

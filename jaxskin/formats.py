@@ -363,6 +363,26 @@ NEGATIVE_NOISE = 0.005
 GAP_MIN_NM, GAP_STEPS = 20.0, 3.0
 
 
+def drop_repeats(data, lines, path, notes: list):
+    """`(data, lines)` without rows that repeat the row before them exactly (the same
+    wavelength and readings: an export or a merge script's doubled row, refused as "must
+    increase"; a trial), with a note naming them. A wavelength repeated with other readings
+    is left for the caller's check to refuse."""
+    data = np.asarray(data)
+    same = np.r_[False, np.all(data[1:] == data[:-1], axis=1)] if len(data) > 1 else \
+        np.zeros(len(data), bool)
+    if not same.any():
+        return data, lines
+    lines = list(lines)
+    where = [f"{lines[i]} (= {lines[i - 1]})" for i in np.flatnonzero(same)[:5]]
+    more = f" and {int(same.sum()) - 5} more" if same.sum() > 5 else ""
+    several = same.sum() > 1
+    notes.append(f"{path}: line{'s' if several else ''} {', '.join(where)}{more} "
+                 f"repeat{'' if several else 's'} the row before: read once")
+    keep = ~same
+    return data[keep], [n for n, k in zip(lines, keep, strict=True) if k]
+
+
 def wavelength_gaps(wavelengths, lo: float = 380.0, hi: float = 780.0) -> list[str]:
     """Warnings (one line each) for holes in increasing `wavelengths` that reach into
     [`lo`, `hi`] nm (the render grid, what the fits use): a step wider than `GAP_MIN_NM`
@@ -654,8 +674,10 @@ def read_spectra(path, percent: bool | None = False, notes: list | None = None
                        "wavelength_nm,<spectrum name>,...", min_rows=2, wavelength_first=True)
         if len(t.header) < 2:
             raise t.error("no spectra: expected wavelength_nm and one column per spectrum")
-        names, wavelengths, R = t.header[1:], t.data[:, 0], t.data[:, 1:].T
-        header_line, line_of, wl_name = t.header_line, t.lines, t.header[0]
+        notes = [] if notes is None else notes
+        data, line_of = drop_repeats(t.data, t.lines, path, notes)
+        names, wavelengths, R = t.header[1:], data[:, 0], data[:, 1:].T
+        header_line, wl_name = t.header_line, t.header[0]
     notes = [] if notes is None else notes
     if t is not None and t.decimal_comma:
         notes.append(f"{path}: {DECIMAL_COMMA_NOTE}")

@@ -301,3 +301,13 @@ def test_spectra_read_the_wavelength_column_by_its_other_names(tmp_path, name):
     names, wl, R = formats.read_spectra(_spectra_file(tmp_path, f"{name};a\n" + "".join(
         f"{w};0,4\n" for w in range(380, 790, 10))))
     assert names == ["a"] and wl[0] == 380 and wl[-1] == 780 and np.all(R == 0.4)
+
+
+def test_spectra_rows_repeated_exactly_are_read_once(tmp_path):
+    rows = [f"{w},0.4,0.3" for w in range(380, 790, 10)]
+    text = "wavelength_nm,a,b\n" + "\n".join(rows[:5] + rows[4:5] * 2 + rows[5:]) + "\n"
+    notes = []
+    names, wl, R = formats.read_spectra(_spectra_file(tmp_path, text), notes=notes)
+    assert wl.tolist() == list(range(380, 790, 10)) and R.shape == (2, 41)
+    assert notes == [f"{tmp_path / 's.csv'}: lines 7 (= 6), 8 (= 7) repeat the row before: "
+                     "read once"], notes

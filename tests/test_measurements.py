@@ -613,3 +613,21 @@ def test_a_hole_in_the_wavelengths_is_warned_about(tmp_path, capsys):
     err = capsys.readouterr().err
     assert (f"jaxskin: warning: {gap}: no readings between 495 and 605 nm (110 nm, where the "
             "file's step is 5 nm)") in err, err
+
+
+def test_a_row_repeated_exactly_is_read_once(tmp_path):
+    """An export's doubled row (the same wavelength and readings) was refused as "must
+    increase" (a trial): read once, with a note naming it; the same wavelength with other
+    readings is still refused."""
+    plain = read_measurement(write(tmp_path, GOOD, "plain.csv"))
+    lines = GOOD.splitlines()
+    doubled = "\n".join(lines[:3] + [lines[2]] + lines[3:]) + "\n"  # line 4 = line 3
+    m = read_measurement(write(tmp_path, doubled, "doubled.csv"))
+    np.testing.assert_array_equal(m.R, plain.R)
+    np.testing.assert_array_equal(m.wavelength_nm, plain.wavelength_nm)
+    assert f"{tmp_path / 'doubled.csv'}: line 4 (= 3) repeats the row before: read once" in \
+        m.notes, m.notes
+    other = lines[2].rsplit(",", 1)[0] + ",0.0499"
+    with pytest.raises(InputError, match="wavelengths must increase"):
+        read_measurement(write(tmp_path, "\n".join(lines[:3] + [other] + lines[3:]) + "\n",
+                               "other.csv"))
