@@ -34,12 +34,12 @@ import numpy as np
 
 from jaxskin.formats import (
     _DECIMAL_COMMA,
-    DECIMAL_COMMA_NOTE,
     NEGATIVE_NOISE,
     PERCENT_MEDIAN,
     WAVELENGTH_HEADER,
     WAVELENGTH_RANGE_NM,
     check_percent,
+    decimal_comma_note,
     drop_repeats,
     read_table,
 )
@@ -166,7 +166,7 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
     wl, notes = _wavelengths_nm(data[:, 0], header[0], path, numbers)
     notes += repeats
     if table.decimal_comma:
-        notes.append(f"{path}: {DECIMAL_COMMA_NOTE}")
+        notes.append(f"{path}: {decimal_comma_note(table.decimal_comma)}")
     if ignored:
         notes.append(f"{path}: ignored column{'s' if len(ignored) > 1 else ''} "
                      + ", ".join(ignored))

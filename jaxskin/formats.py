@@ -58,7 +58,11 @@ _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 _DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+(?:[eE][+-]?\d+)?")
 _THOUSANDS = re.compile(r"[1-9]\d{0,2}(?:,\d{3})+")  # 1,050: 1050, or 1.05 (µm)?
 _NAMES = {"\t": "tab", ",": "comma", ";": "semicolon"}
-DECIMAL_COMMA_NOTE = "numbers with a decimal comma (18,65) read as 18.65"
+def decimal_comma_note(example: str) -> str:
+    """The note for a table read with decimal commas, quoting the first of them (a fixed
+    "18,65" read as if it quoted the user's data; a trial)."""
+    return (f"numbers with a decimal comma ({example}) read with a point "
+            f"({example.replace(',', '.')})")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -74,7 +78,7 @@ class Table:
     lines: list[int]
     meta: dict[str, tuple[str, int]]
     delimiter: str = ","
-    decimal_comma: bool = False  # numbers written with a decimal comma were read
+    decimal_comma: str = ""  # the first number written with a decimal comma, if any
 
     def column(self, name: str) -> np.ndarray:
         """The values of the column named `name`, `(rows,)`."""
@@ -276,7 +280,7 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
     kept = [c for c, name in enumerate(header) if name not in skipped]
 
     rows, numbers = [], []
-    decimal_comma = False
+    decimal_comma = ""
     for number, raw in enumerate(lines[header_line:], start=header_line + 1):
         line = raw.strip()
         if not line or line.startswith("#"):
@@ -310,8 +314,8 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
                                      "wavelengths without thousands separators", path,
                                      number, header[0])
                 if _DECIMAL_COMMA.fullmatch(cells[c]):
+                    decimal_comma = decimal_comma or cells[c]
                     cells[c] = cells[c].replace(",", ".")
-                    decimal_comma = True
         rows.append([_number(cells[c], path, number, header[c]) for c in kept])
         numbers.append(number)
     if len(rows) < min_rows:
@@ -680,7 +684,7 @@ def read_spectra(path, percent: bool | None = False, notes: list | None = None
         header_line, wl_name = t.header_line, t.header[0]
     notes = [] if notes is None else notes
     if t is not None and t.decimal_comma:
-        notes.append(f"{path}: {DECIMAL_COMMA_NOTE}")
+        notes.append(f"{path}: {decimal_comma_note(t.decimal_comma)}")
     if len(wavelengths) > 1 and np.all(np.diff(wavelengths) < 0):  # long ones first
         wavelengths, R = wavelengths[::-1], R[:, ::-1]
         line_of = None if line_of is None else list(line_of)[::-1]

@@ -432,7 +432,9 @@ def test_spreadsheet_exports_decimal_commas_empty_rows_and_a_footer(tmp_path):
         m = read_measurement(write(tmp_path, text, "eu.csv"))
         for a in ("R", "R_inf", "R_g", "thickness_mm", "wavelength_nm"):
             np.testing.assert_array_equal(getattr(m, a), getattr(plain, a))
-        assert any("decimal comma (18,65) read as 18.65" in n for n in m.notes), m.notes
+        # the file's own first decimal comma quoted (a fixed "18,65" read as if it were)
+        assert f"{tmp_path / 'eu.csv'}: numbers with a decimal comma (0,30) read with a " \
+            "point (0.30)" in m.notes, m.notes
     assert not any("decimal comma" in n for n in plain.notes)
     empty_rows = read_measurement(write(tmp_path, GOOD + ",,,,\n,,,,\n", "rows.csv"))
     np.testing.assert_array_equal(empty_rows.R, plain.R)
