@@ -36,6 +36,7 @@ from jaxskin.formats import (
     _DECIMAL_COMMA,
     NEGATIVE_NOISE,
     PERCENT_MEDIAN,
+    PERCENT_UNIT,
     WAVELENGTH_HEADER,
     WAVELENGTH_RANGE_NM,
     check_percent,
@@ -199,7 +200,7 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
     if not radiance and (white != 1.0 or "white_reflectance" in meta):
         notes.append(f"{path}: the white standard's reflectance is not used: no radiance "
                      "columns (E_... with E_white)")
-    said = [n for n in columns if _PERCENT_UNIT.search(n) and not _is_radiance(n)]
+    said = [n for n in columns if PERCENT_UNIT.search(n) and not _is_radiance(n)]
     if said and not percent:  # the header says so: not left to the median's guess
         these = "', '".join(said)
         notes.append(f"{path}: column{'s' if len(said) > 1 else ''} '{these}' say"
@@ -347,13 +348,12 @@ def _positive(value, path, line, column=None, scale=1.0, key=None) -> float:
 
 
 # A percent unit after a reading column's name: "R_inf (%)", "R_g [%]", "R_g %".
-_PERCENT_UNIT = re.compile(r"\s*[(\[]\s*%\s*[)\]]$|\s*%$")
 
 
 def _canonical(name: str) -> str:
     """A reading column's name in the format's spelling: spaces as `_` (`R 0.05 mm` →
     `R_0.05_mm`), `E_R_…` as `E_…`, `∞` as `inf`."""
-    short = _PERCENT_UNIT.sub("", name.strip())  # "R_inf (%)"
+    short = PERCENT_UNIT.sub("", name.strip())  # "R_inf (%)"
     short = re.sub(r"\s+", "_", short).replace("∞", "inf")
     short = "E_" + short[4:] if short.startswith("E_R_") else short
     return {"Rinf": "R_inf", "Rg": "R_g", "Einf": "E_inf", "Eg": "E_g"}.get(short, short)

@@ -58,6 +58,10 @@ _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 _DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+(?:[eE][+-]?\d+)?")
 _THOUSANDS = re.compile(r"[1-9]\d{0,2}(?:,\d{3})+")  # 1,050: 1050, or 1.05 (µm)?
 _NAMES = {"\t": "tab", ",": "comma", ";": "semicolon"}
+# A reading column's header that says its unit is percent: `R_inf (%)`, `Cheek [%]`, `A %`.
+PERCENT_UNIT = re.compile(r"\s*[(\[]\s*%\s*[)\]]$|\s*%$")
+
+
 def decimal_comma_note(example: str) -> str:
     """The note for a table read with decimal commas, quoting the first of them (a fixed
     "18,65" read as if it quoted the user's data; a trial)."""
@@ -693,31 +697,43 @@ def read_spectra(path, percent: bool | None = False, notes: list | None = None
         row = int(np.flatnonzero(np.diff(wavelengths) <= 0)[0]) + 1
         raise InputError("wavelengths must increase (or all decrease)", path,
                          None if line_of is None else line_of[row], wl_name)
+    # A header that says % (`Forearm A (%)`): that spectrum in percent, named without it,
+    # as calibrate reads its columns (the unit stayed in the names; a trial).
+    columns = list(names)  # as the file spells them, for the messages
+    marked = np.array([bool(PERCENT_UNIT.search(n)) for n in names])
+    names = [PERCENT_UNIT.sub("", n) if m else n for n, m in zip(names, marked, strict=True)]
+    if marked.any():
+        said = [c for c, m in zip(columns, marked, strict=True) if m]
+        these = "', '".join(said[:3])
+        notes.append(f"{path}: column{'s' if len(said) > 1 else ''} '{these}'"
+                     f"{' ...' if len(said) > 3 else ''} say{'' if len(said) > 1 else 's'} %: "
+                     "read as percent (/ 100)")
+    rest = R[~marked]
     if percent is None:
-        percent = bool(R.size) and float(np.median(R)) > PERCENT_MEDIAN
+        percent = bool(rest.size) and float(np.median(rest)) > PERCENT_MEDIAN
         if percent:
-            notes.append(f"{path}: reflectances have a median of {np.median(R):.3g}: read as "
-                         "percent (/ 100; --percent says so)")
-    elif percent:
-        check_percent(R, path)
-    if percent:
-        R = R / 100.0
-    top = 100.0 if percent else 1.0
+            notes.append(f"{path}: reflectances have a median of {np.median(rest):.3g}: read "
+                         "as percent (/ 100; --percent says so)")
+    elif percent and rest.size:
+        check_percent(rest, path)
+    tops = np.where(marked | bool(percent), 100.0, 1.0)
+    R = R / tops[:, None]
     noise = (R < 0) & (R >= -NEGATIVE_NOISE)  # as calibrate reads them (it refused -0.001)
     for k in np.flatnonzero(noise.any(axis=1)):
         notes.append(f"{path}: spectrum '{names[k]}': {int(noise[k].sum())} reading"
                      f"{'s' if noise[k].sum() > 1 else ''} below 0 (down to "
-                     f"{R[k][noise[k]].min() * top:g}, within the {NEGATIVE_NOISE * top:g} of "
-                     "noise) read as 0")
+                     f"{R[k][noise[k]].min() * tops[k]:g}, within the "
+                     f"{NEGATIVE_NOISE * tops[k]:g} of noise) read as 0")
     R = np.where(noise, 0.0, R)
-    for k, name in enumerate(names):
+    for k, name in enumerate(columns):
         bad = np.flatnonzero((R[k] < 0) | (R[k] > 1.0))
         if bad.size:
+            top = tops[k]
             raise InputError(f"reflectance must be in [0, {top:g}]"
                              + (f" (below the -{NEGATIVE_NOISE * top:g} read as noise: "
                                 "reflectances cannot be negative)"
                                 if R[k, bad[0]] < 0 else
-                                "" if percent else " (use --percent for 0-100)")
+                                "" if top == 100 else " (use --percent for 0-100)")
                              + f", got {R[k, bad[0]] * top:g} at {wavelengths[bad[0]]:g} nm",
                              path, None if line_of is None else line_of[bad[0]], name)
     seen = set()

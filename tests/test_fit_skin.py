@@ -311,3 +311,17 @@ def test_spectra_rows_repeated_exactly_are_read_once(tmp_path):
     assert wl.tolist() == list(range(380, 790, 10)) and R.shape == (2, 41)
     assert notes == [f"{tmp_path / 's.csv'}: lines 7 (= 6), 8 (= 7) repeat the row before: "
                      "read once"], notes
+
+
+def test_a_spectrum_whose_header_says_percent_is_read_as_percent_and_named_without_it(
+        tmp_path):
+    """`Forearm A (%)` kept its unit in the name (fit.csv, the report) and was read as
+    percent only by the median's guess (a trial); calibrate reads the header."""
+    rows = "".join(f"{w};37,5;0,2\n" for w in range(380, 790, 10))
+    notes = []
+    names, wl, R = formats.read_spectra(_spectra_file(
+        tmp_path, "Wavelength (nm);Forearm A (%);Cheek B\n" + rows), notes=notes)
+    assert names == ["Forearm A", "Cheek B"]
+    assert np.allclose(R[0], 0.375) and np.allclose(R[1], 0.2)  # only the one that says %
+    assert f"{tmp_path / 's.csv'}: column 'Forearm A (%)' says %: read as percent (/ 100)" \
+        in notes, notes
