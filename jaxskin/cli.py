@@ -387,10 +387,11 @@ def _parser() -> argparse.ArgumentParser:
                    "of two keys: one command per value of the second, with -D); of several "
                    "scenes, one without the key is rendered once, with a warning")
     r.add_argument("-D", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a scene value, e.g. -D wrinkles.k_scale=1.3 or -D "
-                   "layer.blush.material=foundation_dark (a shipped material or a calibrate "
-                   "JSON; paths from the working directory); repeatable; applies to every "
-                   "scene")
+                   help="override a scene value, e.g. -D wrinkles.k_scale=1.3, -D "
+                   "camera.rotate=0,60,0 (a list: numbers with commas, or TOML's [0, 60, 0]) "
+                   "or -D layer.blush.material=foundation_dark (a shipped material or a "
+                   "calibrate JSON; paths from the working directory); repeatable; applies to "
+                   "every scene")
     cluster.add_option(r, f"batch of {cluster.SWEEP_BATCH} sweep values, or scene")
 
     f = sub.add_parser(

@@ -721,6 +721,13 @@ def _parse_override(item: str, flag: str = "-D"):
         value = tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
         value = text  # a bare word: a string
+        try:  # numbers with commas, as typed without brackets (-D camera.rotate=0,60,0 was
+            items = tomllib.loads(f"v = [{text}]")["v"]  # a string; a trial)
+        except tomllib.TOMLDecodeError:
+            items = []
+        if len(items) > 1 and all(isinstance(c, (int, float)) and not isinstance(c, bool)
+                                  for c in items):
+            value = items
     return key, value
 
 
@@ -733,8 +740,8 @@ def _finite_list(value, n: int, positive: bool = False) -> bool:
 
 def _vector(value, key, path, limit=None, n=3):
     if not _finite_list(value, n):
-        raise InputError(f"expected {('two', 'three')[n - 2]} finite numbers, got {value!r}",
-                         path, key=key)
+        raise InputError(f"expected {('two', 'three')[n - 2]} finite numbers "
+                         f"({('[x, y]', '[x, y, z]')[n - 2]}), got {value!r}", path, key=key)
     if limit is not None and math.hypot(*value) > limit + 1e-9:
         raise InputError(f"magnitude must be in [0, {limit:g}] (the paper's range), got "
                          f"{math.hypot(*value):.3g}", path, key=key)

@@ -446,3 +446,21 @@ def test_an_edit_with_null_for_the_missing_key_is_read():
     with pytest.raises(InputError, match="give exactly one of 'at'"):
         parse_scene({"fields": {"edit": [{"at": None, "vertex": None, "d1": [1, 0, 0],
                                           "d2": [0, 1, 0]}]}}, "s.toml")
+
+
+def test_a_list_given_to_D_without_brackets_is_the_list():
+    """`-D camera.rotate=0,60,0` was refused as the string '0,60,0' (a trial): numbers with
+    commas are the list; words with commas stay a string, a vector key's message shows the
+    form."""
+    from jaxskin.io import InputError
+    from jaxskin.scene import _parse_override, load_scene
+
+    assert _parse_override("camera.rotate=0,60,0") == ("camera.rotate", [0, 60, 0])
+    assert _parse_override("camera.center = -0.1, 0.25") == ("camera.center", [-0.1, 0.25])
+    assert _parse_override("name=a,b") == ("name", "a,b")
+    assert _parse_override("skin.melanin=0.3") == ("skin.melanin", 0.3)
+    turned = load_scene("face", ["camera.rotate=0,60,0"]).values["camera.rotate"]
+    assert list(turned) == [0, 60, 0]
+    with pytest.raises(InputError, match=r"expected three finite numbers \(\[x, y, z\]\), got "
+                                         r"'sideways'"):
+        load_scene("face", ["camera.rotate=sideways"])
