@@ -478,9 +478,11 @@ def load_scene(name_or_path, overrides=(), *, flag: str = "override") -> Scene:
     if path.is_dir():
         raise InputError("is a folder; expected a TOML scene file or a built-in scene "
                          f"({', '.join(BUILTIN_SCENES)})", path)
-    if not path.is_file():
-        raise InputError(f"no such scene file; built-in scenes: {', '.join(BUILTIN_SCENES)}",
-                         path)
+    if not path.is_file():  # named as given: `./hand` was shown as `hand` (a trial)
+        hint = f"built-in scenes: {', '.join(BUILTIN_SCENES)}"
+        if Path(key).name in BUILTIN_SCENES and key not in BUILTIN_SCENES:
+            hint = f"the built-in scene is '{Path(key).name}', without the folder"
+        raise InputError(f"no such scene file; {hint}", key)
     try:
         raw = path.read_bytes()
     except OSError as e:

@@ -151,6 +151,8 @@ def output_is_input(tmp):
 CASES = {
     # --- TOML scenes
     "toml-syntax": lambda t: scene(t, "name = \n"),
+    # `./hand` was named `hand` in the message, beside "built-in scenes: hand, ..." (a trial)
+    "scene-dot-slash-builtin": lambda t: ["render", "./hand", "-o", str(t / "out"), *SMALL],
     "toml-unknown-key": lambda t: scene(t, "[wrinkles]\nk_scal = 1.0\n"),
     "toml-out-of-range": lambda t: scene(t, "[material]\nmelanin = 5.0\n"),
     "toml-wrong-type": lambda t: scene(t, '[texture]\nsize = "big"\n'),
@@ -450,6 +452,8 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
 @pytest.mark.parametrize("case, words", [
     ("toml-edit-single-brackets", "expected [[fields.edit]] tables, one per edit"),
     ("scene-is-a-folder", "is a folder; expected a TOML scene file"),
+    ("scene-dot-slash-builtin", "jaxskin: error: ./hand: no such scene file; the built-in "
+                                "scene is 'hand', without the folder"),
     ("D-brdf-missing", "jaxskin: error: -D material.brdf=nope.json: key 'material.brdf'"),
     ("sweep-static-key", "static setting (each value compiles its own program): render each "
                          "value with -D texture.size=VALUE"),
