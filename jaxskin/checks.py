@@ -84,7 +84,7 @@ def _check_scene(sc, count: int) -> list:
         image = sp.image_of(map_key) if sp is not None else None
         if image is not None:
             inputs.append(image)
-            maps.read_grey(image, key=image_key)
+            _square(maps.read_grey(image, key=image_key), image, image_key)
         elif sc.values.get(image_key):  # set, but this model reads no such map (`idle_maps`)
             inputs.append(sc.values[image_key])  # still never overwritten (a trial)
     for layer in sp.layers if sp is not None else ():
@@ -93,7 +93,8 @@ def _check_scene(sc, count: int) -> list:
             cosmetics.load_material(layer.material, sp.grid)
         if layer.image is not None:
             inputs.append(layer.image)
-            maps.read_grey(layer.image, key=f"layer.{layer.name}.image")
+            key = f"layer.{layer.name}.image"
+            _square(maps.read_grey(layer.image, key=key), layer.image, key)
         for i, (_, vertices, _) in enumerate(layer.polygons):
             if vertices is not None and max(vertices) >= len(mesh.vertices):
                 raise InputError(f"vertex {max(vertices)} does not exist; the mesh has "
@@ -124,6 +125,22 @@ def idle_maps(sc) -> list[str]:
 
 # A cosmetic layer thicker than this (mm) gets a warning: films are µm to a tenth of a mm.
 THICK_LAYER_MM = 1.0
+
+
+_SAID_STRETCHED: set[str] = set()
+
+
+def _square(grey, path, key) -> None:
+    """Warn (once a file) when a texture-space map is not square: it is stretched over the
+    square texture, its aspect ratio lost (a 300x200 map was, in silence; a trial)."""
+    h, w = grey.shape
+    if abs(w - h) > 0.01 * max(w, h) and str(path) not in _SAID_STRETCHED:
+        import warnings
+
+        _SAID_STRETCHED.add(str(path))
+        warnings.warn(f"{key} = {path}: {w}x{h} pixels, stretched over the square texture "
+                      "(its aspect ratio is not kept): texture-space maps are square; pad or "
+                      "crop it to a square", stacklevel=2)
 
 
 def thick_layers(sc) -> list[str]:

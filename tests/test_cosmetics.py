@@ -370,6 +370,33 @@ def test_a_colour_thickness_map_is_read_as_its_mean_with_one_warning(tmp_path):
         np.testing.assert_allclose(maps.read_grey(tmp_path / "grey.png"), 128 / 255)
 
 
+def test_a_map_that_is_not_square_is_warned_about_once(tmp_path):
+    """A 300x200 layer map was stretched over the square texture without a word (a trial):
+    the checks say so, once a file; a square map, or one a pixel off, is read without one."""
+    import warnings
+
+    import imageio.v3 as iio
+
+    from jaxskin.checks import check_scene
+    from jaxskin.scene import load_scene
+
+    iio.imwrite(tmp_path / "rect.png", np.full((200, 300), 40000, np.uint16))
+    iio.imwrite(tmp_path / "square.png", np.full((201, 200), 40000, np.uint16))
+    for name in ("rect", "square"):
+        (tmp_path / f"{name}.toml").write_text(
+            '[mesh]\nfile = "face"\nprojection = "uv"\n[material]\nmodel = "spectral"\n'
+            '[texture]\nsize = 64\n[camera]\nsize = 32\n[[layer]]\nname = "blush"\n'
+            f'material = "blush_rose"\nthickness_mm = 0.03\nimage = "{name}.png"\n')
+    rect = load_scene(str(tmp_path / "rect.toml"))
+    with pytest.warns(UserWarning, match=r"layer\.blush\.image = .*rect\.png: 300x200 pixels, "
+                                         r"stretched over the square texture"):
+        check_scene(rect, 1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_scene(rect, 1)  # said once
+        check_scene(load_scene(str(tmp_path / "square.toml")), 1)
+
+
 def test_blur_names_a_wrong_shape():
     """An image without its channel axis was a broadcasting TypeError (a trial)."""
     with pytest.raises(ValueError, match=r"irradiance must be \(H, W, 3\)"):
