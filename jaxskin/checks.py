@@ -31,8 +31,14 @@ def check_scene(sc, count: int, overrides=()) -> list:
     try:
         return _check_scene(sc, count)
     except InputError as e:
-        item = next((o for o in reversed(list(overrides))
-                     if e.key is not None and _parse_override(o)[0] == e.key), None)
+        keys = [_parse_override(o)[0] for o in overrides]
+        if "mesh.file" in keys and str(e.key).startswith("fields.edit"):  # a trial
+            raise InputError(f"{e.message} (the scene's [[fields.edit]] were made for its own "
+                             "mesh, not the one -D mesh.file gives: write a scene file with "
+                             "edits for that mesh, or none)", e.path, e.line, e.column,
+                             e.key) from None
+        item = next((o for o, k in reversed(list(zip(overrides, keys, strict=True)))
+                     if e.key is not None and k == e.key), None)  # the last: the one used
         if item is None:
             raise
         raise InputError(e.message, f"-D {item}", key=e.key) from None

@@ -100,6 +100,13 @@ def brdf(tmp, doc):
 LOBE = {"Cxy": [-1.0, -1.0, -1.0], "Cz": [0.8, 0.7, 0.6], "n": [20.0, 20.0, 20.0]}
 
 
+def _big_box(tmp):
+    import trimesh
+
+    trimesh.creation.box(extents=(20, 20, 20)).export(tmp / "box.obj")
+    return str(tmp / "box.obj")
+
+
 def hand(tmp, *extra):
     return ["render", "hand", "-o", str(tmp / "out"), *SMALL, *extra]
 
@@ -153,6 +160,8 @@ CASES = {
     "toml-syntax": lambda t: scene(t, "name = \n"),
     # `./hand` was named `hand` in the message, beside "built-in scenes: hand, ..." (a trial)
     "scene-dot-slash-builtin": lambda t: ["render", "./hand", "-o", str(t / "out"), *SMALL],
+    # the hand's own field edits on another mesh: the edit's message, and what to do
+    "D-mesh-with-the-scenes-edits": lambda t: hand(t, "-D", f"mesh.file={_big_box(t)}"),
     "toml-unknown-key": lambda t: scene(t, "[wrinkles]\nk_scal = 1.0\n"),
     "toml-out-of-range": lambda t: scene(t, "[material]\nmelanin = 5.0\n"),
     "toml-wrong-type": lambda t: scene(t, '[texture]\nsize = "big"\n'),
@@ -454,6 +463,8 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
     ("scene-is-a-folder", "is a folder; expected a TOML scene file"),
     ("scene-dot-slash-builtin", "jaxskin: error: ./hand: no such scene file; the built-in "
                                 "scene is 'hand', without the folder"),
+    ("D-mesh-with-the-scenes-edits", "(the scene's [[fields.edit]] were made for its own mesh, "
+                                     "not the one -D mesh.file gives: write a scene file"),
     ("D-brdf-missing", "jaxskin: error: -D material.brdf=nope.json: key 'material.brdf'"),
     ("sweep-static-key", "static setting (each value compiles its own program): render each "
                          "value with -D texture.size=VALUE"),
