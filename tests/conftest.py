@@ -10,6 +10,7 @@ import gc
 import os
 import shutil
 import tempfile
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -22,7 +23,18 @@ import pytest
 # process that makes the folder (the xdist controller, or the one process with -n 0)
 # removes it at exit; its workers inherit the variable.
 if "JAXSKIN_TEST_CACHE" not in os.environ:
-    os.environ["JAXSKIN_TEST_CACHE"] = tempfile.mkdtemp(prefix="jaxskin-test-cache-")
+    # A run killed (`timeout`'s SIGTERM) runs no atexit: its folder, named by its process,
+    # is removed by the next run once that process is gone (30 MB each were left; a trial).
+    for stale in Path(tempfile.gettempdir()).glob("jaxskin-test-cache-*-*"):
+        pid = stale.name.split("-")[3]
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:
+            shutil.rmtree(stale, ignore_errors=True)
+        except (ValueError, OSError):
+            pass
+    os.environ["JAXSKIN_TEST_CACHE"] = tempfile.mkdtemp(
+        prefix=f"jaxskin-test-cache-{os.getpid()}-")
     atexit.register(shutil.rmtree, os.environ["JAXSKIN_TEST_CACHE"], ignore_errors=True)
 os.environ["JAXSKIN_CACHE_DIR"] = os.environ["JAXSKIN_TEST_CACHE"]
 jax.config.update("jax_compilation_cache_dir", os.environ["JAXSKIN_TEST_CACHE"])
