@@ -101,7 +101,7 @@ angle = 0.0                        # degrees
 feather = 0.03                     # soft edge width, uv units
 [[layer.polygon]]                  # polygons on the mesh's UVs, feathered
 vertices = [61, 146, 91]           # mesh vertices (their UVs) ...
-points = [[0.4, 0.2], [0.6, 0.2], [0.5, 0.3]]  # ... or uv points (give one of the two)
+# points = [[0.4, 0.2], [0.6, 0.2], [0.5, 0.3]]  # ... or uv points (give one of the two)
 feather = 0.01                     # soft edge width, uv units
 ```
 
