@@ -705,7 +705,8 @@ def _check(key: str, value, where, layers=()):
         value, ok = float(value), True
     if not ok or (kind is float and not math.isfinite(value)):
         raise InputError(f"expected {'a finite number' if kind is float else kind.__name__}, "
-                         f"got {value!r}", where, key=key)
+                         f"got {value!r}{_comma_hint(value) if kind is float else ''}", where,
+                         key=key)
     if spec.choices is not None and value not in spec.choices:
         raise InputError(f"must be one of {', '.join(map(str, spec.choices))}; got {value!r}",
                          where,
@@ -723,13 +724,15 @@ def _parse_override(item: str, flag: str = "-D"):
         value = tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
         value = text  # a bare word: a string
-        try:  # numbers with commas, as typed without brackets (-D camera.rotate=0,60,0 was
-            items = tomllib.loads(f"v = [{text}]")["v"]  # a string; a trial)
-        except tomllib.TOMLDecodeError:
-            items = []
-        if len(items) > 1 and all(isinstance(c, (int, float)) and not isinstance(c, bool)
-                                  for c in items):
-            value = items
+        spec = SCHEMA.get(key)
+        if spec is not None and spec.kind in ("vec2", "vec3"):  # numbers with commas, as
+            try:  # typed without brackets (camera.rotate=0,60,0 was a string; a trial); a
+                items = tomllib.loads(f"v = [{text}]")["v"]  # scalar's 0,5 stays '0,5'
+            except tomllib.TOMLDecodeError:
+                items = []
+            if len(items) > 1 and all(isinstance(c, (int, float)) and not isinstance(c, bool)
+                                      for c in items):
+                value = items
     return key, value
 
 
@@ -901,11 +904,19 @@ def _tables(value, path, where):
     return value
 
 
+def _comma_hint(value) -> str:
+    """A hint for a number written with a decimal comma (`-D skin.melanin=0,5`)."""
+    if isinstance(value, str) and re.fullmatch(r"[+-]?\d*,\d+", value.strip()):
+        return f" (a decimal comma? write {value.strip().replace(',', '.')})"
+    return ""
+
+
 def _number(value, path, where, lo=None):
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(
             value) or (lo is not None and value < lo):
         bound = f" >= {lo:g}" if lo is not None else ""
-        raise InputError(f"expected a finite number{bound}, got {value!r}", path, key=where)
+        raise InputError(f"expected a finite number{bound}, got {value!r}{_comma_hint(value)}",
+                         path, key=where)
     return float(value)
 
 

@@ -458,6 +458,9 @@ def test_a_list_given_to_D_without_brackets_is_the_list():
     assert _parse_override("camera.rotate=0,60,0") == ("camera.rotate", [0, 60, 0])
     assert _parse_override("camera.center = -0.1, 0.25") == ("camera.center", [-0.1, 0.25])
     assert _parse_override("name=a,b") == ("name", "a,b")
+    assert _parse_override("material.melanin=0,5") == ("material.melanin", "0,5")  # a scalar
+    with pytest.raises(InputError, match=r"got '0,5' \(a decimal comma\? write 0\.5\)"):
+        load_scene("hand", ["material.melanin=0,5"])
     assert _parse_override("skin.melanin=0.3") == ("skin.melanin", 0.3)
     turned = load_scene("face", ["camera.rotate=0,60,0"]).values["camera.rotate"]
     assert list(turned) == [0, 60, 0]
