@@ -3,7 +3,8 @@
 Left: flat swatches (D65, sRGB) over melanin fraction (columns, 0.005–0.5) and haemoglobin
 fraction (rows, 0.001–0.1), the other parameters at `biophysical.DEFAULT`. Middle: the 100
 NIST forearms sorted by lightness, each swatch split: the measured spectrum's colour above,
-its fitted biophysical twin's below (the fit in benchmarks/fit_skin_nist/fit.csv, made by
+its fitted biophysical twin's below (the fit in
+benchmarks/fit_skin_nist/nist_skin_reflectance_M38597_fit.csv, made by
 `jaxskin fit-skin data/spectra/nist_skin_reflectance_M38597.csv -o benchmarks/fit_skin_nist`).
 Bottom: the face scene rendered with `material.model = "biophysical"` across melanin.
 
@@ -30,7 +31,7 @@ from jaxskin.scene import scene_at_width  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "biophysical_swatches.png"
-FIT = HERE / "fit_skin_nist" / "fit.csv"
+FIT = HERE / "fit_skin_nist" / "nist_skin_reflectance_M38597_fit.csv"
 MELANIN = np.geomspace(0.005, 0.5, 9)
 HAEMOGLOBIN = np.array([0.001, 0.005, 0.01, 0.02, 0.05, 0.1])
 FACES = np.geomspace(0.01, 0.5, 6)
