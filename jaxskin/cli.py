@@ -227,9 +227,9 @@ SHOWN_NAMES = 8
 class _Run:
     """What a command has written so far: for the last line after a failure or a signal."""
 
-    def __init__(self):
+    def __init__(self, stage: str = "checking the inputs"):
         self.outputs: list[Outputs] = []
-        self._stage = "checking the inputs"
+        self._stage = stage
 
     @property
     def stage(self) -> str:
@@ -505,10 +505,12 @@ def _parser() -> argparse.ArgumentParser:
 
 def _list(args, run: _Run) -> int:
     """One line per built-in scene, mesh, material, BRDF preset, illuminant, spectral step."""
-    run.stage = "listing"
     from . import cosmetics, spectral
     from .mesh import BUILTIN as MESHES
     from .scene import builtin_scenes
+
+    _raise_pending()  # after the imports: a signal held inside one is raised here, before
+    # any line (it was raised at the end, the whole list printed first; a review)
 
     def first_comment(path: Path, width: int = 100) -> str:
         """The first sentence of the scene file's opening comment (at most `width` long)."""
@@ -993,7 +995,7 @@ def _main(argv, early: list) -> int:
         return 2
     if args.command != "list":
         _enable_compilation_cache()
-    run = _Run()
+    run = _Run("listing" if args.command == "list" else "checking the inputs")
     # `list` too: it loads JAX and the spectral tables (1-4 s), where a signal was only
     # noted and the list printed on to exit 0 (a review)
     commands = {"calibrate": _calibrate, "fit-brdf": _fit_brdf, "render": _render,

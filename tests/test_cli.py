@@ -540,3 +540,23 @@ def test_exit_now_says_the_line_and_ends_without_waiting_for_threads():
                           timeout=30)
     assert (proc.returncode, proc.stdout) == (143, "before\n"), proc
     assert proc.stderr == "jaxskin: terminated (SIGTERM) while serving; no file was written\n"
+
+
+def test_a_signal_inside_lists_imports_prints_no_line_of_it():
+    """A SIGTERM while `list` imported its modules was held (it came inside an import) and
+    raised only after the whole list was printed (a review): the stage is set after them."""
+    script = ("import importlib.abc, os, signal, sys\n"
+              "class Finder(importlib.abc.MetaPathFinder):\n"
+              "    def find_spec(self, name, path, target=None):\n"
+              "        if name == 'jaxskin.cosmetics':\n"
+              "            os.kill(os.getpid(), signal.SIGTERM)\n"
+              "            for _ in range(1000):\n"
+              "                pass\n"
+              "        return None\n"
+              "sys.meta_path.insert(0, Finder())\n"
+              "from jaxskin.cli import main\n"
+              "sys.exit(main(['list']))\n")
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=300)
+    assert (proc.returncode, proc.stdout) == (143, ""), proc
+    assert proc.stderr == "jaxskin: terminated (SIGTERM) while listing; no file was written\n"

@@ -112,9 +112,9 @@ def command(args, run) -> int:
     if signals_received() and work.running:  # a render in its thread, which no signal stops
         if signals_received() > 1:  # Ctrl-C twice: not waiting (it was 8 s at 1024², and a
             exit_now(run)  # third one raised inside the interpreter's wait; a review)
-        print("jaxskin: stopping once the render in progress ends; Ctrl-C again stops at once",
-              file=sys.stderr, flush=True)
-        try:
+        try:  # the line inside: a second signal while it prints also ends it at once
+            print("jaxskin: stopping once the render in progress ends; Ctrl-C again stops "
+                  "at once", file=sys.stderr, flush=True)
             work.pool.shutdown(wait=True)
         except tuple(_SIGNAL_ERRORS.values()):
             exit_now(run)
