@@ -460,6 +460,14 @@ def _reflectances(data, header, columns, path, numbers, percent, notes, white_R=
             percent = True
             notes.append(f"{path}: reflectances have a median of {np.median(values):.3g}: read "
                          "as percent (/ 100)")
+        elif marked:  # some say %, these do not, and read either way: 0.12 beside R_inf (%)
+            unmarked = [n for n in columns if not _is_radiance(n) and n not in marked]
+            raise InputError(  # was a fraction, a black card's 0.6 % a white card (reviews)
+                f"column '{marked[0]}' says %, column{'s' if len(unmarked) > 1 else ''} '"
+                + "', '".join(unmarked) + f"' {'do' if len(unmarked) > 1 else 'does'} not, "
+                f"and their readings (median {np.median(values):.3g}) could be fractions or "
+                "percent: give each column its unit (R_g (%)), or pass --percent if all are "
+                "percent", path)
     out = {}
     for name, (kind, _) in columns.items():
         if kind == "white":

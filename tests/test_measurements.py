@@ -548,15 +548,24 @@ def test_a_header_that_says_percent_reads_percent(tmp_path):
     dark = read_measurement(write(tmp_path, "wavelength_nm,R_0.05mm (%),R_inf (%),R_g (%)\n"
                                   "400,0.2,0.5,0.1\n410,0.3,0.6,0.1\n", "dark.csv"))
     np.testing.assert_allclose(dark.R_inf, [0.005, 0.006], rtol=1e-12)
-    # One column says %, the others are fractions: only that one is divided (every column
-    # once was: R 0.0012 and R_g 0.0004 from 0.12 and 0.04, with exit 0).
-    mixed = read_measurement(write(tmp_path, "wavelength_nm,R_0.05mm,R_inf (%),R_g\n"
-                                   "400,0.12,35,0.04\n410,0.13,36,0.05\n", "mixed.csv"))
-    np.testing.assert_allclose(mixed.R[0], [0.12, 0.13], rtol=1e-12)
-    np.testing.assert_allclose(mixed.R_inf, [0.35, 0.36], rtol=1e-12)
-    np.testing.assert_allclose(mixed.R_g, [0.04, 0.05], rtol=1e-12)
-    assert list(mixed.notes) == [f"{tmp_path / 'mixed.csv'}: column 'R_inf (%)' says %: read as "
-                           "percent (/ 100)"], mixed.notes
+    # One column says %, the others do not and read either way: every column was divided
+    # once (R 0.12 became 0.0012, exit 0); then only the marked one, and a black card's
+    # 0.6 % read as a white card's 0.6 (two reviews). Ambiguous: refused, naming them.
+    with pytest.raises(InputError, match=r"mixed.csv: column 'R_inf \(%\)' says %, columns "
+                                         r"'R_0.05mm', 'R_g' do not, and their readings "
+                                         r"\(median 0.085\) could be fractions or percent"):
+        read_measurement(write(tmp_path, "wavelength_nm,R_0.05mm,R_inf (%),R_g\n400,0.12,35,"
+                               "0.04\n410,0.13,36,0.05\n", "mixed.csv"))
+    with pytest.raises(InputError, match=r"black.csv: column 'R_0.05mm \(%\)' says %, column "
+                                         r"'R_g' does not, and their readings \(median 0.605\)"):
+        read_measurement(write(tmp_path, "wavelength_nm,R_0.05mm (%),R_inf (%),R_g\n400,12,35,"
+                               "0.6\n410,13,36,0.61\n", "black.csv"))
+    # --percent says what the unmarked ones are
+    marked = read_measurement(write(tmp_path, "wavelength_nm,R_0.05mm,R_inf (%),R_g\n"
+                                    "400,12,35,0.6\n410,13,36,0.61\n", "mixed.csv"),
+                              percent=True)
+    np.testing.assert_allclose(marked.R_g, [0.006, 0.0061], rtol=1e-12)
+    np.testing.assert_allclose(marked.R_inf, [0.35, 0.36], rtol=1e-12)
 
 
 def test_thousands_separators_and_lone_decimal_commas(tmp_path):
