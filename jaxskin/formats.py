@@ -58,8 +58,9 @@ _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 _DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+(?:[eE][+-]?\d+)?")
 _THOUSANDS = re.compile(r"[1-9]\d{0,2}(?:,\d{3})+")  # 1,050: 1050, or 1.05 (µm)?
 _NAMES = {"\t": "tab", ",": "comma", ";": "semicolon"}
-# A reading column's header that says its unit is percent: `R_inf (%)`, `Cheek [%]`, `A %`.
-PERCENT_UNIT = re.compile(r"\s*[(\[]\s*%\s*[)\]]$|\s*%$")
+# A reading column's header that says its unit is percent: `R_inf (%)`, `Cheek [%]`, `A %`;
+# not a number's % (`Foundation 30%`, `Intralipid 2 %`: a name; a review).
+PERCENT_UNIT = re.compile(r"\s*[(\[]\s*%\s*[)\]]$|(?<![\d.\s])\s*%$")
 
 
 def decimal_comma_note(example: str) -> str:
@@ -702,6 +703,14 @@ def read_spectra(path, percent: bool | None = False, notes: list | None = None
     columns = list(names)  # as the file spells them, for the messages
     marked = np.array([bool(PERCENT_UNIT.search(n)) for n in names])
     names = [PERCENT_UNIT.sub("", n) if m else n for n, m in zip(names, marked, strict=True)]
+    for k in np.flatnonzero(marked):
+        if not names[k]:
+            raise InputError("a spectrum's name is its unit alone: name the column", path,
+                             header_line, columns[k])
+        if np.max(R[k]) <= 1.0:  # no skin reflects under 1 % at every band
+            raise InputError(f"says %, but every reading is at most 1 (median "
+                             f"{np.median(R[k]):.3g}): these are fractions (0-1); remove the % "
+                             "from the header", path, header_line, columns[k])
     if marked.any():
         said = [c for c, m in zip(columns, marked, strict=True) if m]
         these = "', '".join(said[:3])

@@ -325,3 +325,22 @@ def test_a_spectrum_whose_header_says_percent_is_read_as_percent_and_named_witho
     assert np.allclose(R[0], 0.375) and np.allclose(R[1], 0.2)  # only the one that says %
     assert f"{tmp_path / 's.csv'}: column 'Forearm A (%)' says %: read as percent (/ 100)" \
         in notes, notes
+
+
+def test_a_number_with_percent_in_a_name_is_not_a_unit(tmp_path):
+    """`Foundation 30%` was read as the spectrum `Foundation 30` in percent, its 0.3-0.5
+    divided to a near-black 0.003 and fitted with exit 0 (a review): a number's % is part
+    of the name; a column that says % over readings all at most 1 is refused."""
+    from jaxskin.io import InputError
+
+    rows = "".join(f"{w},0.4,0.3\n" for w in range(380, 790, 10))
+    names, wl, R = formats.read_spectra(_spectra_file(
+        tmp_path, "wavelength_nm,Foundation 30%,Forearm\n" + rows))
+    assert names == ["Foundation 30%", "Forearm"] and np.allclose(R[0], 0.4)
+    with pytest.raises(InputError, match=r"s.csv:1: column 'Cheek \(%\)': says %, but every "
+                                         r"reading is at most 1"):
+        formats.read_spectra(_spectra_file(tmp_path, "wavelength_nm,Cheek (%),Forearm\n" +
+                                           rows))
+    with pytest.raises(InputError, match=r"column '%': a spectrum's name is its unit alone"):
+        formats.read_spectra(_spectra_file(tmp_path, "wavelength_nm,%,Forearm\n" +
+                                           rows.replace(",0.4,", ",40,")))
