@@ -245,14 +245,19 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
     meta: dict[str, tuple[str, int]] = {}
     header = delimiter = None
     header_line = 0
-    first = None  # the first line that is not a comment: (number, its first cell)
+    first = None  # the last line before the data whose first cell is text: the header meant
+    data_seen = False
     try:
         for number, raw in enumerate(lines, start=1):
             line = raw.strip()
             if not line:
                 continue
-            if first is None and not line.startswith("#"):
-                first = (number, re.split(r"[,;\t]", line, maxsplit=1)[0].strip().strip('"'))
+            if not data_seen and not line.startswith("#"):
+                cell = re.split(r"[,;\t]", line, maxsplit=1)[0].strip().strip('"')
+                if _NUMBER.fullmatch(cell) or _DECIMAL_COMMA.fullmatch(cell):
+                    data_seen = True
+                elif cell:
+                    first = (number, cell)
             if line.startswith("#"):
                 if ":" in line:
                     key, value = line[1:].split(":", 1)
@@ -271,9 +276,13 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
         raise InputError(f"not CSV ({e})", path, number) from None
     if header is None:
         seen = ""
-        if first is not None and first[1] and not _NUMBER.fullmatch(first[1]):
-            seen = (f" (line {first[0]} begins with {first[1][:40]!r}, not a name this "
-                    f"reader knows for the first column: name it {expected_header.split(',')[0]})")
+        if first is not None:  # the row above the data (a preamble line was quoted; a review)
+            known = WAVELENGTH_HEADER.fullmatch(first[1])
+            name = expected_header.split(",")[0]
+            why = (f"wavelengths in {known['unit']}; this reader takes nm: give them in nm, "
+                   f"as {name}" if known and known["unit"] else
+                   f"not a name this reader knows for the first column: name it {name}")
+            seen = f" (line {first[0]} begins with {first[1][:40]!r}: {why})"
         raise InputError(f"no header row; expected a row '{expected_header}' (comma, tab or "
                          f"semicolon separated) after any preamble{seen}", path)
     for i, name in enumerate(header):

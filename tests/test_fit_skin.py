@@ -344,3 +344,15 @@ def test_a_number_with_percent_in_a_name_is_not_a_unit(tmp_path):
     with pytest.raises(InputError, match=r"column '%': a spectrum's name is its unit alone"):
         formats.read_spectra(_spectra_file(tmp_path, "wavelength_nm,%,Forearm\n" +
                                            rows.replace(",0.4,", ",40,")))
+
+
+def test_spectra_in_micrometres_are_named_as_such(tmp_path):
+    """fit-skin's "not a name this reader knows" for `wavelength_um`, a name it knows in a
+    unit it does not take (a review)."""
+    from jaxskin.io import InputError
+
+    path = _spectra_file(tmp_path, "wavelength_um,a\n0.4,0.3\n0.41,0.3\n")
+    with pytest.raises(InputError, match=r"line 1 begins with 'wavelength_um': wavelengths in "
+                                         r"um; this reader takes nm: give them in nm, as "
+                                         r"wavelength_nm\)$"):
+        formats.read_spectra(path)

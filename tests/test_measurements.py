@@ -249,10 +249,15 @@ def test_instrument_exports_read_like_the_plain_format(tmp_path, style):
 
 
 def test_no_header_names_what_the_first_row_begins_with(tmp_path):
-    """"no header row" left the user to guess which cell was not understood (a trial)."""
+    """"no header row" left the user to guess which cell was not understood (a trial); the
+    row quoted is the one above the data, not the preamble's first (a review)."""
+    pre = write(tmp_path, "Instrument: CM-700d\nDate: 2026\nWavelenght (nm);R_0,05mm;R_inf;"
+                "R_g\n400;0,3;0,4;0,04\n410;0,3;0,4;0,04\n", "pre.csv")
+    with pytest.raises(InputError, match=r"\(line 3 begins with 'Wavelenght \(nm\)': not a "):
+        read_measurement(pre)
     path = write(tmp_path, "Golden;R_0,05mm;R_inf;R_g\n400;0,3;0,4;0,04\n", "g.csv")
     with pytest.raises(InputError, match=r"g.csv: no header row; .* after any preamble \(line "
-                                         r"1 begins with 'Golden', not a name this reader knows "
+                                         r"1 begins with 'Golden': not a name this reader knows "
                                          r"for the first column: name it wavelength_nm\)$"):
         read_measurement(path)
 
