@@ -635,7 +635,7 @@ def _warn_repeated(overrides) -> None:
         key, value = (s.strip() for s in item.partition("=")[::2])
         seen.setdefault(key, []).append(value)
     for key, values in seen.items():
-        if len({_name_value(v) for v in values}) > 1:
+        if len({_name_value(key, v) for v in values}) > 1:
             _say(f"jaxskin: warning: -D {key} is given {len(values)} times ("
                  f"{', '.join(values)}): the last, {values[-1]}, is used")
 
@@ -705,7 +705,7 @@ def _base_name(sc, overrides, room: int = 16) -> str:
         key, _, value = (s.strip() for s in item.partition("="))
         last.pop(key, None)
         last[key] = value
-    parts = [f"{slug(key)}-{slug(_name_value(value))}" for key, value in last.items()
+    parts = [f"{slug(key)}-{slug(_name_value(key, value))}" for key, value in last.items()
              if key != "name" and not named]  # `-D name=X` names the outputs X, nothing added
     suffix = "_".join(parts)
 
@@ -715,7 +715,7 @@ def _base_name(sc, overrides, room: int = 16) -> str:
 
     # many overrides, or a long name: a digest keeps runs apart and names short
     if len(suffix) > 120 or (suffix and too_long(f"{base}_{suffix}")):
-        used = "\0".join(f"{key}={_name_value(value)}" for key, value in last.items())
+        used = "\0".join(f"{key}={_name_value(key, value)}" for key, value in last.items())
         suffix = "D-" + hashlib.sha1(used.encode()).hexdigest()[:12]
     full = f"{base}_{suffix}" if suffix else base
     if too_long(full):
@@ -727,16 +727,30 @@ def _base_name(sc, overrides, room: int = 16) -> str:
     return full
 
 
-def _name_value(value: str) -> str:
+def _name_value(key: str, value: str) -> str:
     """A -D value as output names spell it: a number in its shortest exact form, so that
     `-D k=0.1`, `k=1e-1` and `k=0.10` (one render) name one file (a trial); `512.0` and
-    `512` both `512`. Anything else as given."""
+    `512` both `512`; a list of numbers as its numbers joined by `_` (`0,60,0` and
+    `[0, 60, 0]` alike; a review). Anything else as given."""
+    from .scene import _parse_override
+
+    def short(x) -> str:
+        text = repr(float(x))
+        return text[:-2] if text.endswith(".0") else text
+
+    def number(x) -> bool:
+        return isinstance(x, (int, float)) and not isinstance(x, bool)
+
     try:
-        number = float(value)
+        number_text = float(value)
     except ValueError:
-        return value
-    text = repr(number)
-    return text[:-2] if text.endswith(".0") else text
+        number_text = None
+    if number_text is not None:
+        return short(number_text)
+    parsed = _parse_override(f"{key}={value}")[1]
+    if isinstance(parsed, list) and parsed and all(number(x) for x in parsed):
+        return "_".join(short(x) for x in parsed)
+    return value
 
 
 def _sweep_suffixes(sweep, ext: str) -> list[str]:

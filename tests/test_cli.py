@@ -424,6 +424,10 @@ def test_one_number_spelt_two_ways_names_one_file(capsys):
     assert _base_name(sc, many) == _base_name(sc, [f"key{i}=5e-1" for i in range(40)])
     assert _base_name(sc, many) != _base_name(sc, [f"key{i}=0.6" for i in range(40)])
     _warn_repeated(["material.melanin=0.1", "material.melanin=1e-1"])
+    # a list with or without brackets (a review): one name, no "given twice"
+    assert _base_name(sc, ["camera.rotate=0,60,0"]) == _base_name(
+        sc, ["camera.rotate=[0, 60.0, 0]"]) == "hand_camera.rotate-0_60_0"
+    _warn_repeated(["camera.rotate=0,60,0", "camera.rotate=[0, 60, 0]"])
     assert capsys.readouterr().err == ""
 
 
