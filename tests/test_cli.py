@@ -530,6 +530,12 @@ def test_a_signal_while_listing_ends_it(monkeypatch, capsys):
     assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL  # Python's again after
 
 
+def _python(script: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    """`script` run by this Python in a process of its own."""
+    return subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=timeout)
+
+
 def test_exit_now_says_the_line_and_ends_without_waiting_for_threads():
     """A second signal while the editor waits on its worker's render: the command's line,
     and the process ends at once, not waiting for a thread that is still running."""
@@ -540,8 +546,7 @@ def test_exit_now_says_the_line_and_ends_without_waiting_for_threads():
               "run = cli._Run(); run.stage = 'serving'\n"
               "print('before', flush=True)\n"
               "cli.exit_now(run)\n")
-    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                          timeout=30)
+    proc = _python(script, timeout=30)
     assert (proc.returncode, proc.stdout) == (143, "before\n"), proc
     assert proc.stderr == "jaxskin: terminated (SIGTERM) while serving; no file was written\n"
 
@@ -560,7 +565,6 @@ def test_a_signal_inside_lists_imports_prints_no_line_of_it():
               "sys.meta_path.insert(0, Finder())\n"
               "from jaxskin.cli import main\n"
               "sys.exit(main(['list']))\n")
-    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                          timeout=300)
+    proc = _python(script)
     assert (proc.returncode, proc.stdout) == (143, ""), proc
     assert proc.stderr == "jaxskin: terminated (SIGTERM) while listing; no file was written\n"
