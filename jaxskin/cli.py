@@ -742,11 +742,9 @@ def _name_value(key: str, value: str) -> str:
         return isinstance(x, (int, float)) and not isinstance(x, bool)
 
     try:
-        number_text = float(value)
+        return short(float(value))
     except ValueError:
-        number_text = None
-    if number_text is not None:
-        return short(number_text)
+        pass
     parsed = _parse_override(f"{key}={value}")[1]
     if isinstance(parsed, list) and parsed and all(number(x) for x in parsed):
         return "_".join(short(x) for x in parsed)
