@@ -2,6 +2,7 @@
 
     python benchmarks/bench_gradients.py            # about a minute on 2 cores
     python benchmarks/bench_gradients.py --quick    # tiny sizes: checks that it runs
+    python benchmarks/bench_gradients.py --chunking cpu   # a GPU with the CPU's chunks
 
 In one process, warm (each function called once before timing), every call blocked on
 (`jax.block_until_ready`); each row's forward and gradient timed in turn (forward,
@@ -34,6 +35,7 @@ from common import device, machine, table, timeit, write_section  # noqa: E402
 
 from jaxskin import render  # noqa: E402
 from jaxskin.scene import load_scene  # noqa: E402
+from jaxskin.shading import layered  # noqa: E402
 
 HAND = ["texture.size=1024", "camera.size=512"]
 FACE = ["camera.size=1280", "camera.height=720"]
@@ -114,14 +116,23 @@ def measure(quick: bool = False, repeat: int = 5):
     return rows
 
 
+def _chunking_option(ap):
+    ap.add_argument("--chunking", choices=["device", "cpu"], default="device",
+                    help="the makeup derivative's loops: the device's own chunking (default) "
+                         "or the CPU's (chunks of 1000 texels, two a step) on any device")
+
+
 def main(argv: list[str] | None = None):
-    args = common.options(__doc__, argv)
+    args = common.options(__doc__, argv, _chunking_option)
+    if args.chunking == "cpu":  # before anything is traced: the rule is built at trace time
+        layered._chunking = lambda P: (layered.CHUNK, layered.STREAMS)
     print(machine())
     rows = measure(args.quick, args.repeat)
     t = table(["model", "gradient with respect to", "forward ms", "gradient ms",
                "gradient / forward", "entries"], rows)
     print(t)
-    command = "python benchmarks/bench_gradients.py" + (" --quick" if args.quick else "")
+    command = "python benchmarks/bench_gradients.py" + (" --quick" if args.quick else "") + (
+        " --chunking cpu" if args.chunking == "cpu" else "")
     write_section("gradients", f"""## Gradients against the forward pass (issue 19)
 
 Command: `{command}`. Machine: {machine()}. Device: {device()}.

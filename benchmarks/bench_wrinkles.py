@@ -3,6 +3,7 @@ the sequential program against the parallel (lockstep) one.
 
     python benchmarks/bench_wrinkles.py        # about 3 minutes on 2 cores
     python benchmarks/bench_wrinkles.py --parallel   # only sequential against parallel
+    python benchmarks/bench_wrinkles.py --speed [--quick] [--results F]   # times alone
 
 The built-in hand scene (Bando 2001 fig. 6.1: planar, k_scale 1.1) at 512² and 2048²
 texels: cold (trace + compile + run) and warm times of `jaxskin.wrinkles.height_field`, and
@@ -202,5 +203,52 @@ the sequential program's.
     write_section("wrinkles-parallel", body)
 
 
+def speed(sizes=(512, 2048), repeat=5):
+    """Times alone, on whichever device JAX has (the GPU check): both programs at each size,
+    cold then warm (parallel: best of `repeat`; sequential: one warm run, seconds a run on a
+    GPU), with the furrow counts per pass (the same inputs give the same counts on any
+    device, up to float rounding in the seeds' tests). No NumPy baseline, no statistics."""
+    from common import device
+
+    rows = []
+    for size in sizes:
+        sc, s, cent, radius = inputs(size)
+        k, key = sc.config.texture.k_scale, jax.random.key(sc.config.texture.seed)
+        args = (s.mask, s.field1, s.field2)
+        par = functools.partial(lockstep.height_field, *args, k, key)
+        seq = functools.partial(wrinkles.height_field, *args, cent, k, key, radius=radius)
+        out, cold, warm = {}, {}, {}
+        for name, fn, n in (("par", par, repeat), ("seq", seq, 1)):
+            t0 = time.perf_counter()
+            out[name] = jax.block_until_ready(fn())
+            cold[name] = time.perf_counter() - t0
+            warm[name] = timeit(lambda f=fn: f()[0], repeat=n, warmup=0)
+        counts = {n: "+".join(str(int(c)) for c in out[n][1].count) for n in out}
+        rows.append((f"{size}²", lockstep.slots_for(size, size),
+                     f"{cold['seq']:.2f} / {cold['par']:.2f}", f"{warm['seq'] * 1e3:.1f}",
+                     f"{warm['par'] * 1e3:.1f}", f"{warm['seq'] / warm['par']:.1f}",
+                     f"{counts['seq']} / {counts['par']}"))
+        print(rows[-1], flush=True)
+    t = table(["texture", "slots", "cold s seq / par", "warm ms sequential",
+               "warm ms parallel", "sequential / parallel", "furrows F1+F2 seq / par"], rows)
+    print(t)
+    write_section("wrinkles-speed", f"""## Furrow programs' speed on the device (issue 19)
+
+Command: `python benchmarks/bench_wrinkles.py --speed`. Machine: {machine()}. Device:
+{device()}.
+
+The hand (k_scale 1.1): cold (trace + compile + run), then warm, the parallel program
+best of {repeat}, the sequential one a single warm run.
+
+{t}
+""")
+
+
 if __name__ == "__main__":
-    parallel() if "--parallel" in sys.argv else main()  # --parallel: that section only
+    if "--speed" in sys.argv:  # the two programs' times alone (the GPU check)
+        if "--results" in sys.argv:
+            import common
+            common.RESULTS = Path(sys.argv[sys.argv.index("--results") + 1])
+        speed((64, 128) if "--quick" in sys.argv else (512, 2048))
+    else:
+        parallel() if "--parallel" in sys.argv else main()  # --parallel: that section only

@@ -136,9 +136,10 @@ def save_figure(fig, path: Path) -> None:
     print(f"wrote {path} ({path.stat().st_size // 1024} KB)")
 
 
-def options(doc: str, argv: list[str] | None = None):
+def options(doc: str, argv: list[str] | None = None, more=None):
     """The options `run.py` passes on (`--quick`, `--repeat`, `--results`), parsed for a
-    benchmark whose help is the first line of `doc`; `--results` redirects `write_section`."""
+    benchmark whose help is the first line of `doc`; `--results` redirects `write_section`.
+    `more(parser)`, if given, adds the benchmark's own options."""
     import argparse
 
     global RESULTS
@@ -146,6 +147,8 @@ def options(doc: str, argv: list[str] | None = None):
     ap.add_argument("--quick", action="store_true", help="tiny sizes (a check that it runs)")
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--results", type=Path, help="write the section to this file instead")
+    if more:
+        more(ap)
     args = ap.parse_args(argv or [])
     if args.results:
         RESULTS = args.results

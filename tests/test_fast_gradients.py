@@ -62,10 +62,13 @@ def test_cotangents_equal_autodiff_of_the_plain_forward(x64, blurred, per_texel_
     g = jnp.asarray(np.random.default_rng(1).normal(size=out.shape))
     expected = autodiff(args, g)
     got = jax.jit(lambda a, g: layered._cotangents(GRID, blurred, *a, g))(args, g)
-    # ragged chunks, two a step (the default); at the stiff point also one and three (the
-    # chunking does not depend on the values)
-    chunked = [layered._cotangents_chunked(GRID, blurred, *args, g, chunk=16, streams=k)
-               for k in ((1, 2, 3) if point == "stiff" else (2,))]
+    # ragged chunks, two a step (the CPU's default); at the stiff point also one and three,
+    # and all texels as one chunk (a GPU's `_chunking`; the chunking does not depend on the
+    # values)
+    P = args[0].shape[1]
+    ways = ((16, 1), (16, 2), (16, 3), (P, 1)) if point == "stiff" else ((16, 2),)
+    chunked = [layered._cotangents_chunked(GRID, blurred, *args, g, chunk=c, streams=k)
+               for c, k in ways]
     for name, e, a, *cs in zip("X E h h_l S K skin".split(), expected, got, *chunked,
                                strict=True):
         assert a.shape == e.shape, name

@@ -41,7 +41,10 @@ def _to_lab(rgb8: np.ndarray) -> np.ndarray:
 
 
 def _render(name: str) -> np.ndarray:
-    scene = scene_at_width(name, SIZE)
+    # The references pin the sequential furrow program, which `wrinkles.method = "auto"`
+    # picks for these 512² textures on a CPU; on a GPU `auto` picks the parallel one (other
+    # furrows of the same character), so the method is named to compare like with like.
+    scene = scene_at_width(name, SIZE, ["wrinkles.method=sequential"])
     image = np.asarray(render.render(scene.config, scene.params))
     return np.round(np.clip(image, 0.0, 1.0) * 255).astype(np.uint8)
 

@@ -171,6 +171,19 @@ def _joint(grid, blurred, *args):
 CHUNK = 1000
 # Chunks per step of the transpose's loop, computed side by side (`_cotangents_chunked`).
 STREAMS = 2
+# On a GPU the loops' steps are launches: one chunk of up to WIDE_CHUNK texels a step
+# (262,144 × 41 float32 bands: 43 MB an intermediate), so the makeup face's 170,324
+# texels at the default 512² texture are one step, not 86 steps of two chunks.
+WIDE_CHUNK = 262_144
+
+
+def _chunking(P: int) -> tuple[int, int]:
+    """`(texels a chunk, chunks a step)` of the derivative's loops over `P` texels, for the
+    device JAX compiles for: `(CHUNK, STREAMS)` on a CPU (cache-sized chunks, two threads'
+    worth a step), one wide chunk a step elsewhere (`WIDE_CHUNK`)."""
+    if jax.default_backend() == "cpu":
+        return CHUNK, STREAMS
+    return min(P, WIDE_CHUNK), 1
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
@@ -231,13 +244,15 @@ def _per_texel(a, axis: int, P: int, chunk: int):
 
 
 def _chunked_tangent(grid, blurred, primals, tangents):
-    """Forward mode: the tangent of the colours, a loop over chunks of `CHUNK` texels,
+    """Forward mode: the tangent of the colours, a loop over chunks of texels (`_chunking`),
     each chunk's tangent recomputed from its inputs (checkpointed)."""
     X = primals[0]
     P = X.shape[1]
 
+    chunk = _chunking(P)[0]
+
     def per_texel(a, axis):
-        return _per_texel(a, axis, P, CHUNK)
+        return _per_texel(a, axis, P, chunk)
 
     # X, E, h, h_l per texel; S, K per band; skin_R per band (n,) or per texel (P, n).
     texel_axes = (1, 0, 0, 1, None, None, 0 if primals[6].ndim == 2 else None)
@@ -436,8 +451,8 @@ def _cotangents_chunked(grid, blurred, X, E, h, h_l, S, K, skin_R, g, chunk=None
     core waited on the other: on 2 cores the pass took 1.4× the three spectral products
     where on one core it took 1.0× (benchmarks/RESULTS.md, issue 19)."""
     P = X.shape[1]
-    chunk = chunk or CHUNK
-    streams = streams or STREAMS
+    chunk = chunk or _chunking(P)[0]
+    streams = streams or _chunking(P)[1]
     step = chunk * streams
 
     def per_texel(a, axis):
