@@ -181,9 +181,22 @@ def _chunking(P: int) -> tuple[int, int]:
     """`(texels a chunk, chunks a step)` of the derivative's loops over `P` texels, for the
     device JAX compiles for: `(CHUNK, STREAMS)` on a CPU (cache-sized chunks, two threads'
     worth a step), one wide chunk a step elsewhere (`WIDE_CHUNK`)."""
-    if jax.default_backend() == "cpu":
+    if _cpu_form("chunks"):
         return CHUNK, STREAMS
     return min(P, WIDE_CHUNK), 1
+
+
+def _cpu_form(name: str) -> bool:
+    """Whether to trace the form written for XLA:CPU of `name` (the device JAX compiles for
+    is a CPU), rather than the plain one a GPU compiler fuses well:
+
+    - `"chunks"`: the derivative's loops over cache-sized chunks (`_chunking`);
+    - `"apart"`: the three spectral colours as three programs (`_separately`), not one;
+    - `"skip"`: a layer absent from a whole chunk skips its S and K sums (`lax.cond`);
+    - `"sums"`: sums over bands and texels as products with ones (`_rowsum`, `_colsum`).
+
+    Measured on an H200 (benchmarks/RESULTS.md, issue 19)."""
+    return jax.default_backend() == "cpu"
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
@@ -220,6 +233,8 @@ def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
     args = (X, E, h, h_l, S, K, skin_R)
     to_rgb = jnp.asarray(grid.rgb_matrix, X.dtype)
     to_xyz = jnp.asarray(grid.xyz_matrix, X.dtype)
+    if not _cpu_form("apart"):
+        return _joint(grid, True, *args)
     rgb_surface, xyz_da, xyz_dta = _separately(
         [lambda: matmul(_spectra(*args)[0], to_rgb), lambda: matmul(_spectra(*args)[1], to_xyz),
          lambda: matmul(_spectra(*args)[2], to_xyz)])
@@ -338,6 +353,8 @@ def _rowsum(a):
     """`a (P, n)` summed over bands, `(P, 1)`, as a product with ones: XLA:CPU fuses a
     reduction along the short band axis into the elementwise work and runs that loop
     unvectorised (measured: the backward pass 1.6-1.8× slower than with the product)."""
+    if not _cpu_form("sums"):
+        return jnp.sum(a, axis=-1, keepdims=True)
     return matmul(a, jnp.ones((a.shape[-1], 1), a.dtype))
 
 
@@ -345,6 +362,8 @@ def _colsum(a):
     """`a (P, n)` summed over texels, `(n,)`, as a product with ones: as a reduction along
     the texel axis (the major one) XLA:CPU fuses the summand into a loop that strides
     across it."""
+    if not _cpu_form("sums"):
+        return jnp.sum(a, axis=0)
     return matmul(jnp.ones((1, a.shape[0]), a.dtype), a)[0]
 
 
@@ -427,10 +446,11 @@ def _cotangents(grid, blurred, X, E, h, h_l, S, K, skin_R, g):
         # face 1.6 layers of 4 are present in a chunk on average; the render's gradient with
         # respect to its scalars 2.80-2.85× → 2.58-2.62× its forward (separate processes,
         # alternated; benchmarks/RESULTS.md, issue 19).
+        layer_args = (S[i], K[i], x[i], parts[i], aR_l[i], aT_l[i])
         dS[i], dK[i] = jax.lax.cond(
             jnp.any(x[i] != 0), _layer_SK,
             lambda S_, K_, *_: (jnp.zeros_like(S_), jnp.zeros_like(K_)),
-            S[i], K[i], x[i], parts[i], aR_l[i], aT_l[i])
+            *layer_args) if _cpu_form("skip") else _layer_SK(*layer_args)
         a_D = a_D * T2
     dh = _rowsum(dh)
     d_skin = a_s if skin_R.ndim == 2 else _colsum(a_s)
