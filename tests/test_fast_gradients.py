@@ -51,6 +51,40 @@ def _spectral_inputs(point, per_texel_skin, P=40, L=4, seed=0):
 def test_cotangents_equal_autodiff_of_the_plain_forward(x64, blurred, per_texel_skin, point):
     """Every cotangent of `_colours` (X, E, h, h_l, S, K, skin), by hand, against jax.vjp of
     `_joint` (the same colours in one plain program), to 1e-10 of the largest entry."""
+    assert layered._cpu_form("sums")  # this run traces XLA:CPU's forms
+    # ragged chunks, two a step (the CPU's default); at the stiff point also one and three,
+    # and all texels as one chunk (a GPU's `_chunking`; the chunking does not depend on the
+    # values)
+    ways = ((16, 1), (16, 2), (16, 3), (None, 1)) if point == "stiff" else ((16, 2),)
+    _check_cotangents(blurred, per_texel_skin, point, ways)
+
+
+@pytest.mark.parametrize("per_texel_skin", [False, True], ids=["skin per band", "skin map"])
+@pytest.mark.parametrize("blurred", [False, True], ids=["unblurred", "blurred"])
+def test_the_forms_a_gpu_traces_equal_autodiff(x64, monkeypatch, blurred, per_texel_skin):
+    """The same at the stiff point with the forms a GPU traces (`layered._cpu_form` False:
+    one wide chunk, the colours in one program, no skipped layers, plain sums), so that a
+    CPU-only run checks them too; every form is asked for."""
+    asked = set()
+
+    def plain(name):
+        asked.add(name)
+        return False
+
+    monkeypatch.setattr(layered, "_cpu_form", plain)
+    _check_cotangents(blurred, per_texel_skin, "stiff", ((None, None), (16, 3)))
+    assert asked >= {"chunks", "skip", "sums"}, asked
+    args = _spectral_inputs("stiff", per_texel_skin)
+    together = layered._colours(GRID, True, *args)
+    assert "apart" in asked
+    monkeypatch.setattr(layered, "_cpu_form", lambda name: True)
+    apart = layered._colours(GRID, True, *args)
+    assert float(jnp.max(jnp.abs(together - apart))) <= 1e-12 * float(jnp.max(jnp.abs(apart)))
+
+
+def _check_cotangents(blurred, per_texel_skin, point, ways):
+    """`_cotangents` and `_cotangents_chunked` with each `(chunk, streams)` of `ways`
+    (None: `_chunking`'s) against `jax.vjp` of `_joint`, to 1e-10 of the largest entry."""
     args = _spectral_inputs(point, per_texel_skin)
 
     @jax.jit  # each side one program (run op by op, the hand-written pass took 10 s)
@@ -62,11 +96,6 @@ def test_cotangents_equal_autodiff_of_the_plain_forward(x64, blurred, per_texel_
     g = jnp.asarray(np.random.default_rng(1).normal(size=out.shape))
     expected = autodiff(args, g)
     got = jax.jit(lambda a, g: layered._cotangents(GRID, blurred, *a, g))(args, g)
-    # ragged chunks, two a step (the CPU's default); at the stiff point also one and three,
-    # and all texels as one chunk (a GPU's `_chunking`; the chunking does not depend on the
-    # values)
-    P = args[0].shape[1]
-    ways = ((16, 1), (16, 2), (16, 3), (P, 1)) if point == "stiff" else ((16, 2),)
     chunked = [layered._cotangents_chunked(GRID, blurred, *args, g, chunk=c, streams=k)
                for c, k in ways]
     for name, e, a, *cs in zip("X E h h_l S K skin".split(), expected, got, *chunked,
