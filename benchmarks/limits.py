@@ -38,7 +38,6 @@ from common import device, machine, table, timeit, write_section  # noqa: E402
 from jaxskin import render, spectral, sss, wrinkles  # noqa: E402
 from jaxskin.scene import load_scene  # noqa: E402
 
-
 PASSES = 20  # memory passes in one program: a GPU's launch and the call's dispatch
 # (tens of µs) are not the memory's time; one call per pass made an H200's 64 MB pass 0.19 ms
 
