@@ -179,16 +179,17 @@ compiled program (transcendentals as one each).
 
 {t}
 
-Reading (of the 2-core CPU runs; a GPU's is in the issue 19 section): the KM texture is the stage nearest its limits, 7–8× a memory pass of its
-185 MB and 7–8× its arithmetic at peak (over this session's runs); what is left is XLA's
-materialised intermediates. The renders sit far above both lines (tens of × a pass of
-their bytes, which fit in this CPU's cache, so the pass itself is fast; 10–90× peak):
-small per-pixel work, gathers (bilinear view sampling, texel lists) that XLA does not
-count as arithmetic, and for the makeup face the three spectral colours computed apart
-(`layered._separately`). The FFT blur is 3× its arithmetic ideal. The gaps are where a
-custom kernel could gain; no XLA flag closes them. (That reading is issue 8's, from a run
-without the gradient and furrow rows; those are issue 19's: the furrow row's memory line
-is the time to touch its texels once, the floor a parallel furrow program could reach.)
+Reading (of the 2-core CPU runs; a GPU's is in the issue 19 section): the KM texture is
+the stage nearest its limits, 7–8× a memory pass of its 185 MB and 7–8× its arithmetic at
+peak (over this session's runs); what is left is XLA's materialised intermediates. The
+renders sit far above both lines (tens of × a pass of their bytes, which fit in this CPU's
+cache, so the pass itself is fast; 10–90× peak): small per-pixel work, gathers (bilinear
+view sampling, texel lists) that XLA does not count as arithmetic, and for the makeup face
+the three spectral colours computed apart (`layered._separately`). The FFT blur is 3× its
+arithmetic ideal. The gaps are where a custom kernel could gain; no XLA flag closes them.
+(That reading is issue 8's, from a run without the gradient and furrow rows; those are
+issue 19's: the furrow row's memory line is the time to touch its texels once, the floor a
+parallel furrow program could reach.)
 """)
 
 
