@@ -184,21 +184,19 @@ XLA had fused into every ring point's read). More slots cut long furrows short (
 per 2048 texels the 90th percentile of lengths on the 512² hand fell from 132 to 94
 texels), so the slot count is a trade of speed for likeness.
 
-**GPU: not measured** (no GPU in this session). What to expect: the program is fixed-shape,
-one while loop per pass with no host round trip other than XLA's loop condition; counted
-with the profiler on the hand, about 75 iterations per pass at 512² (64 slots) and 83 at
-2048² (1024 slots), each some 20 fused kernels over (slots × 91) elements. On an H100 that
-should be launch-bound at roughly 0.1–0.2 ms per iteration: some 15–35 ms at 512² and
-20–40 ms at 2048², against the sequential program's 0.64 s and 8.5 s there — some 20–40x
-at 512² (the 20 ms aim at the edge) and 200x or more at 2048². More slots would shorten
-the loop at 512² at a cost in likeness (above). The
+**GPU** (one H200, 2026-12-04, `bench_wrinkles.py --speed`; the issue 19 section has the
+table): 8.4 ms at 512² and 12.2 ms at 2048², against the sequential program's 0.72 s and
+8.94 s on the same GPU (86× and 731×; the aims: under 20 ms at 512², at least 50× at
+2048²), with the furrow counts of the CPU runs. It is launch-bound, as estimated before
+that run (15–35 ms and 20–40 ms): about 75 iterations per pass at 512² (64 slots) and 83 at
+2048² (1024 slots), each some 20 fused kernels over (slots × 91) elements. The
 scene's `wrinkles.method = "auto"` picks this program on a GPU or TPU, and on a CPU from
 2048² (`scene.PARALLEL_FROM_SIZE_ON_CPU`): there the two are about as quick from a cold
 start (the first table's cold column: trace, compile, first run, what a one-off render
 pays; at 4096², 10.4 s sequential against 8.1 s parallel, measured separately), below it
 the sequential program compiles about a second sooner, more than the parallel one saves in
-running. Every built-in scene is 512², so their default look (and their golden images) is
-the sequential program's.
+running. Every built-in scene is 512², so their default look on a CPU (and their golden
+images, which name the method) is the sequential program's; on a GPU, the parallel one's.
 """
     write_section("wrinkles-parallel", body)
 

@@ -207,34 +207,37 @@ def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
 
     Performance (XLA on CPU). Forward: without blur one spectral product; with it three,
     each computed apart (`_separately`). Forward mode: `_chunked_tangent`, a loop over
-    chunks of `CHUNK` texels, each chunk's tangent by `jax.jvp` of `_joint`, checkpointed.
-    Reverse mode: that tangent's transpose written by hand (`_cotangents`, through
-    `linear.linear_call`): the colours' cotangent goes to band space through the transposed
-    colour matrices, then one elementwise pass per chunk recomputes the layers and the stack
-    and runs the chain rule back through them. Measured on the 4-layer makeup face at
-    1280×720 (benchmarks/bench_gradients.py, the loaded 2-core machine, one process): the
-    gradient of the whole render with respect to the thickness maps 1.97× the forward pass,
-    with respect to the 21 scalars 3.06×, where JAX's transpose of the chunked JVP (the
-    rule before) took 6.32× and 6.51× (after main's faster SSS blur, on a quieter
-    machine: 2.25× and 3.15×; the render without the spectral pass is at 2× on its own,
-    this pass at about 2.3×: the primal's three products and the transpose's one pass,
-    1.3–1.6× their cost). Later, with the S and K cotangents through q (`_layer_SK`), on a
-    2-core AVX2 machine: scalars 2.8–3.1×, maps 2.3–2.4× (benchmarks/RESULTS.md, issue 19).
-    Then with two chunks a step side by side (`STREAMS`), the stack's adjoints divided and
-    the S and K sums as products (2-core AVX-512, ABBA): maps 1.91–2.05×, scalars
-    2.28–2.53×. Since 2026-12-04 a layer absent from a whole chunk skips its S and K sums
-    (quiet, separate processes: scalars 2.80–2.85× → 2.58–2.62×; maps unchanged).
-    Earlier: plain reverse mode through this forward (the `switch` inside a `map` keeps
-    every branch's residuals) 162× and 21 GB; reverse mode over checkpointed chunks of
+    chunks of texels (`_chunking`), each chunk's tangent by `jax.jvp` of `_joint`,
+    checkpointed. Reverse mode: that tangent's transpose written by hand (`_cotangents`,
+    through `linear.linear_call`): the colours' cotangent goes to band space through the
+    transposed colour matrices, then one elementwise pass per chunk recomputes the layers
+    and the stack and runs the chain rule back through them. Measured on the 4-layer makeup
+    face at 1280×720 (benchmarks/bench_gradients.py, the loaded 2-core machine, one
+    process): the gradient of the whole render with respect to the thickness maps 1.97× the
+    forward pass, with respect to the 21 scalars 3.06×, where JAX's transpose of the chunked
+    JVP (the rule before) took 6.32× and 6.51× (after main's faster SSS blur, on a quieter
+    machine: 2.25× and 3.15×; the render without the spectral pass is at 2× on its own, this
+    pass at about 2.3×: the primal's three products and the transpose's one pass, 1.3–1.6×
+    their cost). Later, with the S and K cotangents through q (`_layer_SK`), on a 2-core
+    AVX2 machine: scalars 2.8–3.1×, maps 2.3–2.4× (benchmarks/RESULTS.md, issue 19). Then
+    with two chunks a step side by side (`STREAMS`), the stack's adjoints divided and the S
+    and K sums as products (2-core AVX-512, ABBA): maps 1.91–2.05×, scalars 2.28–2.53×.
+    Since 2026-12-04 a layer absent from a whole chunk skips its S and K sums (quiet,
+    separate processes: scalars 2.80–2.85× → 2.58–2.62×; maps unchanged). On a GPU
+    (`_cpu_form`): the colours in one program and the loops in one wide chunk; on an H200
+    the forward 1.0 ms, the gradients 2.1 ms (maps) and 3.1 ms (scalars), where the CPU's
+    forms took 1.8 ms, 2.95 ms and 4.2 ms (and 8.3 ms for the scalars with the CPU's
+    chunks). Earlier: plain reverse mode through this forward (the `switch` inside a `map`
+    keeps every branch's residuals) 162× and 21 GB; reverse mode over checkpointed chunks of
     `_joint` 5.8–14×.
     """
     if not blurred:
         return _joint(grid, False, X, E, h, h_l, S, K, skin_R)
     args = (X, E, h, h_l, S, K, skin_R)
+    if not _cpu_form("apart"):  # a GPU fuses the three products' shared work itself
+        return _joint(grid, True, *args)
     to_rgb = jnp.asarray(grid.rgb_matrix, X.dtype)
     to_xyz = jnp.asarray(grid.xyz_matrix, X.dtype)
-    if not _cpu_form("apart"):
-        return _joint(grid, True, *args)
     rgb_surface, xyz_da, xyz_dta = _separately(
         [lambda: matmul(_spectra(*args)[0], to_rgb), lambda: matmul(_spectra(*args)[1], to_xyz),
          lambda: matmul(_spectra(*args)[2], to_xyz)])
