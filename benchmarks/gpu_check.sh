@@ -131,7 +131,7 @@ step tests "$left" "$PY" -m pytest -v -p no:cacheprovider -n "$WORKERS" --dist l
   tests/test_spectral.py tests/test_km.py tests/test_gradients.py \
   tests/test_fast_gradients.py tests/test_render.py tests/test_lockstep.py \
   tests/test_radiometry.py
-grep -E "passed|failed|error" "$OUT/tests.log" | tail -n 5 > "$OUT/tests.txt"
+grep -E "^=+ .*(passed|failed|error)" "$OUT/tests.log" | tail -n 1 > "$OUT/tests.txt"
 grep -E "FAILED|ERROR" "$OUT/tests.log" | head -n 40 >> "$OUT/tests.txt"
 log "tests: $(grep -c PASSED "$OUT/tests.log") passed, $(grep -c -E ' FAILED| ERROR' "$OUT/tests.log") failed or errors (tests.txt)"
 log "done; tables in $OUT/RESULTS.md"
