@@ -74,12 +74,18 @@ def test_the_forms_a_gpu_traces_equal_autodiff(x64, monkeypatch, blurred, per_te
     monkeypatch.setattr(layered, "_cpu_form", plain)
     _check_cotangents(blurred, per_texel_skin, "stiff", ((None, None), (16, 3)))
     assert asked >= {"chunks", "skip", "sums"}, asked
+    # The colours and their tangent (forward mode: `_chunked_tangent`) against the CPU's forms.
     args = _spectral_inputs("stiff", per_texel_skin)
-    together = layered._colours(GRID, True, *args)
+    tangents = tuple(jnp.asarray(np.random.default_rng(3).normal(size=a.shape)) for a in args)
+
+    def colours_and_tangent():
+        return jax.jvp(lambda *a: layered._colours(GRID, True, *a), args, tangents)
+
+    together = colours_and_tangent()
     assert "apart" in asked
     monkeypatch.setattr(layered, "_cpu_form", lambda name: True)
-    apart = layered._colours(GRID, True, *args)
-    assert float(jnp.max(jnp.abs(together - apart))) <= 1e-12 * float(jnp.max(jnp.abs(apart)))
+    for plain, cpu in zip(together, colours_and_tangent(), strict=True):
+        assert float(jnp.max(jnp.abs(plain - cpu))) <= 1e-12 * float(jnp.max(jnp.abs(cpu)))
 
 
 def _check_cotangents(blurred, per_texel_skin, point, ways):

@@ -267,7 +267,9 @@ def _chunked_tangent(grid, blurred, primals, tangents):
     X = primals[0]
     P = X.shape[1]
 
-    chunk = _chunking(P)[0]
+    # Off the CPU an eighth of the wide chunk: `jax.jacfwd` batches this function over every
+    # tangent (21 for the makeup's scalars), multiplying each intermediate by as many.
+    chunk = CHUNK if _cpu_form("chunks") else min(P, WIDE_CHUNK // 8)
 
     def per_texel(a, axis):
         return _per_texel(a, axis, P, chunk)
