@@ -7,10 +7,13 @@ Two limits, both measured here rather than taken from a data sheet:
 
 - memory: the time of the stage's own input and output bytes passing through memory once
   (a fused, jitted `x * 1.0001` over an array of half those bytes: it reads them and writes
-  as many), so "× memory" is how many such passes the stage costs;
+  as many), so "× memory" is how many such passes the stage costs; measured as one call
+  writing a fresh output, as a stage does, and in place, many passes in one program (the
+  memory's own rate: no first touch of a fresh output, no dispatch);
 - arithmetic: XLA's own count of the stage's floating-point operations (`cost_analysis()`
   of the compiled program; a transcendental counts as one) against this machine's peak,
-  measured as a 2048² float32 matmul, so "× peak" is the stage's time over that ideal.
+  measured as a 2048² float32 matmul at `Precision.HIGHEST` (the renderer's precision), so
+  "× peak" is the stage's time over that ideal.
 
 A stage far above both lines is bound by neither: by how XLA schedules it (fusion,
 materialised intermediates) or by latency. The furrow program (issue 19) gets the memory
@@ -38,8 +41,7 @@ from common import device, machine, table, timeit, write_section  # noqa: E402
 from jaxskin import render, spectral, sss, wrinkles  # noqa: E402
 from jaxskin.scene import load_scene  # noqa: E402
 
-PASSES = 20  # memory passes in one program: a GPU's launch and the call's dispatch
-# (tens of µs) are not the memory's time; one call per pass made an H200's 64 MB pass 0.19 ms
+PASSES = 20  # in-place memory passes in one program (`memory_pass`)
 
 
 def peak_flops() -> float:
@@ -52,12 +54,16 @@ def peak_flops() -> float:
     return 2 * n**3 / t
 
 
-def memory_pass(nbytes: int) -> float:
-    """Seconds to read `nbytes / 2` and write as many, fused (one pass of those bytes): the
-    best of 5 programs of `PASSES` passes each, divided by `PASSES`."""
+def memory_pass(nbytes: int) -> tuple[float, float]:
+    """Seconds of one pass of `nbytes` (read `nbytes / 2`, write as many, fused), two ways:
+    one call writing a fresh output, as a stage does (on a CPU the output's first touch, on
+    a GPU the call's dispatch and launch, are part of it: 18 of 20 ms for 185 MB on the
+    2-core CPU; an H200's 64 MB pass took 0.19 ms, 0.34 TB/s), and in place, `PASSES` in one
+    program, the time of one (the memory's own rate)."""
     x = jnp.ones(max(int(nbytes) // 8, 1), jnp.float32)
+    call = timeit(jax.jit(lambda v: v * 1.0001), x, repeat=5)
     passes = jax.jit(lambda v: jax.lax.fori_loop(0, PASSES, lambda _, w: w * 1.0001, v))
-    return timeit(passes, x, repeat=5) / PASSES
+    return call, timeit(passes, x, repeat=5) / PASSES
 
 
 def stages(quick: bool = False):
@@ -151,7 +157,7 @@ def main(argv: list[str] | None = None):
         t = timeit(f, *args, repeat=opts.repeat)
         out = f(*args)
         nbytes = _nbytes(args) + _nbytes(out)
-        t_mem = memory_pass(nbytes)
+        t_mem, t_stream = memory_pass(nbytes)
         if loop:
             flops_cols = ("—", "—", "—")
         else:
@@ -161,9 +167,11 @@ def main(argv: list[str] | None = None):
             t_peak = flops / peak
             flops_cols = (f"{flops / 1e9:.2f}", f"{t_peak * 1e3:.2f}", f"{t / t_peak:.0f}×")
         rows.append((name, f"{t * 1e3:.2f}", f"{nbytes / 1e6:.1f}", f"{t_mem * 1e3:.3f}",
-                     f"{t / t_mem:.1f}×", *flops_cols))
+                     f"{t / t_mem:.1f}×", f"{t_stream * 1e3:.3f}", f"{t / t_stream:.0f}×",
+                     *flops_cols))
         print(rows[-1], flush=True)
     t = table(["stage", "warm ms", "in + out MB", "memory pass ms", "× memory",
+               "in-place pass ms", "× in place",
                "XLA GFLOP", "at peak ms", "× peak"], rows)
     print(f"peak {peak / 1e9:.0f} GFLOP/s (float32 matmul)")
     print(t)
@@ -174,7 +182,9 @@ Command: `{command}`. Machine: {machine()}. Device: {device()}.
 
 Peak arithmetic measured as a 2048² float32 matmul at `Precision.HIGHEST`: {peak / 1e9:.0f}
 GFLOP/s. "memory pass": the stage's input and output bytes read and written once by a
-fused copy ({PASSES} in one program, the time of one); "XLA GFLOP": XLA's count for the
+fused copy, one call writing a fresh output as a stage does; "in-place pass": the same
+copy in place, {PASSES} in one program, the time of one (the memory's own rate, without the
+fresh output's first touch or the call's dispatch); "XLA GFLOP": XLA's count for the
 compiled program (transcendentals as one each).
 
 {t}
