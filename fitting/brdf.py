@@ -26,7 +26,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
-from jaxskin.formats import _is_measurement_table, read_table
+from jaxskin.formats import _is_measurement_table, decimal_comma_note, read_table
 from jaxskin.io import FitError, InputError, atomic_write
 from jaxskin.shading import lafortune
 
@@ -52,6 +52,7 @@ class BRDFSamples:
     wo: np.ndarray
     f: np.ndarray
     weight: np.ndarray
+    notes: tuple[str, ...] = ()  # what the reader noticed (decimal commas), for the user
 
 
 def _direction(theta_deg, phi_deg):
@@ -159,7 +160,8 @@ def read_samples(path) -> BRDFSamples:
                       bad[0], "weight")
     if not np.any(weight > 0):
         raise t.error("every weight is 0", column="weight")
-    return BRDFSamples(t.path, wi, wo, f, weight)
+    notes = (f"{path}: {decimal_comma_note(t.decimal_comma)}",) if t.decimal_comma else ()
+    return BRDFSamples(t.path, wi, wo, f, weight, notes)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -926,6 +926,8 @@ def _fit_brdf(args, run: _Run) -> int:
                                                       "the report")
     samples = brdf.read_samples(args.file)
     brdf.check_samples(samples, args.lobes)
+    for note in samples.notes:
+        print(f"jaxskin: note: {note}", file=sys.stderr)
     from . import resources
 
     resources.check_memory(resources.fit_brdf_bytes(len(samples.f), args.lobes, args.starts),

@@ -167,3 +167,8 @@ def test_samples_from_a_european_spreadsheet_read_as_the_shipped_ones(tmp_path):
     plain = brdf.read_samples(SAMPLES)
     for name in ("wi", "wo", "f", "weight"):
         np.testing.assert_array_equal(getattr(samples, name), getattr(plain, name))
+    # said, as calibrate and fit-skin say it, quoting the file's first such number
+    first = euro[2].split(";")[0]
+    assert samples.notes == (f"{tmp_path / 'bad.csv'}: numbers with a decimal comma "
+                             f"({first}) read with a point ({first.replace(',', '.')})",)
+    assert plain.notes == ()
