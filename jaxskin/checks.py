@@ -109,6 +109,13 @@ def _check_scene(sc, count: int) -> list:
     return inputs
 
 
+def picture_warnings(sc, side: list[str] | None = None) -> list[str]:
+    """What `jaxskin render` and the editor's footer warn about a scene's picture: maps that
+    change nothing (`idle_maps`), a view from the side of a planar map (`hidden_side`, or
+    `side` where the caller has it already), layers thick as masks (`thick_layers`)."""
+    return idle_maps(sc) + (hidden_side(sc) if side is None else side) + thick_layers(sc)
+
+
 def idle_maps(sc) -> list[str]:
     """Warnings for skin maps that change nothing in scene `sc`: one its material model does
     not read (`skin.melanin_image` in a Blinn scene), or a `skin.*_image` that scales its
@@ -125,7 +132,7 @@ def idle_maps(sc) -> list[str]:
                        f"({sc.values['material.model']}) reads no such map: it changes nothing")
         elif sc.values.get(image) and scalar in sc.params and float(sc.values[scalar]) == 0.0:
             out.append(f"{image} scales {scalar}, which is 0 in scene {sc.name!r}: the map "
-                       f"changes nothing (set {scalar}, e.g. -D {scalar}=1)")
+                       f"changes nothing (set {scalar} above 0, e.g. to 1)")
     return out
 
 

@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from . import __version__, cluster
-from .checks import check_scene, hidden_side, idle_maps, reading, thick_layers, unused_overrides
+from .checks import check_scene, picture_warnings, reading, unused_overrides
 from .io import FitError, InputError
 from .outputs import MAX_NAME, MAX_NAME_BYTES, Outputs, check_name, slug
 
@@ -831,7 +831,7 @@ def _render(args, run: _Run) -> int:
         if skip:
             _say(f"jaxskin: warning: --sweep {args.sweep[0]} changes nothing in scene "
                  f"{sc.name!r} (not one of its parameters): it is rendered once, unswept")
-        for line in idle_maps(sc) + hidden_side(sc) + thick_layers(sc):
+        for line in picture_warnings(sc):
             _say(f"jaxskin: warning: {line}")
     run.outputs.append(outputs)
     # The units of work: a scene's sweep in batches of cluster.SWEEP_BATCH values (one

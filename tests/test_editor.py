@@ -33,6 +33,7 @@ from jaxskin import (  # noqa: E402
 from jaxskin.editor import state as state_module  # noqa: E402
 from jaxskin.editor.server import MAX_BODY, make_app  # noqa: E402
 from jaxskin.editor.state import EditorError, Session  # noqa: E402
+from jaxskin.maps import write_image  # noqa: E402
 from jaxskin.toml_writer import dumps  # noqa: E402
 
 SCENE = """\
@@ -478,6 +479,15 @@ def test_the_page_shows_the_render_commands_warnings_on_what_it_shows(session, t
         "0.01 mm); at this thickness most products are opaque"]
     session.set({"layer.blush.thickness_mm": None})
     assert session.state()["warnings"] == []
+    # a skin map that changes nothing (the editor's footer said nothing where render warned)
+    write_image(np.full((8, 8), 0.5), tmp_path / "m.png")
+    face = Session("face", tmp_path)
+    face.set({"skin.melanin_image": str(tmp_path / "m.png")})
+    assert face.state()["warnings"] == [
+        "skin.melanin_image scales skin.melanin, which is 0 in scene 'face': the map changes "
+        "nothing (set skin.melanin above 0, e.g. to 1)"]
+    face.set({"skin.melanin": 1.0})
+    assert face.state()["warnings"] == []
 
 
 def test_a_mistyped_mesh_name_says_what_was_expected(tmp_path):

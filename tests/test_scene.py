@@ -325,7 +325,7 @@ def test_a_skin_map_whose_scalar_is_0_is_found(tmp_path, capsys):
     img = f"skin.melanin_image={tmp_path / 'm.png'}"
     assert idle_maps(load_scene("face", [*small, img])) == [
         "skin.melanin_image scales skin.melanin, which is 0 in scene 'face': the map changes "
-        "nothing (set skin.melanin, e.g. -D skin.melanin=1)"]
+        "nothing (set skin.melanin above 0, e.g. to 1)"]
     assert idle_maps(load_scene("face", [*small, img, "skin.melanin=1"])) == []
     assert idle_maps(load_scene("face", small)) == []
     args = [a for o in [*small, img] for a in ("-D", o)]

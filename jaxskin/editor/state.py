@@ -701,15 +701,15 @@ class Session:
                 "saved_as": self.saved_as, "warnings": self.warnings(), "schema": schema()}
 
     def warnings(self) -> list[str]:
-        """The render command's warnings about what the page shows (a view from the side of
-        a planar map, a layer thick as a mask); the side's share measured once a
-        configuration."""
-        from ..checks import hidden_side, thick_layers
+        """The render command's warnings about what the page shows (`picture_warnings`: a
+        skin map that changes nothing, a view from the side of a planar map, a layer thick as
+        a mask); the side's share measured once a configuration."""
+        from ..checks import hidden_side, picture_warnings
 
         config = self.scene.config
         if self._side is None or self._side[0] != config:
             self._side = (config, hidden_side(self.scene))
-        return self._side[1] + thick_layers(self.scene)
+        return picture_warnings(self.scene, self._side[1])
 
     def modified(self) -> bool:
         """Whether the page differs from its scene file: a change, or paint not saved."""
