@@ -23,28 +23,47 @@ def _shade(ax, wl, mask):
             start = None
 
 
-def write_report(m: Measurement, r: KMFit, path) -> None:
-    """Write the report PNG for measurement `m` and its fit `r` to `path` (atomically)."""
+def as_rendered(wl, r: KMFit, extrapolate: str, x) -> tuple[np.ndarray, np.ndarray]:
+    """S and K per mm of fit `r` (measured at `wl`) at wavelengths `x` as the renderer
+    extends them (`jaxskin.cosmetics.extend`, in log S and log K)."""
+    from jaxskin.cosmetics import extend
+
+    return tuple(np.exp(extend(x, wl, np.log(v), extrapolate))
+                 for v in (r.S_per_mm, r.K_per_mm))
+
+
+def write_report(m: Measurement, r: KMFit, path, extrapolate: str | None = None) -> None:
+    """Write the report PNG for measurement `m` and its fit `r` to `path` (atomically).
+    Where `m` does not cover the render grid (380–780 nm), the S and K panel shows how the
+    renderer will extend them (`extrapolate`: "hold" or "linear", dashed), or says that it
+    will refuse the material (`extrapolate` None)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.legend_handler import HandlerTuple
+
+    from jaxskin.spectral import Grid
 
     wl = m.wavelength_nm
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.2), constrained_layout=True)
     ax = axes[0]
     _shade(ax, wl, r.identifiable)
     colours = plt.cm.viridis(np.linspace(0.15, 0.85, len(m.thickness_mm)))
+    handles, labels = [], []  # one entry a curve: its measured points and its fit together
     for X, R, Rf, c in zip(m.thickness_mm, m.R, r.R_fit, colours, strict=True):
-        ax.plot(wl, R, "o", ms=3, color=c, label=f"R {X:g} mm measured")
-        ax.plot(wl, Rf, "-", color=c, label="fit")
-    ax.plot(wl, m.R_inf, "s", ms=3, color="C3", label="R∞ measured")
-    ax.plot(wl, r.R_inf_fit, "-", color="C3", label="fit")
-    ax.plot(wl, m.R_g, "--", color="k", lw=1, label="R_g (background)")
+        handles.append((ax.plot(wl, R, "o", ms=3, color=c)[0], ax.plot(wl, Rf, "-", color=c)[0]))
+        labels.append(f"R {X:g} mm")
+    handles.append((ax.plot(wl, m.R_inf, "s", ms=3, color="C3")[0],
+                    ax.plot(wl, r.R_inf_fit, "-", color="C3")[0]))
+    labels.append("R∞")
+    handles.append(ax.plot(wl, m.R_g, "--", color="k", lw=1)[0])
+    labels.append("R_g (background)")
     ax.set(xlabel="wavelength (nm)", ylabel="reflectance", ylim=(0, None),
-           title=f"{m.name}: data and fit (rmse {r.rmse:.2e})")
-    # below the axes: inside, ten entries covered the data (the lipstick around 600 nm)
-    ax.legend(fontsize=7, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.16))
+           title=f"{m.name}: measured (marks), fit (lines); rmse {r.rmse:.2e}")
+    # below the axes: inside, the entries covered the data (the lipstick around 600 nm)
+    ax.legend(handles, labels, handler_map={tuple: HandlerTuple(ndivide=None)}, fontsize=7,
+              ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.16))
 
     ax = axes[1]
     _shade(ax, wl, r.identifiable)
@@ -52,6 +71,21 @@ def write_report(m: Measurement, r: KMFit, path) -> None:
     ax.semilogy(wl, r.K_per_mm, "-", color="C1", label="K fitted")
     ax.semilogy(wl, r.S_closed, "x", ms=4, color="C0", alpha=0.6, label="S closed form")
     ax.semilogy(wl, r.K_closed, "x", ms=4, color="C1", alpha=0.6, label="K closed form")
+    grid = Grid().wavelengths
+    if wl[0] > grid[0] or wl[-1] < grid[-1]:  # the renderer's grid reaches beyond the data
+        if extrapolate is None:
+            ax.text(0.5, 0.03, f"covers {wl[0]:g}-{wl[-1]:g} nm of the renderer's "
+                    f"{grid[0]:g}-{grid[-1]:g}:\nrefused at render time without --extrapolate",
+                    transform=ax.transAxes, ha="center", va="bottom", fontsize=8, color="C3")
+        else:
+            x = np.arange(min(grid[0], wl[0]), max(grid[-1], wl[-1]) + 0.5, 1.0)
+            for v, c, name in zip(as_rendered(wl, r, extrapolate, x), ("C0", "C1"), "SK",
+                                  strict=True):
+                ax.semilogy(x, v, "--", lw=1, color=c,
+                            label=f"{name} as rendered (--extrapolate {extrapolate})")
+            for lo, hi in ((x[0], wl[0]), (wl[-1], x[-1])):
+                if hi > lo:
+                    ax.axvspan(lo, hi, color="C1", alpha=0.08, lw=0, zorder=0)
     ax.set(xlabel="wavelength (nm)", ylabel="per mm",
            title="S and K (grey: not identifiable, S from neighbours)")
     ax.legend(fontsize=7)

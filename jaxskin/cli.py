@@ -593,7 +593,7 @@ def _calibrate(args, run: _Run) -> int:
             write_json(result.to_json(m, extrapolate=args.extrapolate), json_path)
             outputs.done(json_path)
             if png_path is not None:
-                write_report(m, result, png_path)
+                write_report(m, result, png_path, args.extrapolate)
                 outputs.done(png_path)
             elif json_path.with_suffix(".png").exists():
                 mismatched.append(f"{json_path.with_suffix('.png')} is an earlier run's report "

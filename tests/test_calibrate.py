@@ -4,6 +4,7 @@ import dataclasses
 import json
 import subprocess
 import sys
+import types
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +14,7 @@ from jaxskin import km
 from jaxskin.cli import main
 from jaxskin.fitting import km as fkm
 from jaxskin.fitting.measurements import Measurement, read_measurement
+from jaxskin.fitting.report import as_rendered
 from jaxskin.io import InputError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -318,13 +320,20 @@ def test_cli_instrument_export_coverage_and_extrapolation(tmp_path, capsys):
     with pytest.raises(InputError, match="covers 400-700 nm"):
         cosmetics.load_material(tmp_path / "a" / "export.json", grid)
 
-    assert main(["calibrate", str(src), "-o", str(tmp_path / "b"), "--no-report",
+    assert main(["calibrate", str(src), "-o", str(tmp_path / "b"),
                  "--extrapolate", "linear"]) == 0
     assert "warning" not in capsys.readouterr().err
     doc = _strict_json(tmp_path / "b" / "export.json")
     assert doc["extrapolate"] == "linear" and doc["wavelength_nm"][0] == 400
     m = cosmetics.load_material(tmp_path / "b" / "export.json", grid)
     assert m.extrapolated.sum() == 10  # 380, 390 and 710, ..., 780
+    # The report's dashed S and K beyond the data are what the renderer loads.
+    assert (tmp_path / "b" / "export.png").is_file()
+    fit = types.SimpleNamespace(S_per_mm=np.asarray(doc["S_per_mm"]),
+                                K_per_mm=np.asarray(doc["K_per_mm"]))
+    for shown, loaded in zip(as_rendered(np.asarray(doc["wavelength_nm"]), fit, "linear",
+                                         grid.wavelengths), (m.S, m.K), strict=True):
+        np.testing.assert_allclose(shown, loaded, rtol=1e-12)
     # The fit itself, from 6-digit µm/percent text: the true S (measured: within 1.2e-5 on
     # the 3 and 10 µm films).
     assert np.max(np.abs(np.asarray(doc["S_per_mm"]) / S - 1)) < 3e-5
