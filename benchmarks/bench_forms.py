@@ -30,13 +30,16 @@ FORMS = {"cpu": {"apart", "skip", "sums"}, "plain": set(), "plain+apart": {"apar
 
 
 def main(argv: list[str]) -> int:
-    names = [a for a in argv if not a.startswith("--")]
-    if len(names) != 1 or names[0] not in FORMS:
-        print(f"bench_forms.py: name one variant: {', '.join(FORMS)}", file=sys.stderr)
-        return 2
-    variant, forms = names[0], FORMS[names[0]]
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("variant", choices=list(FORMS), help="which forms to trace")
+    ap.add_argument("--quick", action="store_true", help="tiny sizes (a check that it runs)")
+    args = ap.parse_args(argv)
+    variant, forms = args.variant, FORMS[args.variant]
     layered._cpu_form = lambda name: name in forms  # "chunks" never: one wide chunk
-    sc = load_scene("makeup", ["texture.size=64", "camera.size=32"] if "--quick" in argv
+    sc = load_scene("makeup", ["texture.size=64", "camera.size=32"] if args.quick
                     else ["camera.size=1280", "camera.height=720"])
     config, params = sc.config, sc.params
     arrays = render.prepare(config).arrays

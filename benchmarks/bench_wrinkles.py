@@ -1,15 +1,19 @@
 """Furrow height field benchmark: the jitted program against its NumPy transcription, and
 the sequential program against the parallel (lockstep) one.
 
-    python benchmarks/bench_wrinkles.py        # about 3 minutes on 2 cores
+    python benchmarks/bench_wrinkles.py        # about 5 minutes on 2 cores
     python benchmarks/bench_wrinkles.py --parallel   # only sequential against parallel
-    python benchmarks/bench_wrinkles.py --speed [--quick] [--results F]   # times alone
+    python benchmarks/bench_wrinkles.py --speed      # the two programs' times alone
+    python benchmarks/bench_wrinkles.py --quick      # tiny sizes: checks that it runs
 
 The built-in hand scene (Bando 2001 fig. 6.1: planar, k_scale 1.1) at 512² and 2048²
 texels: cold (trace + compile + run) and warm times of `jaxskin.wrinkles.height_field`, and
 the same algorithm in benchmarks/numpy_furrows.py (a Python loop over seeds and steps,
 NumPy on each step's window), in the same run. The paper: 8–10 s at 512² (Athlon 1 GHz and
-a GeForce, 2001). Writes the `wrinkles` section of RESULTS.md.
+a GeForce, 2001). Writes the `wrinkles` section of RESULTS.md, then `wrinkles-parallel`
+(`--parallel`: that one only); `--speed` writes `wrinkles-speed` (the GPU check's: both
+programs at 512² and 2048² on whichever device JAX has, the parallel one best of
+`--repeat`). `--results FILE` writes them there instead.
 """
 
 from __future__ import annotations
@@ -24,8 +28,9 @@ import jax.numpy as jnp
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import common  # noqa: E402
 import numpy_furrows  # noqa: E402
-from common import HERE, machine, table, timeit, write_section  # noqa: E402
+from common import machine, table, timeit, write_section  # noqa: E402
 
 from jaxskin import furrow_stats, lockstep, texture, wrinkles  # noqa: E402
 from jaxskin.scene import load_scene  # noqa: E402
@@ -39,10 +44,32 @@ def inputs(size):
     return sc, s, cent, radius
 
 
-def main():
+QUICK = (64, 128)  # --quick's texture sizes
+
+
+def main(argv: list[str] | None = None):
+    def modes(ap):
+        ap.add_argument("--parallel", action="store_true",
+                        help="only the sequential program against the parallel one")
+        ap.add_argument("--speed", action="store_true",
+                        help="only both programs' times on JAX's device (the GPU check)")
+
+    args = common.options(__doc__, argv, modes)
+    cmd = common.command("benchmarks/bench_wrinkles.py", argv)
+    if args.speed:
+        speed(QUICK if args.quick else (512, 2048), args.repeat, cmd)
+    elif args.parallel:
+        parallel(QUICK if args.quick else (512, 1024, 1536, 2048), cmd)
+    else:
+        against_numpy(QUICK if args.quick else (512, 2048), cmd)
+        parallel(QUICK if args.quick else (512, 1024, 1536, 2048), cmd)
+    print(f"wrote {common.RESULTS}")
+
+
+def against_numpy(sizes, cmd: str):
     print(machine())
     rows, counts = [], {}
-    for size in (512, 2048):
+    for size in sizes:
         sc, s, cent, radius = inputs(size)
         key = jax.random.key(sc.config.texture.seed)
         args = (s.mask, s.field1, s.field2, cent, sc.config.texture.k_scale, key)
@@ -68,7 +95,7 @@ def main():
     print(t)
     body = f"""## Furrow height field (issue 4)
 
-Command: `python benchmarks/bench_wrinkles.py`. Machine: {machine()}.
+Command: `{cmd}`. Machine: {machine()}.
 
 The built-in hand (Bando 2001 fig. 6.1, planar projection, k_scale 1.1, seed 0). Cold:
 trace, compile and run; warm: best of repeated runs. The baseline is the same algorithm in
@@ -89,8 +116,6 @@ step, and removing it (the seed search scans rows from a cursor inside the step 
 the times above.
 """
     write_section("wrinkles", body)
-    parallel()
-    print(f"wrote {HERE / 'RESULTS.md'}")
 
 
 def side_by_side(size, repeat=3):
@@ -121,9 +146,9 @@ def side_by_side(size, repeat=3):
     return cold, {n: min(t) for n, t in warm.items()}, stats, counts
 
 
-def parallel():
+def parallel(sizes, cmd: str):
     rows, char = [], []
-    for size in (512, 1024, 1536, 2048):
+    for size in sizes:
         cold, warm, st, counts = side_by_side(size)
         rows.append((f"{size}²", lockstep.slots_for(size, size),
                      f"{cold['seq']:.1f} / {cold['par']:.1f}",
@@ -145,7 +170,7 @@ def parallel():
                "median length seq / par", "90th pct length", "KS distance of lengths"], char)
     body = f"""## Parallel furrow program (issue 19)
 
-Command: `python benchmarks/bench_wrinkles.py` (this section: `parallel()`). Machine:
+Command: `{cmd}` (this section: `parallel()`). Machine:
 {machine()}. Pictures: `python benchmarks/furrow_pictures.py` →
 `benchmarks/furrows_side_by_side.png`.
 
@@ -201,7 +226,7 @@ images, which name the method) is the sequential program's; on a GPU, the parall
     write_section("wrinkles-parallel", body)
 
 
-def speed(sizes=(512, 2048), repeat=5):
+def speed(sizes, repeat: int, cmd: str):
     """Times alone, on whichever device JAX has (the GPU check): both programs at each size,
     cold then warm (parallel: best of `repeat`; sequential: one warm run, seconds a run on a
     GPU), with the furrow counts per pass (the same inputs give the same counts on any
@@ -232,8 +257,7 @@ def speed(sizes=(512, 2048), repeat=5):
     print(t)
     write_section("wrinkles-speed", f"""## Furrow programs' speed on the device (issue 19)
 
-Command: `python benchmarks/bench_wrinkles.py --speed`. Machine: {machine()}. Device:
-{device()}.
+Command: `{cmd}`. Machine: {machine()}. Device: {device()}.
 
 The hand (k_scale 1.1): cold (trace + compile + run), then warm, the parallel program
 best of {repeat}, the sequential one a single warm run.
@@ -243,10 +267,4 @@ best of {repeat}, the sequential one a single warm run.
 
 
 if __name__ == "__main__":
-    if "--speed" in sys.argv:  # the two programs' times alone (the GPU check)
-        if "--results" in sys.argv:
-            import common
-            common.RESULTS = Path(sys.argv[sys.argv.index("--results") + 1])
-        speed((64, 128) if "--quick" in sys.argv else (512, 2048))
-    else:
-        parallel() if "--parallel" in sys.argv else main()  # --parallel: that section only
+    main(sys.argv[1:])

@@ -136,16 +136,33 @@ def save_figure(fig, path: Path) -> None:
     print(f"wrote {path} ({path.stat().st_size // 1024} KB)")
 
 
+def command(script: str, argv: list[str] | None) -> str:
+    """The command line that made a section, for its "Command:" line: `python SCRIPT` and
+    its options, less `--results FILE` (where the section was written, not how)."""
+    words, skip = [], False
+    for a in argv or []:
+        if skip:
+            skip = False
+        elif a == "--results":
+            skip = True
+        elif not a.startswith("--results="):
+            words.append(a)
+    return " ".join(["python", script, *words])
+
+
 def options(doc: str, argv: list[str] | None = None, more=None):
     """The options `run.py` passes on (`--quick`, `--repeat`, `--results`), parsed for a
-    benchmark whose help is the first line of `doc`; `--results` redirects `write_section`.
+    benchmark whose help is its docstring `doc`; `--results` redirects `write_section`.
     `more(parser)`, if given, adds the benchmark's own options."""
     import argparse
 
     global RESULTS
-    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap = argparse.ArgumentParser(description=doc,  # the docstring: what it measures, how
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="tiny sizes (a check that it runs)")
-    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--repeat", type=int, default=5,
+                    help="timed repeats where the benchmark takes them (default 5; what a "
+                         "repeat is, each benchmark's docstring says)")
     ap.add_argument("--results", type=Path, help="write the section to this file instead")
     if more:
         more(ap)

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# The GPU check (issue 19): one script, at most 7.5 minutes on a GPU machine that reaches
-# no package registry. It installs the wheels it lacks without dependencies, runs the
-# gradient, furrow and limit benchmarks with reduced repeats and a chosen test subset in
-# the time left, and writes everything under $OUT.
+# The GPU check (issue 19): one script, at most 8 minutes on a GPU machine that reaches no
+# package registry. It installs the wheels it lacks without dependencies, runs the
+# gradient, furrow, derivative-form and limit benchmarks with reduced repeats and a chosen
+# test subset in the time left, and writes everything under $OUT. It stops at once where
+# JAX sees no GPU.
 #
 #   benchmarks/gpu_check.sh --download   # HERE, with a network: fill the wheel folder
 #   benchmarks/gpu_check.sh              # on the GPU machine (carry benchmarks/_work)
@@ -18,8 +19,13 @@
 # scratch copy without the source package, so that layout is the one imported. Each step
 # has its own time limit; a failed step is recorded, not fatal.
 #
-# Output under $OUT: env.txt (Python, JAX, devices, what was installed), RESULTS.md (the
-# benchmark sections), one log per step, tests.txt (pytest's summary), summary.txt.
+# Output under $OUT (default /tmp/jaxskin_check_out): env.txt (Python, JAX, devices, what
+# was installed), RESULTS.md (the benchmark sections: gradients, wrinkles-speed, limits),
+# RESULTS_cpu_chunks.md (the gradients with the CPU's chunking), forms.txt (bench_forms.py's
+# two lines), one log per step, tests.txt (pytest's summary line), summary.txt. The wheel
+# folder is needed only where the machine cannot install from a package index: after
+# `pip install -e '.[cuda13,test]'` (or `cuda12`) in a virtual environment,
+# `PYTHON=.venv/bin/python benchmarks/gpu_check.sh` finds everything installed.
 set -u
 ROOT="${JAXSKIN_ROOT:-$(cd "$(dirname "$0")/.." && pwd)}"  # the repository
 WHEELS="$ROOT/benchmarks/_work/wheels"
@@ -29,7 +35,8 @@ for arg in "$@"; do
   case "$arg" in
     --cpu) MODE=cpu ;;
     --download) MODE=download ;;
-    *) echo "gpu_check.sh: unknown argument $arg" >&2; exit 2 ;;
+    -h|--help) sed -n '2,/^set -u/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
+    *) echo "gpu_check.sh: unknown argument $arg (--cpu, --download or --help)" >&2; exit 2 ;;
   esac
 done
 
@@ -39,6 +46,7 @@ if [ "$MODE" = download ]; then
   "$PIP" -m pip download -q --no-deps -d "$WHEELS" trimesh==5.2.0 colour-science==0.4.7 \
     imageio==2.38.1 jaxtyping==0.3.11 wadler-lindig tqdm==4.70.1 pypng==0.20220715.0 \
     mpmath==1.4.1 pytest==9.2.0 pluggy==1.7.0 iniconfig==2.3.1 cycler==0.12.1 \
+    pytest-xdist==3.8.0 execnet==2.1.2 \
     pyparsing==3.3.3 packaging typing-extensions
   "$PIP" -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 \
     --platform manylinux2014_x86_64 --platform manylinux_2_28_x86_64 -d "$WHEELS" \
@@ -59,8 +67,8 @@ if [ "$MODE" = cpu ]; then
   PY="${PYTHON:-$ROOT/.venv/bin/python}"
   QUICK=--quick; REPEAT=2; LIMIT=400; TEST_LIMIT=900; TOTAL=3600; WORKERS=2
   SCENES=(camera.size=64 camera.height=64 texture.size=64)
-else  # four benchmark steps of at most LIMIT, the tests in what is left of TOTAL
-  QUICK=; REPEAT=3; LIMIT=80; TEST_LIMIT=240; TOTAL=450; WORKERS=8
+else  # six benchmark steps of at most LIMIT, the tests in what is left of TOTAL
+  QUICK=; REPEAT=3; LIMIT=80; TEST_LIMIT=240; TOTAL=480; WORKERS=8
   SCENES=()
 fi
 
@@ -72,6 +80,7 @@ find "$DEPS" -name __pycache__ -prune -exec rm -rf {} +
 missing=()
 for pair in trimesh:trimesh colour:colour_science imageio:imageio jaxtyping:jaxtyping \
             wadler_lindig:wadler_lindig tqdm:tqdm png:pypng mpmath:mpmath pytest:pytest \
+            xdist:pytest-xdist execnet:execnet \
             pluggy:pluggy iniconfig:iniconfig matplotlib:matplotlib PIL:pillow \
             kiwisolver:kiwisolver contourpy:contourpy fontTools:fonttools cycler:cycler \
             pyparsing:pyparsing packaging:packaging typing_extensions:typing_extensions; do
@@ -95,6 +104,11 @@ print('jaxskin from', jaxskin.__file__)"; echo "installed: ${missing[*]:-nothing
   nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv 2>/dev/null; } \
   > "$OUT/env.txt" 2>&1
 cat "$OUT/env.txt" | tee -a "$OUT/summary.txt"
+if [ "$MODE" = gpu ] && ! "$PY" -c "import jax, sys; sys.exit(jax.default_backend() != 'gpu')"
+then  # JAX would fall back to the CPU at full sizes: every step at its limit, no figures
+  log "gpu_check.sh: JAX sees no GPU here (env.txt); on a CPU run it with --cpu"
+  exit 2
+fi
 
 step() {  # step NAME LIMIT COMMAND...: run with a time limit, log under $OUT, record it
   local name=$1 limit=$2; shift 2
@@ -111,6 +125,10 @@ step() {  # step NAME LIMIT COMMAND...: run with a time limit, log under $OUT, r
 RUN=("$PY" benchmarks/run.py --device --results "$OUT/RESULTS.md" --repeat "$REPEAT" $QUICK)
 step gradients "$LIMIT" "${RUN[@]}" gradients
 step furrows "$LIMIT" "$PY" benchmarks/bench_wrinkles.py --speed $QUICK --results "$OUT/RESULTS.md"
+# the makeup derivative's forms: the device's (plain on a GPU) and XLA:CPU's, a process each
+step forms_plain "$LIMIT" "$PY" benchmarks/bench_forms.py plain $QUICK
+step forms_cpu "$LIMIT" "$PY" benchmarks/bench_forms.py cpu $QUICK
+grep -h " forward " "$OUT/forms_plain.log" "$OUT/forms_cpu.log" > "$OUT/forms.txt"
 step gradients_cpu_chunks "$LIMIT" "$PY" benchmarks/bench_gradients.py --chunking cpu \
   --repeat "$REPEAT" $QUICK --results "$OUT/RESULTS_cpu_chunks.md"
 step limits "$LIMIT" "${RUN[@]}" limits

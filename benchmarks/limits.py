@@ -142,6 +142,20 @@ def furrow_stages(size: int):
              [s.mask, s.field1, s.field2, key], True)]
 
 
+_CPU_READING = """\
+Reading (of the 2-core CPU runs; a GPU's is in the issue 19 section): the KM texture is
+the stage nearest its limits, 7–8× a memory pass of its 185 MB and 7–8× its arithmetic at
+peak (over this session's runs); what is left is XLA's materialised intermediates. The
+renders sit far above both lines (tens of × a pass of their bytes, which fit in this CPU's
+cache, so the pass itself is fast; 10–90× peak): small per-pixel work, gathers (bilinear
+view sampling, texel lists) that XLA does not count as arithmetic, and for the makeup face
+the three spectral colours computed apart (`layered._separately`). The FFT blur is 3× its
+arithmetic ideal. The gaps are where a custom kernel could gain; no XLA flag closes them.
+(That reading is issue 8's, from a run without the gradient and furrow rows; those are
+issue 19's: the furrow row's memory line is the time to touch its texels once, the floor a
+parallel furrow program could reach.)"""
+
+
 def _nbytes(tree) -> int:
     """Bytes of the arrays in `tree` (random keys and Python scalars: none)."""
     return int(sum(a.nbytes for a in jax.tree.leaves(tree) if hasattr(a, "nbytes")
@@ -165,7 +179,7 @@ def main(argv: list[str] | None = None):
             cost = cost[0] if isinstance(cost, list) else cost
             flops = float(cost.get("flops", 0.0)) + float(cost.get("transcendentals", 0.0))
             t_peak = flops / peak
-            flops_cols = (f"{flops / 1e9:.2f}", f"{t_peak * 1e3:.2f}", f"{t / t_peak:.0f}×")
+            flops_cols = (f"{flops / 1e9:.3g}", f"{t_peak * 1e3:.3g}", f"{t / t_peak:.0f}×")
         rows.append((name, f"{t * 1e3:.2f}", f"{nbytes / 1e6:.1f}", f"{t_mem * 1e3:.3f}",
                      f"{t / t_mem:.1f}×", f"{t_stream * 1e3:.3f}", f"{t / t_stream:.0f}×",
                      *flops_cols))
@@ -175,7 +189,11 @@ def main(argv: list[str] | None = None):
                "XLA GFLOP", "at peak ms", "× peak"], rows)
     print(f"peak {peak / 1e9:.0f} GFLOP/s (float32 matmul)")
     print(t)
-    command = "python benchmarks/limits.py" + (" --quick" if opts.quick else "")
+    command = common.command("benchmarks/limits.py", argv)
+    reading = _CPU_READING if jax.default_backend() == "cpu" and not opts.quick else (
+        "No reading is written for this run (tiny sizes, or not a CPU): read the table. The "
+        "2-core CPU's reading is in RESULTS.md's `limits` section, an H200's in its issue 19 "
+        "section.")
     write_section("limits", f"""## Physical limits: memory and arithmetic (issues 8, 19)
 
 Command: `{command}`. Machine: {machine()}. Device: {device()}.
@@ -185,21 +203,13 @@ GFLOP/s. "memory pass": the stage's input and output bytes read and written once
 fused copy, one call writing a fresh output as a stage does; "in-place pass": the same
 copy in place, {PASSES} in one program, the time of one (the memory's own rate, without the
 fresh output's first touch or the call's dispatch); "XLA GFLOP": XLA's count for the
-compiled program (transcendentals as one each).
+compiled program (transcendentals as one each). Warm times: the best of {opts.repeat}
+calls. "—": a program of loops, whose arithmetic XLA counts once per loop body, not per
+trip (no arithmetic line).
 
 {t}
 
-Reading (of the 2-core CPU runs; a GPU's is in the issue 19 section): the KM texture is
-the stage nearest its limits, 7–8× a memory pass of its 185 MB and 7–8× its arithmetic at
-peak (over this session's runs); what is left is XLA's materialised intermediates. The
-renders sit far above both lines (tens of × a pass of their bytes, which fit in this CPU's
-cache, so the pass itself is fast; 10–90× peak): small per-pixel work, gathers (bilinear
-view sampling, texel lists) that XLA does not count as arithmetic, and for the makeup face
-the three spectral colours computed apart (`layered._separately`). The FFT blur is 3× its
-arithmetic ideal. The gaps are where a custom kernel could gain; no XLA flag closes them.
-(That reading is issue 8's, from a run without the gradient and furrow rows; those are
-issue 19's: the furrow row's memory line is the time to touch its texels once, the floor a
-parallel furrow program could reach.)
+{reading}
 """)
 
 

@@ -9,7 +9,7 @@ machine, the device and the command); the order below runs the cheap, foundation
 first. `--device` prints the device JAX measures on (platform, kind, count) before anything
 runs; every section records it too. `--results PATH` writes the sections to PATH instead
 of RESULTS.md (the GPU check writes under $OUT). `--quick` and `--repeat N` are passed to
-the benchmarks that take them (gradients, limits).
+the benchmarks that take them (wrinkles, gradients, limits).
 """
 
 from __future__ import annotations
@@ -37,11 +37,17 @@ BENCHMARKS = {
 
 
 def main(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(prog="run.py", add_help=True)
-    ap.add_argument("names", nargs="*")
-    ap.add_argument("--device", action="store_true", help="print the device measured")
+    ap = argparse.ArgumentParser(prog="run.py", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("names", nargs="*", metavar="NAME",
+                    help=f"benchmarks to run, in this order (default: all): "
+                         f"{', '.join(BENCHMARKS)}")
+    ap.add_argument("--device", action="store_true",
+                    help="print the device JAX measures on (its default one) before anything "
+                         "runs; it chooses nothing: JAX_PLATFORMS=cpu or cuda does")
     ap.add_argument("--results", type=Path, help="write the sections to this file")
-    ap.add_argument("--quick", action="store_true", help="tiny sizes, where supported")
+    ap.add_argument("--quick", action="store_true",
+                    help="tiny sizes (a check that it runs), where supported")
     ap.add_argument("--repeat", type=int, help="timed repeats, where supported")
     opts = ap.parse_args(argv)
     names = opts.names or list(BENCHMARKS)

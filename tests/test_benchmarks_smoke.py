@@ -93,3 +93,25 @@ def test_gpu_check_script_parses_and_rejects_unknown_arguments():
     assert subprocess.run(["bash", "-n", str(script)]).returncode == 0
     r = subprocess.run(["bash", str(script), "--nope"], capture_output=True, text=True)
     assert r.returncode == 2 and "unknown argument --nope" in r.stderr
+
+
+def test_benchmark_help_writes_nothing_and_typos_are_refused(tmp_path, capsys):
+    """`bench_wrinkles.py --help` ran the whole benchmark and rewrote RESULTS.md (a trial):
+    now every option is parsed first; a misspelt one is an error, not a full-size run."""
+    import bench_forms
+    import common
+    import pytest
+
+    results = Path(common.RESULTS)
+    before = results.read_bytes()
+    for main, argv in ((bench_wrinkles.main, ["--help"]), (bench_forms.main, ["--help"]),
+                       (bench_wrinkles.main, ["--quik"]), (bench_forms.main, ["plain", "--quik"]),
+                       (bench_forms.main, [])):
+        with pytest.raises(SystemExit) as e:
+            main(argv)
+        assert e.value.code == (0 if argv == ["--help"] else 2), argv
+    assert results.read_bytes() == before
+    assert "--speed" in capsys.readouterr().out
+    assert common.command("benchmarks/limits.py", ["--quick", "--results", "/x/R.md",
+                                                   "--repeat", "3"]) == \
+        "python benchmarks/limits.py --quick --repeat 3"
