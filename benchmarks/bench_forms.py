@@ -10,7 +10,8 @@ timed in turn, best of 8 rounds.
 A variant is `cpu`, `plain`, or `plain+NAME` with NAME one of `apart`, `skip`, `sums`
 (`layered._cpu_form` says what each is). Chunking is one wide chunk in every variant (on a
 CPU as well: compare variants on the device they are meant for). Run each variant in its
-own process: the derivative's rule is built at the first trace. Prints one line.
+own process: the forms are read when the derivative is traced, and jit keeps the first
+trace. Prints one line.
 """
 
 from __future__ import annotations

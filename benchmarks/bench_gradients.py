@@ -124,13 +124,14 @@ def measure(quick: bool = False, repeat: int = 5):
 
 def _chunking_option(ap):
     ap.add_argument("--chunking", choices=["device", "cpu"], default="device",
-                    help="the makeup derivative's loops: the device's own chunking (default) "
-                         "or the CPU's (chunks of 1000 texels, two a step) on any device")
+                    help="the makeup derivative's transpose loop: the device's own chunking "
+                         "(default) or the CPU's (chunks of 1000 texels, two a step) on any "
+                         "device; forward mode keeps its own chunks")
 
 
 def main(argv: list[str] | None = None):
     args = common.options(__doc__, argv, _chunking_option)
-    if args.chunking == "cpu":  # before anything is traced: the rule is built at trace time
+    if args.chunking == "cpu":  # before anything is traced: jit keeps the first trace
         layered._chunking = lambda P: (layered.CHUNK, layered.STREAMS)
     print(machine())
     rows = measure(args.quick, args.repeat)

@@ -48,14 +48,15 @@ def _spectral_inputs(point, per_texel_skin, P=40, L=4, seed=0):
 @pytest.mark.parametrize("point", ["ordinary", "stiff"])
 @pytest.mark.parametrize("per_texel_skin", [False, True], ids=["skin per band", "skin map"])
 @pytest.mark.parametrize("blurred", [False, True], ids=["unblurred", "blurred"])
-def test_cotangents_equal_autodiff_of_the_plain_forward(x64, blurred, per_texel_skin, point):
+def test_cotangents_equal_autodiff_of_the_plain_forward(x64, monkeypatch, blurred,
+                                                        per_texel_skin, point):
     """Every cotangent of `_colours` (X, E, h, h_l, S, K, skin), by hand, against jax.vjp of
-    `_joint` (the same colours in one plain program), to 1e-10 of the largest entry."""
-    assert layered._cpu_form("sums")  # this run traces XLA:CPU's forms
+    `_joint` (the same colours in one plain program), to 1e-10 of the largest entry, with
+    XLA:CPU's forms on any device."""
+    monkeypatch.setattr(layered, "_cpu_form", lambda name: True)
     # ragged chunks, two a step (the CPU's default); at the stiff point also one and three,
-    # and all texels as one chunk (a GPU's `_chunking`; the chunking does not depend on the
-    # values)
-    ways = ((16, 1), (16, 2), (16, 3), (None, 1)) if point == "stiff" else ((16, 2),)
+    # and all 40 texels as one chunk (the chunking does not depend on the values)
+    ways = ((16, 1), (16, 2), (16, 3), (40, 1)) if point == "stiff" else ((16, 2),)
     _check_cotangents(blurred, per_texel_skin, point, ways)
 
 
@@ -63,8 +64,9 @@ def test_cotangents_equal_autodiff_of_the_plain_forward(x64, blurred, per_texel_
 @pytest.mark.parametrize("blurred", [False, True], ids=["unblurred", "blurred"])
 def test_the_forms_a_gpu_traces_equal_autodiff(x64, monkeypatch, blurred, per_texel_skin):
     """The same at the stiff point with the forms a GPU traces (`layered._cpu_form` False:
-    one wide chunk, the colours in one program, no skipped layers, plain sums), so that a
-    CPU-only run checks them too; every form is asked for."""
+    wide chunks, the colours in one program, no skipped layers, plain sums), so that a
+    CPU-only run checks them too; every form is asked for. WIDE_CHUNK 16 makes the 40
+    texels three equal chunks of 14, the last padded, and the tangent's chunks 2 texels."""
     asked = set()
 
     def plain(name):
@@ -72,6 +74,8 @@ def test_the_forms_a_gpu_traces_equal_autodiff(x64, monkeypatch, blurred, per_te
         return False
 
     monkeypatch.setattr(layered, "_cpu_form", plain)
+    monkeypatch.setattr(layered, "WIDE_CHUNK", 16)
+    assert layered._chunking(40) == (14, 1) and layered._chunking(0) == (1, 1)
     _check_cotangents(blurred, per_texel_skin, "stiff", ((None, None), (16, 3)))
     assert asked >= {"chunks", "skip", "sums"}, asked
     # The colours and their tangent (forward mode: `_chunked_tangent`) against the CPU's forms.
@@ -79,10 +83,10 @@ def test_the_forms_a_gpu_traces_equal_autodiff(x64, monkeypatch, blurred, per_te
     tangents = tuple(jnp.asarray(np.random.default_rng(3).normal(size=a.shape)) for a in args)
 
     def colours_and_tangent():
-        return jax.jvp(lambda *a: layered._colours(GRID, True, *a), args, tangents)
+        return jax.jvp(lambda *a: layered._colours(GRID, blurred, *a), args, tangents)
 
     together = colours_and_tangent()
-    assert "apart" in asked
+    assert "apart" in asked or not blurred
     monkeypatch.setattr(layered, "_cpu_form", lambda name: True)
     for plain, cpu in zip(together, colours_and_tangent(), strict=True):
         assert float(jnp.max(jnp.abs(plain - cpu))) <= 1e-12 * float(jnp.max(jnp.abs(cpu)))

@@ -177,20 +177,25 @@ STREAMS = 2
 WIDE_CHUNK = 262_144
 
 
-def _chunking(P: int) -> tuple[int, int]:
-    """`(texels a chunk, chunks a step)` of the derivative's loops over `P` texels, for the
-    device JAX compiles for: `(CHUNK, STREAMS)` on a CPU (cache-sized chunks, two threads'
-    worth a step), one wide chunk a step elsewhere (`WIDE_CHUNK`)."""
+def _chunking(P: int, wide: int | None = None) -> tuple[int, int]:
+    """`(texels a chunk, chunks a step)` of the transpose's loop over `P` texels: on a CPU
+    `(CHUNK, STREAMS)` (cache-sized chunks, two threads' worth a step); elsewhere one chunk
+    a step, as few chunks of at most `wide` texels (default `WIDE_CHUNK`) as cover `P`,
+    of equal size (so the last is not mostly padding)."""
     if _cpu_form("chunks"):
         return CHUNK, STREAMS
-    return min(P, WIDE_CHUNK), 1
+    chunks = max(1, -(-P // (wide or WIDE_CHUNK)))
+    return max(1, -(-P // chunks)), 1
 
 
 def _cpu_form(name: str) -> bool:
-    """Whether to trace the form written for XLA:CPU of `name` (the device JAX compiles for
-    is a CPU), rather than the plain one a GPU compiler fuses well:
+    """Whether to trace the form written for XLA:CPU of `name`, rather than the plain one a
+    GPU compiler fuses well: whether JAX's default backend is the CPU when the function is
+    traced (a computation placed on the CPU of a GPU machine, `jax.default_device`, gets
+    the GPU's forms: the same values, not the CPU's speed):
 
-    - `"chunks"`: the derivative's loops over cache-sized chunks (`_chunking`);
+    - `"chunks"`: the derivative's loops over cache-sized chunks (`_chunking`,
+      `_chunked_tangent`);
     - `"apart"`: the three spectral colours as three programs (`_separately`), not one;
     - `"skip"`: a layer absent from a whole chunk skips its S and K sums (`lax.cond`);
     - `"sums"`: sums over bands and texels as products with ones (`_rowsum`, `_colsum`).
@@ -207,7 +212,7 @@ def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
 
     Performance (XLA on CPU). Forward: without blur one spectral product; with it three,
     each computed apart (`_separately`). Forward mode: `_chunked_tangent`, a loop over
-    chunks of texels (`_chunking`), each chunk's tangent by `jax.jvp` of `_joint`,
+    chunks of texels, each chunk's tangent by `jax.jvp` of `_joint`,
     checkpointed. Reverse mode: that tangent's transpose written by hand (`_cotangents`,
     through `linear.linear_call`): the colours' cotangent goes to band space through the
     transposed colour matrices, then one elementwise pass per chunk recomputes the layers
@@ -224,9 +229,9 @@ def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
     and K sums as products (2-core AVX-512, ABBA): maps 1.91–2.05×, scalars 2.28–2.53×.
     Since 2026-12-04 a layer absent from a whole chunk skips its S and K sums (quiet,
     separate processes: scalars 2.80–2.85× → 2.58–2.62×; maps unchanged). On a GPU
-    (`_cpu_form`): the colours in one program and the loops in one wide chunk; on an H200
-    the forward 1.0 ms, the gradients 2.1 ms (maps) and 3.1 ms (scalars), where the CPU's
-    forms took 1.8 ms, 2.95 ms and 4.2 ms (and 8.3 ms for the scalars with the CPU's
+    (`_cpu_form`): the colours in one program and the loops in wide chunks; on an H200 the
+    forward 1.0–1.1 ms, the gradients 2.1–2.2 ms (maps) and 3.1–3.2 ms (scalars), where the
+    CPU's forms took 1.8 ms, 2.95 ms and 4.2 ms (and 8.3 ms for the scalars with the CPU's
     chunks). Earlier: plain reverse mode through this forward (the `switch` inside a `map`
     keeps every branch's residuals) 162× and 21 GB; reverse mode over checkpointed chunks of
     `_joint` 5.8–14×.
@@ -262,14 +267,13 @@ def _per_texel(a, axis: int, P: int, chunk: int):
 
 
 def _chunked_tangent(grid, blurred, primals, tangents):
-    """Forward mode: the tangent of the colours, a loop over chunks of texels (`_chunking`),
-    each chunk's tangent recomputed from its inputs (checkpointed)."""
+    """Forward mode: the tangent of the colours, a loop over chunks of texels (`CHUNK` on a
+    CPU, else chunks of at most an eighth of `WIDE_CHUNK`: `jax.jacfwd` batches this
+    function over every tangent, 21 for the makeup's scalars, multiplying each intermediate
+    by as many), each chunk's tangent recomputed from its inputs (checkpointed)."""
     X = primals[0]
     P = X.shape[1]
-
-    # Off the CPU an eighth of the wide chunk: `jax.jacfwd` batches this function over every
-    # tangent (21 for the makeup's scalars), multiplying each intermediate by as many.
-    chunk = CHUNK if _cpu_form("chunks") else min(P, WIDE_CHUNK // 8)
+    chunk = CHUNK if _cpu_form("chunks") else _chunking(P, WIDE_CHUNK // 8)[0]
 
     def per_texel(a, axis):
         return _per_texel(a, axis, P, chunk)
