@@ -341,7 +341,8 @@ class SceneConfig:
 # the sequential one. Measured on the hand, 2 cores (benchmarks/RESULTS.md, "Parallel furrow
 # program"), the furrow program alone, cold, sequential / parallel: 2.4 / 3.3–3.4 s at
 # 512², 2.6–3.0 / 3.6–3.9 s at 1024², 4.0–4.3 / 3.4–4.6 s at 2048², 10.4 / 8.1 s at 4096²;
-# warm the parallel one is 1.9–3.5x quicker (512² to 2048², two runs).
+# warm the parallel one is 1.9–4.5x quicker (512² to 2048², three runs; on 2026-12-04, an
+# Intel VM, cold 1.5 / 2.2 s at 512², 2.4 / 2.3 s at 1536², 3.2 / 2.5 s at 2048²).
 PARALLEL_FROM_SIZE_ON_CPU = 2048
 
 
