@@ -120,6 +120,11 @@ def read_samples(path) -> BRDFSamples:
             if bad.size:
                 raise t.error(f"polar angle must be in [0, 90] degrees, got "
                               f"{t.column(c)[bad[0]]:g}", bad[0], c)
+        polar = np.concatenate([t.column("theta_in_deg"), t.column("theta_out_deg")])
+        if len(t.data) >= 8 and 0 < polar.max() <= math.pi / 2 + 1e-6:
+            raise t.error(f"every polar angle is at most {polar.max():.4g}: radians? The "
+                          "columns are in degrees (0-90); convert them, or give unit vectors "
+                          "(wi_x, ..., wo_z)", column="theta_in_deg")
         for c in ("phi_in_deg", "phi_out_deg"):
             bad = np.flatnonzero(np.abs(t.column(c)) > 360)
             if bad.size:
@@ -335,10 +340,16 @@ WORSE, POOR = 2.0, 0.05
 
 
 def fit_warnings(result: BRDFFit) -> list[str]:
-    """What the fit's errors say to look at, one line per channel that fits far worse than
-    the best one (a start stuck in a local minimum: its highlight colour comes out wrong)."""
+    """What the fit says to look at: a channel whose diffuse albedo is above 1 (values in
+    other units), and one line per channel that fits far worse than the best one (a start
+    stuck in a local minimum: its highlight colour comes out wrong)."""
     best = int(np.argmin(result.rel_rms))
     out = []
+    rho = np.asarray(result.params.diffuse, float)  # a surface cannot reflect more than
+    if np.any(rho > 1.0):  # it receives
+        said = ", ".join(f"{name} {r:.3g}" for name, r in zip("RGB", rho, strict=True))
+        out.append(f"diffuse albedo {said}: above 1 is more light out than in; are the BRDF "
+                   "values scaled (0-255, percent)? fit-brdf reads them in 1/sr")
     for k, name in enumerate("RGB"):
         e = float(result.rel_rms[k])
         if e > POOR and e > WORSE * float(result.rel_rms[best]):

@@ -111,8 +111,9 @@ def _check_scene(sc, count: int) -> list:
 
 def picture_warnings(sc, side: list[str] | None = None) -> list[str]:
     """What `jaxskin render` and the editor's footer warn about a scene's picture: maps that
-    change nothing (`idle_maps`), a view from the side of a planar map (`hidden_side`, or
-    `side` where the caller has it already), layers thick as masks (`thick_layers`)."""
+    change nothing (`idle_maps`: each line begins with the map's key), a view from the side
+    of a planar map (`hidden_side`, or `side` where the caller has it already), layers thick
+    as masks (`thick_layers`)."""
     return idle_maps(sc) + (hidden_side(sc) if side is None else side) + thick_layers(sc)
 
 
@@ -122,14 +123,17 @@ def idle_maps(sc) -> list[str]:
     scalar (`skin.melanin_image` × `skin.melanin`, ...), so with that scalar at 0 (the
     default of `skin.melanin`) the map is read and multiplied by 0: the render is the same
     to the byte, and nothing said so."""
-    from .scene import SKIN_MAPS
+    from .scene import SKIN_MAPS, SKIN_MAPS_READ
 
     out = []
     sp = sc.config.spectral
+    model = sc.values["material.model"]
     for map_key, (scalar, image) in SKIN_MAPS.items():
         if sc.values.get(image) and (sp is None or sp.image_of(map_key) is None):
-            out.append(f"{image}: scene {sc.name!r}'s material model "
-                       f"({sc.values['material.model']}) reads no such map: it changes nothing")
+            reads = [] if sp is None else [SKIN_MAPS[m][1] for m in SKIN_MAPS_READ[sp.skin]]
+            out.append(f"{image} changes nothing in scene {sc.name!r}: its material model "
+                       f"({model}{'' if sp is None else f', {sp.skin} skin'}) reads "
+                       + (f"{' and '.join(reads)} instead" if reads else "no skin map"))
         elif sc.values.get(image) and scalar in sc.params and float(sc.values[scalar]) == 0.0:
             out.append(f"{image} scales {scalar}, which is 0 in scene {sc.name!r}: the map "
                        f"changes nothing (set {scalar} above 0, e.g. to 1)")

@@ -825,13 +825,16 @@ def _render(args, run: _Run) -> int:
                 planned[kind] = outputs.plan(f"{base}_{kind}.png", sc.source)
         files.append(planned)
     for sc, skip in zip(scenes, unswept, strict=True):  # after every check: warnings, not
-        for item in unused_overrides(sc, args.overrides):  # errors (-D serves every scene)
-            _say(f"jaxskin: warning: -D {item} changes nothing in scene {sc.name!r} (its "
-                 "material model or settings do not use it)")
+        pictures = picture_warnings(sc)  # errors (-D serves every scene)
+        said = {line.split(" ", 1)[0].rstrip(":") for line in pictures}  # a map's key first
+        for item in unused_overrides(sc, args.overrides):
+            if _parse_override(item)[0] not in said:  # an idle map's line says more
+                _say(f"jaxskin: warning: -D {item} changes nothing in scene {sc.name!r} "
+                     "(its material model or settings do not use it)")
         if skip:
             _say(f"jaxskin: warning: --sweep {args.sweep[0]} changes nothing in scene "
                  f"{sc.name!r} (not one of its parameters): it is rendered once, unswept")
-        for line in picture_warnings(sc):
+        for line in pictures:
             _say(f"jaxskin: warning: {line}")
     run.outputs.append(outputs)
     # The units of work: a scene's sweep in batches of cluster.SWEEP_BATCH values (one

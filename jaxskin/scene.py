@@ -153,6 +153,10 @@ SKIN_MAPS = {"skin.melanin_map": ("skin.melanin", "skin.melanin_image"),
              "skin.melanin_fraction_map": ("skin.melanin_fraction",
                                            "skin.melanin_fraction_image"),
              "skin.haemoglobin_map": ("skin.haemoglobin", "skin.haemoglobin_image")}
+# The skin maps each skin model reads (`SceneConfig.skin_model`): a map another model's
+# scene sets is left out of its config and warned about (`checks.idle_maps`).
+SKIN_MAPS_READ = {"nist": ("skin.melanin_map",),
+                  "biophysical": ("skin.melanin_fraction_map", "skin.haemoglobin_map")}
 # The biophysical skin's parameters (`biophysical.Skin` fields) as scene keys.
 BIOPHYSICAL_KEYS = {"melanin": "skin.melanin_fraction", "eumelanin": "skin.eumelanin",
                     "haemoglobin": "skin.haemoglobin", "oxygenation": "skin.oxygenation",
@@ -388,9 +392,8 @@ class Scene:
                                       v["spectral.illuminant"], v["mesh.unit_mm"],
                                       v["sss.method"] if v["sss.enabled"] else None,
                                       v["sss.texel_mm"], self.layers, self.skin_model,
-                                      v["skin.melanin_image"],
-                                      v["skin.melanin_fraction_image"],
-                                      v["skin.haemoglobin_image"])
+                                      *(v[image] if key in SKIN_MAPS_READ[self.skin_model]
+                                        else None for key, (_, image) in SKIN_MAPS.items()))
         # The BRDF file only where the Lafortune model reads it: another model's config
         # (its jit key) does not change with it, and `-D material.brdf=...` on a Blinn
         # scene is reported as changing nothing (`checks.unused_overrides`).

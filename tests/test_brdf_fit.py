@@ -1,5 +1,6 @@
 """Lafortune fitting: held-out round trip, residual gradients, a failing start, bad input."""
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -81,6 +82,8 @@ BAD = [
     ("not unit", "wi_x,wi_y,wi_z,wo_x,wo_y,wo_z,R,G,B\n0,0,0.5,0,0,1,0.1,0.1,0.1\n", 2, "wi_x", "unit"),
     ("below", "wi_x,wi_y,wi_z,wo_x,wo_y,wo_z,R,G,B\n0,0,1,0,0,-1,0.1,0.1,0.1\n", 2, "wo_z", "below"),
     ("negative weight", HEADER.replace("\n", ",weight\n") + ROW.replace("\n", ",-1\n"), 2, "weight", "in [0,"),
+    ("radians", HEADER + "".join(f"{0.1 * k},0,{0.2 * k},180,0.2,0.1,0.1\n" for k in range(8)),
+     1, "theta_in_deg", "every polar angle is at most 1.4: radians?"),
 ]
 
 
@@ -155,6 +158,16 @@ def test_a_channel_stuck_far_above_the_others_is_warned_about(fitted):
     assert [s[:9] for s in said] == ["channel G", "channel B"], said
     assert said[0].startswith("channel G fits at 54.0% against R's 4.3%") and \
         "--starts (e.g. 32)" in said[0], said
+
+
+def test_values_in_other_units_are_warned_about(fitted):
+    """The samples × 255 (8-bit values) fitted to a diffuse albedo of ~100 with no word, and
+    rendered a white hand (a trial): a diffuse albedo above 1 is warned about."""
+    samples, _ = fitted
+    scaled = dataclasses.replace(samples, f=samples.f * 255)
+    said = brdf.fit_warnings(brdf.fit(scaled, lobes=1, starts=1))
+    assert len(said) == 1 and said[0].startswith("diffuse albedo R ") and \
+        "scaled (0-255, percent)?" in said[0], said
 
 
 def test_samples_from_a_european_spreadsheet_read_as_the_shipped_ones(tmp_path):

@@ -349,8 +349,30 @@ def test_a_skin_map_the_model_does_not_read_is_named_and_never_overwritten(tmp_p
     (tmp_path / "n.toml").write_text('name = "n"\n[mesh]\nfile = "hand"\n[skin]\n'
                                      'melanin_image = "n.png"\n')
     assert idle_maps(load_scene(tmp_path / "n.toml")) == [
-        "skin.melanin_image: scene 'n''s material model (blinn) reads no such map: it "
-        "changes nothing"]
+        "skin.melanin_image changes nothing in scene 'n': its material model (blinn) reads "
+        "no skin map"]
+    # A map of the other spectral skin: left out of the configuration, named (the
+    # biophysical face rendered the same to the byte with skin.melanin_image, and the
+    # spectral face with skin.melanin_fraction_image, without a word; a trial).
+    bio = load_scene("face", ["material.model=biophysical", "skin.melanin_fraction=0.3",
+                              f"skin.melanin_image={tmp_path / 'n.png'}"])
+    assert bio.config == load_scene("face", ["material.model=biophysical",
+                                             "skin.melanin_fraction=0.3"]).config
+    assert idle_maps(bio) == [
+        "skin.melanin_image changes nothing in scene 'face': its material model "
+        "(biophysical, biophysical skin) reads skin.melanin_fraction_image and "
+        "skin.haemoglobin_image instead"]
+    nist = load_scene("face", [f"skin.melanin_fraction_image={tmp_path / 'n.png'}"])
+    assert idle_maps(nist) == [
+        "skin.melanin_fraction_image changes nothing in scene 'face': its material model "
+        "(spectral, nist skin) reads skin.melanin_image instead"]
+    args = ["-D", "texture.size=32", "-D", "camera.size=32", "-D",
+            f"skin.melanin_fraction_image={tmp_path / 'n.png'}"]
+    assert main(["render", "face", "-o", str(tmp_path / "out"), *args]) == 0
+    err = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
+    assert err == ["jaxskin: warning: skin.melanin_fraction_image changes nothing in scene "
+                   "'face': its material model (spectral, nist skin) reads skin.melanin_image "
+                   "instead"], err  # once: not also as a -D that changes nothing
     assert main(["render", str(tmp_path / "n.toml"), "-o", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert f"n.png: the output {tmp_path / 'n.png'} would overwrite this input" in err, err
