@@ -638,3 +638,24 @@ def test_no_report_warns_of_an_earlier_runs_report_beside_the_new_fit(tmp_path, 
     (out / "f.png").unlink()
     assert main(["calibrate", str(src), "-o", str(out), "--no-report"]) == 0
     assert "earlier run's report" not in capsys.readouterr().err
+
+
+def test_extrapolating_most_of_the_grid_is_warned_about(tmp_path, capsys):
+    """A 500-600 nm measurement with --extrapolate linear was stretched over 380-780 nm
+    without a word, K falling from 9.9 to 0.003 per mm at 780 nm (a trial): the share made
+    up and each tenfold run-away are warned about; hold warns of the share only."""
+    lines = (ROOT / "data" / "measurements" / "foundation_beige.csv").read_text().splitlines()
+    kept = [x for x in lines if not x[:1].isdigit() or 500 <= float(x.split(",")[0]) <= 600]
+    src = tmp_path / "mid.csv"
+    src.write_text("\n".join(kept) + "\n")
+    assert main(["calibrate", str(src), "-o", str(tmp_path / "a"), "--no-report",
+                 "--extrapolate", "linear"]) == 0
+    warned = [x for x in capsys.readouterr().err.splitlines() if "warning" in x]
+    assert warned[0] == (f"jaxskin: warning: {src}: covers 500-600 nm, 25% of the renderer's "
+                         "380-780 nm: --extrapolate linear makes up the rest"), warned
+    assert any("--extrapolate linear takes K from" in x and "at 780 nm" in x
+               for x in warned[1:]), warned
+    assert main(["calibrate", str(src), "-o", str(tmp_path / "b"), "--no-report",
+                 "--extrapolate", "hold"]) == 0
+    warned = [x for x in capsys.readouterr().err.splitlines() if "warning" in x]
+    assert len(warned) == 1 and "--extrapolate hold makes up the rest" in warned[0], warned
