@@ -241,7 +241,14 @@ def _other_layout(path):
     the wavelength column after another (a sample name first); else None."""
     from jaxskin.formats import text_rows
 
+    if Path(path).suffix.lower() == ".json" or Path(path).read_bytes()[:1] == b"{":
+        return None, ("a JSON file, not a measurement CSV: a calibrated material (what "
+                      "calibrate writes) is named by a scene's [[layer]] material; calibrate "
+                      "reads wavelength_nm,R_<X>mm,... tables")
     for number, cells in text_rows(path):
+        if {"theta_in_deg", "wi_x"} & set(cells):
+            return number, ("BRDF samples (angles and R, G, B), not a measurement of "
+                            "spectra: fit them with 'jaxskin fit-brdf'")
         along = [c for c in cells[1:] if _WAVELENGTH_CELL.fullmatch(c)
                  and 200 <= float(c.lower().removesuffix("nm")) <= 3000]
         if len(cells) >= 5 and len(along) >= 0.8 * (len(cells) - 1):

@@ -83,7 +83,7 @@ def on_grid(f: formats.MaterialFile, grid: Grid) -> Material:
     outside = (g < wl[0] - 1e-9) | (g > wl[-1] + 1e-9)
     if outside.any() and f.extrapolate is None:
         raise InputError(
-            f"material '{f.name}' covers {wl[0]:g}-{wl[-1]:g} nm, the render grid "
+            f"material '{f.name}' covers {wl[0]:g}-{wl[-1]:g} nm, not all of the render grid "
             f"{g[0]:g}-{g[-1]:g} nm; add \"extrapolate\": \"hold\" or \"linear\" to the file "
             "(or calibrate with --extrapolate) to extend it", f.path, key="wavelength_nm")
     logS, logK = (extend(g, wl, np.log(v), f.extrapolate or "hold") for v in (f.S, f.K))

@@ -71,6 +71,11 @@ def slug(text: str) -> str:
     return s
 
 
+# The endings of the files the commands write or read: an -o folder still to be made with
+# one of them was meant as a file (`calibrate -o fit.json` made a folder 'fit.json').
+FILE_SUFFIXES = {".json", ".png", ".exr", ".glb", ".csv", ".toml", ".npz", ".jpg", ".jpeg"}
+
+
 def check_folder(path, option: str = "-o") -> Path:
     """An output folder that exists (a writable folder) or can be created; nothing is
     created (a probe file in an existing folder is removed at once)."""
@@ -80,6 +85,10 @@ def check_folder(path, option: str = "-o") -> Path:
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise InputError(f"{option}: expected a folder, but this is a file", path)
+    if not path.exists() and path.suffix.lower() in FILE_SUFFIXES:  # made a folder 'x.json'
+        raise InputError(f"{option}: expected the folder to write into, got a file name "
+                         f"({path.name!r}: the outputs are named after the inputs or scenes)",
+                         path)
     try:  # a link that leads nowhere: a missing target, or a loop (exit 1 after the work)
         os.stat(path)
     except FileNotFoundError:

@@ -24,6 +24,9 @@ BRDF_ROW = "30,0,40,180,0.2,0.1,0.1\n"
 # (id, file contents (str or bytes), line named or None, column named or None, words)
 CASES = [
     ("empty file", "", None, None, "no header row"),
+    # what calibrate writes, given back to it (was: 'line 4 begins with "wavelength_nm": [')
+    ("a material JSON", '{\n  "name": "x",\n  "wavelength_nm": [400, 410],\n  "S_per_mm": '
+     '[1, 2]\n}\n', None, None, "a JSON file, not a measurement CSV"),
     ("blank lines only", "\n\n  \n", None, None, "no header row"),
     ("header only", HEADER, 1, None, "needs at least 2 data rows"),
     ("one data row", HEADER + rows(ROWS[:1]), 1, None, "needs at least 2 data rows"),
@@ -169,3 +172,11 @@ def test_bad_csv_is_one_line_exit_2_nothing_written(tmp_path, capsys, contents, 
 
 def test_table_has_at_least_25_cases():
     assert len(CASES) + len(BRDF_CASES) >= 25
+
+
+def test_brdf_samples_given_to_calibrate_point_to_fit_brdf(tmp_path, capsys):
+    """fit-brdf pointed a measurement CSV to calibrate; calibrate now returns the favour."""
+    path, rc, err = _run(tmp_path, capsys, BRDF + BRDF_ROW * 3, "calibrate")
+    assert rc == 2 and err == (f"jaxskin: error: {path}:1: BRDF samples (angles and R, G, B), "
+                               "not a measurement of spectra: fit them with 'jaxskin "
+                               "fit-brdf'\n"), err

@@ -203,6 +203,8 @@ CASES = {
     "edit-far-away": lambda t: scene(t, '[mesh]\nfile = "hand"\n[[fields.edit]]\n'
                                     'at = [100, 100, 100]\nd1 = [1, 0, 0]\nd2 = [0, 1, 0]\n'),
     "out-newline": lambda t: ["render", "hand", "-o", str(t / "new\nline"), *SMALL],
+    "out-a-file-name": lambda t: ["calibrate", str(ROOT / "data" / "measurements" /
+                                                   "blush_rose.csv"), "-o", str(t / "fit.json")],
     # a link to nowhere, a link loop, a folder where the image goes: exit 1 after the
     # render (a trial)
     "out-dangling-link": lambda t: ["render", "hand", "-o", _link(t / "dl", t / "nowhere"),
@@ -256,6 +258,8 @@ CASES = {
                                       name="map.png"),
     "melanin-image-text": lambda t: layered(t, "blush_rose", "", "-D",
                                             f"skin.melanin_image={write(t, 'm.png', 'text')}"),
+    "melanin-image-missing": lambda t: layered(t, "blush_rose", "", "-D",
+                                               f"skin.melanin_image={t / 'nope.png'}"),
     # --- polygons
     "polygon-vertex-missing": lambda t: polygon(t, "vertices = [1, 2, 99999]"),
     "polygon-two-points": lambda t: polygon(t, "points = [[0.1, 0.1], [0.2, 0.2]]"),
@@ -466,6 +470,9 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
     ("D-mesh-with-the-scenes-edits", "(the scene's [[fields.edit]] were made for its own mesh, "
                                      "not the one -D mesh.file gives: write a scene file"),
     ("D-brdf-missing", "jaxskin: error: -D material.brdf=nope.json: key 'material.brdf'"),
+    ("melanin-image-missing", "key 'skin.melanin_image': no such file: "),
+    ("out-a-file-name", "-o: expected the folder to write into, got a file name ('fit.json'"),  # not "expected
+    # a greyscale image file, got ..." (a trial)
     ("sweep-static-key", "static setting (each value compiles its own program): render each "
                          "value with -D texture.size=VALUE"),
     ("material-wavelength-um", "key 'wavelength_nm': wavelengths 0.38-0.78 must lie in "

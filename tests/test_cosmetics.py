@@ -194,7 +194,7 @@ BAD_MATERIALS = [
      "increase"),
     ({"wavelength_nm": [400, 500], "S_per_mm": [1, 0], "K_per_mm": [1, 1]}, "S_per_mm", "> 0"),
     ({"wavelength_nm": [400, 700], "S_per_mm": [1, 2], "K_per_mm": [1, 1]}, "wavelength_nm",
-     "covers 400-700 nm, the render grid 380-780 nm"),
+     "covers 400-700 nm, not all of the render grid 380-780 nm"),
     ({"wavelength_nm": [380, 780], "S_per_mm": [1, 2], "K_per_mm": [1, 1],
       "extrapolate": "spline"}, "extrapolate", "\"hold\" or \"linear\""),
 ]
