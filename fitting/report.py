@@ -69,8 +69,10 @@ def write_report(m: Measurement, r: KMFit, path, extrapolate: str | None = None)
     _shade(ax, wl, r.identifiable)
     ax.semilogy(wl, r.S_per_mm, "-", color="C0", label="S fitted")
     ax.semilogy(wl, r.K_per_mm, "-", color="C1", label="K fitted")
-    ax.semilogy(wl, r.S_closed, "x", ms=4, color="C0", alpha=0.6, label="S closed form")
-    ax.semilogy(wl, r.K_closed, "x", ms=4, color="C1", alpha=0.6, label="K closed form")
+    ax.semilogy(wl, r.S_closed, "x", ms=4, color="C0", alpha=0.6,
+                label="S from R∞ and one film (closed form)")
+    ax.semilogy(wl, r.K_closed, "x", ms=4, color="C1", alpha=0.6,
+                label="K from R∞ and one film (closed form)")
     grid = Grid().wavelengths
     if wl[0] > grid[0] or wl[-1] < grid[-1]:  # the renderer's grid reaches beyond the data
         if extrapolate is None:
@@ -83,9 +85,11 @@ def write_report(m: Measurement, r: KMFit, path, extrapolate: str | None = None)
                                   strict=True):
                 ax.semilogy(x, v, "--", lw=1, color=c,
                             label=f"{name} as rendered (--extrapolate {extrapolate})")
+            label = "no data: extended"
             for lo, hi in ((x[0], wl[0]), (wl[-1], x[-1])):
                 if hi > lo:
-                    ax.axvspan(lo, hi, color="C1", alpha=0.08, lw=0, zorder=0)
+                    ax.axvspan(lo, hi, color="C1", alpha=0.08, lw=0, zorder=0, label=label)
+                    label = None
     ax.set(xlabel="wavelength (nm)", ylabel="per mm",
            title="S and K (grey: not identifiable, S from neighbours)")
     ax.legend(fontsize=7)
@@ -96,10 +100,11 @@ def write_report(m: Measurement, r: KMFit, path, extrapolate: str | None = None)
         ax.plot(wl, Rf - R, ".-", ms=3, lw=0.7, color=c, label=f"{X:g} mm")
     ax.plot(wl, r.R_inf_fit - m.R_inf, ".-", ms=3, lw=0.7, color="C3", label="R∞")
     ax.axhline(0, color="k", lw=0.5)
-    for s in (-3 * r.noise, 3 * r.noise):
-        ax.axhline(s, color="k", lw=0.5, ls=":")
+    for s, label in ((-3 * r.noise, "±3σ of the noise"), (3 * r.noise, None)):
+        ax.axhline(s, color="k", lw=0.5, ls=":", label=label)
     ax.set(xlabel="wavelength (nm)", ylabel="fit − measured",
-           title=f"residuals ({r.steps} LM steps{'' if r.converged else ', NOT converged'})")
+           title=f"residuals ({r.steps} fit iterations"
+                 f"{'' if r.converged else ', NOT converged'})")
     ax.legend(fontsize=7)
     with atomic_write(path, "wb") as fh:
         fig.savefig(fh, format="png", dpi=110)
