@@ -207,8 +207,11 @@ def _residuals(theta, args):
     return w_cos * (model - f) / scale
 
 
+MAX_STEPS = 200  # Levenberg–Marquardt steps a start may take
+
+
 @functools.partial(jax.jit, static_argnames=("max_steps",))
-def _solve_all(theta0, wi, wo, f, w_cos, scale, max_steps=200):
+def _solve_all(theta0, wi, wo, f, w_cos, scale, max_steps=MAX_STEPS):
     """LM for every (channel, start) at once: theta0 (C, S, P), f (C, m), scale (C,).
 
     The damped step solves the small normal equations (Cholesky) rather than a QR of the

@@ -700,6 +700,15 @@ def _sweeps(sc, text: str) -> bool:
     return key in sc.params and getattr(sc.params[key], "ndim", 1) == 0
 
 
+def _stem_of_file(value: str) -> str:
+    """A file's stem where a -D value names one (`m.png`, `dir/b.json`: `m`, `b`; the name
+    read `hand_skin.melanin_image-m.png.png`), else the value; the digest of many
+    overrides keeps whole paths."""
+    from .outputs import FILE_SUFFIXES
+
+    return Path(value).stem if Path(value).suffix.lower() in FILE_SUFFIXES else value
+
+
 def _base_name(sc, overrides, room: int = 16) -> str:
     """The scene's output name: its (checked) name, then `_<key>-<value>` per override (a
     digest of them when that is long), unless one of them is `name=...`: then that name
@@ -714,7 +723,8 @@ def _base_name(sc, overrides, room: int = 16) -> str:
         key, _, value = (s.strip() for s in item.partition("="))
         last.pop(key, None)
         last[key] = value
-    parts = [f"{slug(key)}-{slug(_name_value(key, value))}" for key, value in last.items()
+    parts = [f"{slug(key)}-{slug(_stem_of_file(_name_value(key, value)))}"
+             for key, value in last.items()
              if key != "name" and not named]  # `-D name=X` names the outputs X, nothing added
     suffix = "_".join(parts)
 
@@ -986,8 +996,10 @@ def _fit_brdf(args, run: _Run) -> int:
         outputs.done(report)
     print(f"{'channel':<8} {'rel. RMS error':>14} {'failed starts':>13} {'steps':>6}")
     for k, name in enumerate("RGB"):
+        steps = stats["steps_of_best"][k]  # at the cap: the best start was still improving
         print(f"{name:<8} {result.rel_rms[k]:>14.2%} {stats['failed_starts'][k]:>13} "
-              f"{stats['steps_of_best'][k]:>6}")
+              f"{steps:>6}" + (" (the most allowed: not converged)"
+                               if steps >= brdf.MAX_STEPS else ""))
     print(f"wrote {out}" + ("" if report is None else f" and {report}") + f" ({seconds:.1f} s)")
     for line in brdf.fit_warnings(result):
         warnings.warn(line, stacklevel=1)
