@@ -117,12 +117,22 @@ def picture_warnings(sc, side: list[str] | None = None) -> list[str]:
     return idle_maps(sc) + (hidden_side(sc) if side is None else side) + thick_layers(sc)
 
 
+def idle_map_keys(sc) -> set[str]:
+    """The image keys `idle_maps` warns about."""
+    return {key for key, _ in _idle_maps(sc)}
+
+
 def idle_maps(sc) -> list[str]:
-    """Warnings for skin maps that change nothing in scene `sc`: one its material model does
-    not read (`skin.melanin_image` in a Blinn scene), or a `skin.*_image` that scales its
-    scalar (`skin.melanin_image` × `skin.melanin`, ...), so with that scalar at 0 (the
-    default of `skin.melanin`) the map is read and multiplied by 0: the render is the same
-    to the byte, and nothing said so."""
+    """`_idle_maps`' warnings."""
+    return [line for _, line in _idle_maps(sc)]
+
+
+def _idle_maps(sc) -> list[tuple[str, str]]:
+    """`(image key, warning)` for skin maps that change nothing in scene `sc`: one its
+    material model does not read (`skin.melanin_image` in a Blinn scene), or a
+    `skin.*_image` that scales its scalar (`skin.melanin_image` × `skin.melanin`, ...), so
+    with that scalar at 0 (the default of `skin.melanin`) the map is read and multiplied by
+    0: the render is the same to the byte, and nothing said so."""
     from .scene import SKIN_MAPS, SKIN_MAPS_READ
 
     out = []
@@ -131,12 +141,12 @@ def idle_maps(sc) -> list[str]:
     for map_key, (scalar, image) in SKIN_MAPS.items():
         if sc.values.get(image) and (sp is None or sp.image_of(map_key) is None):
             reads = [] if sp is None else [SKIN_MAPS[m][1] for m in SKIN_MAPS_READ[sp.skin]]
-            out.append(f"{image} changes nothing in scene {sc.name!r}: its material model "
+            out.append((image, f"{image} changes nothing in scene {sc.name!r}: its material model "
                        f"({model}{'' if sp is None else f', {sp.skin} skin'}) reads "
-                       + (f"{' and '.join(reads)} instead" if reads else "no skin map"))
+                       + (f"{' and '.join(reads)} instead" if reads else "no skin map")))
         elif sc.values.get(image) and scalar in sc.params and float(sc.values[scalar]) == 0.0:
-            out.append(f"{image} scales {scalar}, which is 0 in scene {sc.name!r}: the map "
-                       f"changes nothing (set {scalar} above 0, e.g. to 1)")
+            out.append((image, f"{image} scales {scalar}, which is 0 in scene {sc.name!r}: "
+                        f"the map changes nothing (set {scalar} above 0, e.g. to 1)"))
     return out
 
 

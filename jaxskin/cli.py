@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from . import __version__, cluster
-from .checks import check_scene, picture_warnings, reading, unused_overrides
+from .checks import check_scene, idle_map_keys, picture_warnings, reading, unused_overrides
 from .io import FitError, InputError
 from .outputs import MAX_NAME, MAX_NAME_BYTES, Outputs, check_name, slug
 
@@ -575,9 +575,10 @@ def _calibrate(args, run: _Run) -> int:
                   "render time; pass --extrapolate hold|linear to allow it", file=sys.stderr)
         share = (min(wl[-1], grid[-1]) - max(wl[0], grid[0])) / (grid[-1] - grid[0])
         if args.extrapolate is not None and share < 0.5:
-            print(f"jaxskin: warning: {m.path}: covers {wl[0]:g}-{wl[-1]:g} nm, "
-                  f"{max(share, 0.0):.0%} of the renderer's {grid[0]:g}-{grid[-1]:g} nm: "
-                  f"--extrapolate {args.extrapolate} makes up the rest", file=sys.stderr)
+            part = f"{share:.0%} of" if share > 0 else "none of"
+            print(f"jaxskin: warning: {m.path}: covers {wl[0]:g}-{wl[-1]:g} nm, {part} the "
+                  f"renderer's {grid[0]:g}-{grid[-1]:g} nm: --extrapolate {args.extrapolate} "
+                  "makes up the rest", file=sys.stderr)
         for line in wavelength_gaps(wl):
             print(f"jaxskin: warning: {m.path}: {line}", file=sys.stderr)
         for line in fit_km.suspect_labels(m, noise):
@@ -701,12 +702,15 @@ def _sweeps(sc, text: str) -> bool:
 
 
 def _stem_of_file(value: str) -> str:
-    """A file's stem where a -D value names one (`m.png`, `dir/b.json`: `m`, `b`; the name
-    read `hand_skin.melanin_image-m.png.png`), else the value; the digest of many
-    overrides keeps whole paths."""
+    """A -D value that names a file with its ending written `_ending` (`maps/m.png` →
+    `maps/m_png`: the name read `..._skin.melanin_image-m.png.png`), so that the name
+    still tells `m.png` from `m.exr` and a preset `skin` from a file `skin.json`."""
     from .outputs import FILE_SUFFIXES
 
-    return Path(value).stem if Path(value).suffix.lower() in FILE_SUFFIXES else value
+    suffix = Path(value).suffix
+    if suffix.lower() in FILE_SUFFIXES:
+        return value[:-len(suffix)] + "_" + suffix[1:]
+    return value
 
 
 def _base_name(sc, overrides, room: int = 16) -> str:
@@ -844,16 +848,15 @@ def _render(args, run: _Run) -> int:
                 planned[kind] = outputs.plan(f"{base}_{kind}.png", sc.source)
         files.append(planned)
     for sc, skip in zip(scenes, unswept, strict=True):  # after every check: warnings, not
-        pictures = picture_warnings(sc)  # errors (-D serves every scene)
-        said = {line.split(" ", 1)[0].rstrip(":") for line in pictures}  # a map's key first
+        idle = idle_map_keys(sc)  # errors (-D serves every scene)
         for item in unused_overrides(sc, args.overrides):
-            if _parse_override(item)[0] not in said:  # an idle map's line says more
+            if _parse_override(item)[0] not in idle:  # an idle map's own line says more
                 _say(f"jaxskin: warning: -D {item} changes nothing in scene {sc.name!r} "
                      "(its material model or settings do not use it)")
         if skip:
             _say(f"jaxskin: warning: --sweep {args.sweep[0]} changes nothing in scene "
                  f"{sc.name!r} (not one of its parameters): it is rendered once, unswept")
-        for line in pictures:
+        for line in picture_warnings(sc):
             _say(f"jaxskin: warning: {line}")
     run.outputs.append(outputs)
     # The units of work: a scene's sweep in batches of cluster.SWEEP_BATCH values (one
@@ -942,7 +945,8 @@ def _far_extrapolation(m, result, how, grid) -> list[str]:
     if how != "linear":
         return []
     out = []
-    ends = [(x, i) for x, i in ((grid[0], 0), (grid[-1], -1)) if x < wl[0] or x > wl[-1]]
+    ends = [(x, 0 if x < wl[0] else -1) for x in (grid[0], grid[-1])
+            if x < wl[0] or x > wl[-1]]  # each grid end beyond the data, its nearest datum
     for x, i in ends:
         at = as_rendered(wl, result, how, np.array([x]))
         for name, measured, far in (("S", result.S_per_mm[i], at[0][0]),
@@ -965,7 +969,7 @@ def _fit_brdf(args, run: _Run) -> int:
     if out.suffix.lower() != ".json":
         raise InputError(f"-o: expected a .json file name (the fitted lobes; the report is "
                          f"written beside it as .png), got {out.name!r}", out)
-    outputs = Outputs(out.parent, [args.file])
+    outputs = Outputs(out.parent, [args.file], named_files=False)  # -o OUT.json: named
     out = outputs.plan(out.name, "the fit")
     report = None if args.no_report else outputs.plan(out.with_suffix(".png").name,
                                                       "the report")
@@ -996,10 +1000,10 @@ def _fit_brdf(args, run: _Run) -> int:
         outputs.done(report)
     print(f"{'channel':<8} {'rel. RMS error':>14} {'failed starts':>13} {'steps':>6}")
     for k, name in enumerate("RGB"):
-        steps = stats["steps_of_best"][k]  # at the cap: the best start was still improving
+        done = bool(result.converged[k, result.best[k]])  # the best start's own solver flag
         print(f"{name:<8} {result.rel_rms[k]:>14.2%} {stats['failed_starts'][k]:>13} "
-              f"{steps:>6}" + (" (the most allowed: not converged)"
-                               if steps >= brdf.MAX_STEPS else ""))
+              f"{stats['steps_of_best'][k]:>6}" + ("" if done else " (not converged: the "
+                                                   "solver stopped at its step limit)"))
     print(f"wrote {out}" + ("" if report is None else f" and {report}") + f" ({seconds:.1f} s)")
     for line in brdf.fit_warnings(result):
         warnings.warn(line, stacklevel=1)

@@ -76,19 +76,19 @@ def slug(text: str) -> str:
 FILE_SUFFIXES = {".json", ".png", ".exr", ".glb", ".csv", ".toml", ".npz", ".jpg", ".jpeg"}
 
 
-def check_folder(path, option: str = "-o") -> Path:
+def check_folder(path, option: str = "-o", named_files: bool = True) -> Path:
     """An output folder that exists (a writable folder) or can be created; nothing is
-    created (a probe file in an existing folder is removed at once)."""
+    created (a probe file in an existing folder is removed at once). `named_files`: the
+    command names the files in it (calibrate, render, ...), so a folder still to be made
+    whose name ends like a file (`fit.json`) was meant as a file and is refused; a name
+    written with a trailing `/` is taken as a folder."""
     if not str(path).strip():
         raise InputError(f"{option}: expected an output folder, got an empty name "
                          "(use . for the current folder)")
+    slash = str(path).endswith(("/", os.sep))  # `-o fit.json/`: a folder, said so
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise InputError(f"{option}: expected a folder, but this is a file", path)
-    if not path.exists() and path.suffix.lower() in FILE_SUFFIXES:  # made a folder 'x.json'
-        raise InputError(f"{option}: expected the folder to write into, got a file name "
-                         f"({path.name!r}: the outputs are named after the inputs or scenes)",
-                         path)
     try:  # a link that leads nowhere: a missing target, or a loop (exit 1 after the work)
         os.stat(path)
     except FileNotFoundError:
@@ -98,6 +98,12 @@ def check_folder(path, option: str = "-o") -> Path:
     except OSError as e:
         raise InputError(f"{option}: cannot use this folder ({e.strerror or e.__class__.__name__})",
                          path) from None
+    if (named_files and not slash and not os.path.lexists(path)
+            and path.suffix.lower() in FILE_SUFFIXES):  # made a folder 'fit.json'
+        raise InputError(f"{option}: expected the folder to write into, got a file name "
+                         f"({path.name!r}; the outputs are named after the inputs or scenes): "
+                         f"give a folder, or '{path.name}/' to make a folder of that name",
+                         path)
     probe = path
     while not probe.exists():  # the nearest existing ancestor must take a new folder
         if os.path.islink(probe):  # -o dangling/sub: the link leads nowhere (exit 1 after)
@@ -141,8 +147,8 @@ class Outputs:
     - `inputs`: every file the run reads.
     """
 
-    def __init__(self, folder, inputs=(), option: str = "-o"):
-        self.folder = check_folder(folder, option)
+    def __init__(self, folder, inputs=(), option: str = "-o", named_files: bool = True):
+        self.folder = check_folder(folder, option, named_files)
         self.option = option
         self.inputs = [Path(p) for p in inputs if p is not None]
         self.planned: dict[Path, str] = {}

@@ -628,7 +628,8 @@ def parse_scene(doc: dict, path, overrides=(), allow=None, *, flag: str = "overr
             base(image_key) / image).resolve()
         allow(image_key, image_path.resolve())
         if not image_path.is_file():
-            what = "is a folder" if image_path.is_dir() else "no such file"
+            what = ("is a folder" if image_path.is_dir() else "not a regular file"
+                    if image_path.exists() else "no such file")
             raise InputError(f"{what}: {image_path} (expected a greyscale image file)",
                              source(image_key), key=image_key)
         values[image_key] = str(image_path)

@@ -27,6 +27,8 @@ CASES = [
     # what calibrate writes, given back to it (was: 'line 4 begins with "wavelength_nm": [')
     ("a material JSON", '{\n  "name": "x",\n  "wavelength_nm": [400, 410],\n  "S_per_mm": '
      '[1, 2]\n}\n', None, None, "a JSON file, not a measurement CSV"),
+    ("a material JSON in UTF-16, blank lines first", '\n\n  {"name": "x", "wavelength_nm": '
+     '[400, 410]}\n'.encode("utf-16"), None, None, "a JSON file, not a measurement CSV"),
     ("blank lines only", "\n\n  \n", None, None, "no header row"),
     ("header only", HEADER, 1, None, "needs at least 2 data rows"),
     ("one data row", HEADER + rows(ROWS[:1]), 1, None, "needs at least 2 data rows"),

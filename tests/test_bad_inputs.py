@@ -260,6 +260,8 @@ CASES = {
                                             f"skin.melanin_image={write(t, 'm.png', 'text')}"),
     "melanin-image-missing": lambda t: layered(t, "blush_rose", "", "-D",
                                                f"skin.melanin_image={t / 'nope.png'}"),
+    "melanin-image-dev-null": lambda t: layered(t, "blush_rose", "", "-D",
+                                                "skin.melanin_image=/dev/null"),
     # --- polygons
     "polygon-vertex-missing": lambda t: polygon(t, "vertices = [1, 2, 99999]"),
     "polygon-two-points": lambda t: polygon(t, "points = [[0.1, 0.1], [0.2, 0.2]]"),
@@ -471,7 +473,8 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
                                      "not the one -D mesh.file gives: write a scene file"),
     ("D-brdf-missing", "jaxskin: error: -D material.brdf=nope.json: key 'material.brdf'"),
     ("melanin-image-missing", "key 'skin.melanin_image': no such file: "),
-    ("out-a-file-name", "-o: expected the folder to write into, got a file name ('fit.json'"),  # not "expected
+    ("out-a-file-name", "-o: expected the folder to write into, got a file name ('fit.json'"),
+    ("melanin-image-dev-null", "key 'skin.melanin_image': not a regular file: /dev/null"),  # not "expected
     # a greyscale image file, got ..." (a trial)
     ("sweep-static-key", "static setting (each value compiles its own program): render each "
                          "value with -D texture.size=VALUE"),

@@ -429,9 +429,12 @@ def test_one_number_spelt_two_ways_names_one_file(capsys):
         sc, ["camera.rotate=[0, 60.0, 0]"]) == "hand_camera.rotate-0_60_0"
     _warn_repeated(["camera.rotate=0,60,0", "camera.rotate=[0, 60, 0]"])
     assert capsys.readouterr().err == ""
-    # a file value by its stem: not `..._skin.melanin_image-mel.png.png` (a trial)
+    # a file's ending as _ending: not `..._skin.melanin_image-mel.png.png` (a trial), and
+    # still apart from mel.exr, and a preset `skin` from a file skin.json (a review)
     assert _base_name(sc, ["skin.melanin_image=maps/mel.png"]) == \
-        "hand_skin.melanin_image-mel"
+        "hand_skin.melanin_image-maps_mel_png"
+    assert _base_name(sc, ["skin.melanin_image=mel.exr"]) == "hand_skin.melanin_image-mel_exr"
+    assert _base_name(sc, ["material.brdf=skin"]) != _base_name(sc, ["material.brdf=skin.json"])
 
 
 def test_the_last_line_after_a_stop_names_only_the_last_files():

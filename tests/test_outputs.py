@@ -346,3 +346,18 @@ def test_renders_are_tagged_srgb_and_data_maps_are_not(tmp_path):
     for name in ("h.png", "t.png"):
         data = (tmp_path / name).read_bytes()
         assert b"sRGB" not in data and b"gAMA" not in data
+
+
+def test_an_output_folder_named_like_a_file(tmp_path):
+    """`calibrate -o fit.json` made a folder 'fit.json' (a trial): refused where the command
+    names the files; `fit.json/` (a trailing slash), an existing folder of that name, and
+    fit-brdf's folder (its -o is the file) are taken (a review)."""
+    from jaxskin.io import InputError
+    from jaxskin.outputs import check_folder
+
+    with pytest.raises(InputError, match=r"got a file name \('fit.json'; .*'fit.json/' to make"):
+        check_folder(tmp_path / "fit.json")
+    assert check_folder(f"{tmp_path / 'fit.json'}/") == tmp_path / "fit.json"
+    assert check_folder(tmp_path / "v1.json", named_files=False) == tmp_path / "v1.json"
+    (tmp_path / "renders.png").mkdir()
+    assert check_folder(tmp_path / "renders.png") == tmp_path / "renders.png"
