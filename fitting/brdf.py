@@ -208,6 +208,10 @@ def _residuals(theta, args):
 
 
 MAX_STEPS = 200  # Levenberg–Marquardt steps a start may take
+# A fitted diffuse albedo above this is warned about: above 1 is unphysical, but a fit to
+# few or noisy samples trades a little of it with the lobes (1.01 in a cluster test's fit);
+# values in 0-255 or percent give tens to hundreds.
+ALBEDO_WARN = 1.5
 
 
 @functools.partial(jax.jit, static_argnames=("max_steps",))
@@ -349,7 +353,7 @@ def fit_warnings(result: BRDFFit) -> list[str]:
     best = int(np.argmin(result.rel_rms))
     out = []
     rho = np.asarray(result.params.diffuse, float)  # a surface cannot reflect more than
-    if np.any(rho > 1.0):  # it receives
+    if np.any(rho > ALBEDO_WARN):  # it receives; a fit trades a little of it with the lobes
         said = ", ".join(f"{name} {r:.3g}" for name, r in zip("RGB", rho, strict=True))
         out.append(f"diffuse albedo {said}: above 1 is more light out than in; are the BRDF "
                    "values scaled (0-255, percent)? fit-brdf reads them in 1/sr")
