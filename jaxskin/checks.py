@@ -111,9 +111,8 @@ def _check_scene(sc, count: int) -> list:
 
 def picture_warnings(sc, side: list[str] | None = None) -> list[str]:
     """What `jaxskin render` and the editor's footer warn about a scene's picture: maps that
-    change nothing (`idle_maps`: each line begins with the map's key), a view from the side
-    of a planar map (`hidden_side`, or `side` where the caller has it already), layers thick
-    as masks (`thick_layers`)."""
+    change nothing (`idle_maps`), a view from the side of a planar map (`hidden_side`, or
+    `side` where the caller has it already), layers thick as masks (`thick_layers`)."""
     return idle_maps(sc) + (hidden_side(sc) if side is None else side) + thick_layers(sc)
 
 

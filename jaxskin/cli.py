@@ -701,7 +701,7 @@ def _sweeps(sc, text: str) -> bool:
     return key in sc.params and getattr(sc.params[key], "ndim", 1) == 0
 
 
-def _stem_of_file(value: str) -> str:
+def _file_ending_named(value: str) -> str:
     """A -D value that names a file with its ending written `_ending` (`maps/m.png` →
     `maps/m_png`: the name read `..._skin.melanin_image-m.png.png`), so that the name
     still tells `m.png` from `m.exr` and a preset `skin` from a file `skin.json`."""
@@ -727,7 +727,7 @@ def _base_name(sc, overrides, room: int = 16) -> str:
         key, _, value = (s.strip() for s in item.partition("="))
         last.pop(key, None)
         last[key] = value
-    parts = [f"{slug(key)}-{slug(_stem_of_file(_name_value(key, value)))}"
+    parts = [f"{slug(key)}-{slug(_file_ending_named(_name_value(key, value)))}"
              for key, value in last.items()
              if key != "name" and not named]  # `-D name=X` names the outputs X, nothing added
     suffix = "_".join(parts)
