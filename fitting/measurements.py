@@ -235,25 +235,15 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
 _WAVELENGTH_CELL = re.compile(r"(?i)\d+(?:\.\d+)?\s*(?:nm)?")
 
 
-def _starts_like_json(path) -> bool:
-    """Whether the file's first 4 KiB, as UTF-8 or UTF-16 text (a byte-order mark allowed),
-    begin with `{` after white space."""
-    import codecs
-
-    with open(path, "rb") as fh:
-        head = fh.read(4096)
-    utf16 = head.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE))
-    text = head.decode("utf-16" if utf16 else "utf-8-sig", errors="ignore")
-    return text.lstrip().startswith("{")
-
-
 def _other_layout(path):
     """`(line, message)` when a table with no header row is laid out in a way the format
     is not: wavelengths along a row (one row per sample, as some instruments export), or
     the wavelength column after another (a sample name first); else None."""
-    from jaxskin.formats import text_rows
+    from jaxskin.formats import read_text, text_rows
 
-    if Path(path).suffix.lower() == ".json" or _starts_like_json(path):
+    # (read as text already: this runs after `read_table` found no header row in it)
+    if (Path(path).suffix.lower() == ".json"
+            or read_text(path, fallback="cp1252").lstrip().startswith("{")):
         return None, ("a JSON file, not a measurement CSV: a calibrated material (what "
                       "calibrate writes) is named by a scene's [[layer]] material; calibrate "
                       "reads wavelength_nm,R_<X>mm,... tables")

@@ -32,6 +32,26 @@ def as_rendered(wl, r: KMFit, extrapolate: str, x) -> tuple[np.ndarray, np.ndarr
                  for v in (r.S_per_mm, r.K_per_mm))
 
 
+def far_extrapolation(m, result, how, grid) -> list[str]:
+    """Where `--extrapolate linear` carries S or K more than tenfold beyond the data (a
+    500-600 nm file took K from 2.4 to 0.003 per mm at 780 nm, without a word; a trial)."""
+    wl = m.wavelength_nm
+    if how != "linear":
+        return []
+    out = []
+    ends = [(x, 0 if x < wl[0] else -1) for x in (grid[0], grid[-1])
+            if x < wl[0] or x > wl[-1]]  # each grid end beyond the data, its nearest datum
+    for x, i in ends:
+        at = as_rendered(wl, result, how, np.array([x]))
+        for name, measured, far in (("S", result.S_per_mm[i], at[0][0]),
+                                    ("K", result.K_per_mm[i], at[1][0])):
+            if not 0.1 <= far / measured <= 10:
+                out.append(f"--extrapolate linear takes {name} from {measured:.3g} per mm at "
+                           f"{wl[i]:g} nm to {far:.3g} at {x:g} nm ({far / measured:.3g}x): "
+                           "see the report's dashed curves, or use --extrapolate hold")
+    return out
+
+
 def write_report(m: Measurement, r: KMFit, path, extrapolate: str | None = None) -> None:
     """Write the report PNG for measurement `m` and its fit `r` to `path` (atomically).
     Where `m` does not cover the render grid (380–780 nm), the S and K panel shows how the

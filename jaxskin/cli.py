@@ -560,7 +560,7 @@ def _calibrate(args, run: _Run) -> int:
         paths.append((json_path, png_path))
     run.outputs.append(outputs)
 
-    from jaxskin.fitting.report import write_report
+    from jaxskin.fitting.report import far_extrapolation, write_report
     from jaxskin.formats import wavelength_gaps, write_json
     from jaxskin.spectral import Grid
 
@@ -600,7 +600,7 @@ def _calibrate(args, run: _Run) -> int:
             run.stage = f"writing {m.name}"
             write_json(result.to_json(m, extrapolate=args.extrapolate), json_path)
             outputs.done(json_path)
-            for line in _far_extrapolation(m, result, args.extrapolate, grid):
+            for line in far_extrapolation(m, result, args.extrapolate, grid):
                 print(f"jaxskin: warning: {m.path}: {line}", file=sys.stderr)
             if png_path is not None:
                 write_report(m, result, png_path, args.extrapolate)
@@ -932,30 +932,6 @@ def _write_maps(sc, planned: dict, outputs: Outputs, result: dict) -> None:
         maps.write_field_plot(s, planned["field"], f"{sc.name} ({s.mesh.name}): d1 (red), "
                               "d2 (green)", sc.config.rotate)
         outputs.done(planned["field"])
-
-
-def _far_extrapolation(m, result, how, grid) -> list[str]:
-    """Where `--extrapolate linear` carries S or K more than tenfold beyond the data (a
-    500-600 nm file took K from 2.4 to 0.003 per mm at 780 nm, without a word; a trial)."""
-    import numpy as np
-
-    from jaxskin.fitting.report import as_rendered
-
-    wl = m.wavelength_nm
-    if how != "linear":
-        return []
-    out = []
-    ends = [(x, 0 if x < wl[0] else -1) for x in (grid[0], grid[-1])
-            if x < wl[0] or x > wl[-1]]  # each grid end beyond the data, its nearest datum
-    for x, i in ends:
-        at = as_rendered(wl, result, how, np.array([x]))
-        for name, measured, far in (("S", result.S_per_mm[i], at[0][0]),
-                                    ("K", result.K_per_mm[i], at[1][0])):
-            if not 0.1 <= far / measured <= 10:
-                out.append(f"--extrapolate linear takes {name} from {measured:.3g} per mm at "
-                           f"{wl[i]:g} nm to {far:.3g} at {x:g} nm ({far / measured:.3g}x): "
-                           "see the report's dashed curves, or use --extrapolate hold")
-    return out
 
 
 def _fit_brdf(args, run: _Run) -> int:

@@ -664,18 +664,18 @@ def test_extrapolating_most_of_the_grid_is_warned_about(tmp_path, capsys):
 def test_far_extrapolation_is_measured_from_the_nearest_datum():
     """Data wholly above 780 nm: the 780 nm end is compared with the first datum (800 nm),
     not the last (a review: '1200 nm to 780 nm, 240x' for a 1.8x extension)."""
-    from jaxskin.cli import _far_extrapolation
+    from jaxskin.fitting.report import far_extrapolation
 
     wl = np.array([800.0, 900.0, 1000.0])
     m = types.SimpleNamespace(wavelength_nm=wl)
     flat = types.SimpleNamespace(S_per_mm=np.full(3, 5.0), K_per_mm=np.full(3, 2.0))
     grid = np.arange(380.0, 781.0, 10.0)
-    assert _far_extrapolation(m, flat, "linear", grid) == []
-    assert _far_extrapolation(m, flat, "hold", grid) == []
+    assert far_extrapolation(m, flat, "linear", grid) == []
+    assert far_extrapolation(m, flat, "hold", grid) == []
     # K falling 100x per 100 nm: ×2.5 at 780 nm (20 nm out), ×2.5e8 at 380 nm, both from
     # the 800 nm datum
     steep = types.SimpleNamespace(S_per_mm=np.full(3, 5.0),
                                   K_per_mm=np.array([2.0, 0.02, 0.0002]))
-    said = _far_extrapolation(m, steep, "linear", grid)
+    said = far_extrapolation(m, steep, "linear", grid)
     assert len(said) == 1 and said[0].startswith("--extrapolate linear takes K from 2 per mm "
                                                  "at 800 nm to ") and "at 380 nm" in said[0], said

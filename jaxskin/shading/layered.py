@@ -273,7 +273,7 @@ def _chunked_tangent(grid, blurred, primals, tangents):
     by as many), each chunk's tangent recomputed from its inputs (checkpointed)."""
     X = primals[0]
     P = X.shape[1]
-    chunk = CHUNK if _cpu_form("chunks") else _chunking(P, WIDE_CHUNK // 8)[0]
+    chunk = _chunking(P, WIDE_CHUNK // 8)[0]
 
     def per_texel(a, axis):
         return _per_texel(a, axis, P, chunk)
