@@ -306,3 +306,23 @@ def unused_overrides(sc, overrides) -> list[str]:
         if without.config == sc.config and same(without.params, sc.params):
             out.append(item)
     return out
+
+
+def read_instead(sc, item: str) -> str | None:
+    """For a `-D` item that changes nothing in scene `sc` (`unused_overrides`), a key of the
+    same last name that the scene does read, or `None`: `material.melanin` for
+    `skin.melanin=0.3` on the Blinn hand (a trial's first guess; the two sections are the
+    two skin models). Found by trying the value under each such key."""
+    from .scene import _parse_override, load_scene
+
+    key, value = _parse_override(item)
+    leaf = key.rsplit(".", 1)[-1]
+    for other in sorted(k for k in sc.values if k != key and k.rsplit(".", 1)[-1] == leaf):
+        trial = f"{other}={value}"
+        try:
+            changed = load_scene(sc.source, [trial], flag="-D")
+        except InputError:
+            continue
+        if not unused_overrides(changed, [trial]):
+            return other
+    return None

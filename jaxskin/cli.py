@@ -36,7 +36,14 @@ from pathlib import Path
 from typing import NoReturn
 
 from . import __version__, cluster
-from .checks import check_scene, idle_map_keys, picture_warnings, reading, unused_overrides
+from .checks import (
+    check_scene,
+    idle_map_keys,
+    picture_warnings,
+    read_instead,
+    reading,
+    unused_overrides,
+)
 from .io import FitError, InputError
 from .outputs import MAX_NAME, MAX_NAME_BYTES, Outputs, check_name, slug
 
@@ -851,11 +858,17 @@ def _render(args, run: _Run) -> int:
         idle = idle_map_keys(sc)  # errors (-D serves every scene)
         for item in unused_overrides(sc, args.overrides):
             if _parse_override(item)[0] not in idle:  # an idle map's own line says more
+                other = read_instead(sc, item)
+                hint = f"; it reads {other}" if other else ""
                 _say(f"jaxskin: warning: -D {item} changes nothing in scene {sc.name!r} "
-                     "(its material model or settings do not use it)")
+                     f"(its material model or settings do not use it{hint})")
         if skip:
+            key, _, spec = args.sweep[0].partition("=")
+            other = read_instead(sc, f"{key.strip()}={spec.split(':')[0]}")
+            hint = f"; it reads {other}" if other else ""
             _say(f"jaxskin: warning: --sweep {args.sweep[0]} changes nothing in scene "
-                 f"{sc.name!r} (not one of its parameters): it is rendered once, unswept")
+                 f"{sc.name!r} (not one of its parameters{hint}): it is rendered once, "
+                 "unswept")
         for line in picture_warnings(sc):
             _say(f"jaxskin: warning: {line}")
     run.outputs.append(outputs)

@@ -191,6 +191,16 @@ def test_a_sweep_over_a_key_one_scene_lacks_renders_that_scene_once(tmp_path):
     assert not (tmp_path / "bad").exists()
 
 
+    # a key of the other skin model: each warning names the key the scene reads
+    proc = subprocess.run([sys.executable, "-m", "jaxskin.cli", "render", "hand", "face", "-o",
+                           str(out), *small, "-D", "skin.melanin=0.3", "--sweep",
+                           "material.melanin=0.1:0.4:2"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert ("-D skin.melanin=0.3 changes nothing in scene 'hand' (its material model or "
+            "settings do not use it; it reads material.melanin)") in proc.stderr
+    assert ("--sweep material.melanin=0.1:0.4:2 changes nothing in scene 'face' (not one of "
+            "its parameters; it reads skin.melanin): it is rendered once") in proc.stderr
+
 def test_glb_export_reloads_with_textures(tmp_path):
     import trimesh
 

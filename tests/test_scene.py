@@ -230,6 +230,18 @@ def test_an_override_the_scene_does_not_use_is_found():
     assert unused("hand", "wrinkles.method=parallel") == []
 
 
+def test_an_unused_override_names_the_key_the_scene_reads():
+    """The warning for a `-D` key of the other skin model names the one the scene reads (a
+    trial's `-D skin.melanin=0.3` on the Blinn hand); a key with no such twin names none."""
+    from jaxskin.checks import read_instead
+
+    small = ["texture.size=32"]
+    assert read_instead(load_scene("hand", small), "skin.melanin=0.3") == "material.melanin"
+    assert read_instead(load_scene("face", small), "material.melanin=0.3") == "skin.melanin"
+    assert read_instead(load_scene("hand", small), "skin.subject=50") is None
+    assert read_instead(load_scene("hand", small), "camera.fov=60") is None
+
+
 def test_a_layers_material_is_set_with_D(tmp_path, monkeypatch):
     """`-D layer.NAME.material=...` swaps a layer's product for a batch render: a shipped
     name, or a file taken from the working directory (as every path given with -D), checked
