@@ -248,6 +248,16 @@ def _other_layout(path):
                       "calibrate writes) is named by a scene's [[layer]] material; calibrate "
                       "reads wavelength_nm,R_<X>mm,... tables")
     for number, cells in text_rows(path):
+        if (len(cells) >= 2 and is_wavelength_column(cells[0])
+                and not any(_is_reading(c) for c in cells[1:])):
+            shown = ", ".join(repr(c) for c in cells[1:3]) + (", ..." if len(cells) > 3 else "")
+            reads = "calibrate reads R_<X>mm, R_inf, R_g or E_... columns"
+            if any(c[:1] in "re" for c in cells[1:]):  # r_0.05mm: the case
+                return number, (f"no column is a cosmetic's reading ({shown}): {reads}, "
+                                "with a capital R or E")
+            return number, (f"no column is a cosmetic's reading ({shown}; {reads}): skin "
+                            "reflectance spectra, one per column, are fitted with "
+                            f"'jaxskin fit-skin {path}'")
         if {"theta_in_deg", "wi_x"} & set(cells):
             return number, ("BRDF samples (angles and R, G, B), not a measurement of "
                             "spectra: fit them with 'jaxskin fit-brdf'")

@@ -279,8 +279,11 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
         if first is not None:  # the row above the data (a preamble line was quoted; a review)
             known = WAVELENGTH_HEADER.fullmatch(first[1])
             name = expected_header.split(",")[0]
-            why = (f"wavelengths in {known['unit']}; this reader takes nm: give them in nm, "
-                   f"as {name}" if known and known["unit"] else
+            unit = (known["unit"] or "nm").lower() if known else None
+            why = ("a wavelength column, but no later column is one this reader takes"
+                   if unit == "nm" else
+                   f"wavelengths in {unit}; this reader takes nm: give them in nm, as {name}"
+                   if unit else
                    f"not a name this reader knows for the first column: name it {name}")
             seen = f" (line {first[0]} begins with {first[1][:40]!r}: {why})"
         raise InputError(f"no header row; expected a row '{expected_header}' (comma, tab or "

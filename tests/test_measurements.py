@@ -140,7 +140,9 @@ BAD = [
      "no header row"),
     # A header needs a reading column (R… or E…) too; without the rule this row was the
     # header and the error 'unknown column'.
-    ("no reading column", lambda t: t.replace(",R_", ",r_"), None, None, "no header row"),
+    ("no reading column", lambda t: t.replace(",R_", ",r_"), 2, None,
+     "no column is a cosmetic's reading ('r_0.05mm', 'r_0.15mm', ...): calibrate reads "
+     "R_<X>mm, R_inf, R_g or E_... columns, with a capital R or E"),
     ("bare R without thickness", lambda t: t.replace("R_0.15mm", "R"), 2, "R", "thickness"),
     (
         "bad thickness comment",
@@ -465,6 +467,13 @@ def test_spreadsheet_exports_decimal_commas_empty_rows_and_a_footer(tmp_path):
     ("Sample,wavelength_nm,R_0.05mm,R_0.15mm,R_inf,R_g\nA,400,0.3,0.4,0.45,0.04\n", 1,
      "the wavelength column 'wavelength_nm' is not the first: move it first, or delete the "
      "column before it ('Sample')"),
+    # skin spectra (what fit-skin reads), given to calibrate: the message once said the
+    # wavelengths were not in nm, of a header 'wavelength_nm' (a trial)
+    ("wavelength_nm,subject_12,subject_44,subject_90\n400,0.21,0.05,0.12\n"
+     "410,0.22,0.06,0.13\n", 1,
+     "no column is a cosmetic's reading ('subject_12', 'subject_44', ...; calibrate reads "
+     "R_<X>mm, R_inf, R_g or E_... columns): skin reflectance spectra, one per column, are "
+     "fitted with 'jaxskin fit-skin "),
 ])
 def test_other_layouts_are_named(tmp_path, text, line, words):
     """A transposed export or a sample-name column first said "no header row" with no line
