@@ -320,6 +320,10 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
             if len(cells) < len(header) and line.endswith(delimiter):
                 raise InputError("empty cell: expected a number", path, number,
                                  header[len(cells)])
+            if (not hint and delimiter == "," and len(cells) > len(header)
+                    and all(c.isdigit() for c in cells)):  # 380,54,81 for 380;54,81 (a trial)
+                hint = (" (decimal commas in a comma-separated file? 0,54 is then two cells: "
+                        "export with ';' or tab between cells, or with decimal points)")
             raise InputError(f"{len(cells)} cells where the header has {len(header)}{hint}",
                              path, number)
         if delimiter != ",":  # then 18,65 can only be a decimal comma (Excel in Europe)

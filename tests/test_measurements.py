@@ -451,6 +451,13 @@ def test_spreadsheet_exports_decimal_commas_empty_rows_and_a_footer(tmp_path):
     with pytest.raises(InputError, match=r"column 'R_inf': expected a number with a decimal "
                                          r"point, got '0,45' \(in a comma-separated file"):
         read_measurement(write(tmp_path, GOOD.replace("0.45", '"0,45"'), "c.csv"))
+    # decimal commas in a comma-separated file: the cells split at every comma (a trial)
+    commas = ("wavelength_nm,R_0.05mm,R_0.15mm,R_inf,R_g\n400,0,30,0,40,0,45,0,04\n"
+              "410,0,31,0,41,0,46,0,05\n")
+    with pytest.raises(InputError, match=r"dc.csv:2: 9 cells where the header has 5 \(decimal "
+                                         r"commas in a comma-separated file\? 0,54 is then two "
+                                         r"cells: export with ';' or tab between cells"):
+        read_measurement(write(tmp_path, commas, "dc.csv"))
     with pytest.raises(InputError, match=r"pc.csv:3: column 'R_0.05mm': expected a number, "
                                          r"got '30 %': write percent without the '%' sign"):
         read_measurement(write(tmp_path, GOOD.replace("0.30", "30 %"), "pc.csv"))
