@@ -240,33 +240,64 @@ def _vec(a) -> str:
 # A view more than this share of whose samples show the other side's texels is warned (the
 # hand turned 60° about y: 18 %, streaks along the fingers; 30°: 4.5 %).
 HIDDEN_SIDE_WARN = 0.1
+# A view whose mesh is more than this share its inside (drawn black) gets a warning.
+INSIDE_WARN = 0.5
 
 
-def hidden_side(sc) -> list[str]:
-    """A warning when scene `sc`'s camera sees much of the side of a planar map that does not
-    own its texels (`view.hidden_side_share`): a view from the side (the foot turned 70°),
-    where the texels the two sides share go to the side the camera faces more, and the rest
-    shows them lit wrongly (the hand turned 180° was once all such: `scene.planar_side`).
-    Measured on a 64-pixel view of the camera."""
+def _small_view(sc):
+    """`(texture map, view)` of scene `sc`'s camera at 64 pixels across."""
     from . import texture
-    from .view import hidden_side_share, make_view
+    from .view import make_view
 
     config = sc.config
-    if config.texture.projection not in ("planar", "planar-back"):
-        return []
     tmap = texture.mapped(config.texture.mesh, config.texture.projection,
                           config.texture.size)[1]
     height = max(1, round(64 * config.image_height / config.image)) if config.image_height \
         else 0
-    view = make_view(tmap, 64, config.camera, 1, config.fov, config.rotate, height,
-                     config.zoom, config.center)
+    return tmap, make_view(tmap, 64, config.camera, 1, config.fov, config.rotate, height,
+                           config.zoom, config.center)
+
+
+def empty_picture(sc) -> str:
+    """Why a picture of scene `sc` is black at every pixel: the mesh is out of view, or the
+    camera sees only its inside (measured on a 64-pixel view)."""
+    if _small_view(sc)[1].mask.any():
+        return ("every pixel is black: the camera sees the mesh's inside only (an open mesh "
+                "from behind), drawn black; turn camera.rotate toward its front")
+    return ("the mesh is not in view (every pixel is background); check camera.zoom and "
+            "camera.center")
+
+
+def hidden_side(sc) -> list[str]:
+    """Warnings about what scene `sc`'s camera sees, measured on a 64-pixel view of it:
+
+    - much of the side of a planar map that does not own its texels
+      (`view.hidden_side_share`): a view from the side (the foot turned 70°), where the
+      texels the two sides share go to the side the camera faces more, and the rest shows
+      them lit wrongly (the hand turned 180° was once all such: `scene.planar_side`);
+    - mostly the inside of an open mesh (the face from behind), which is drawn black: the
+      picture was black and the warning after it said the mesh was not in view (a trial)."""
+    from .view import hidden_side_share
+
+    config = sc.config
+    tmap, view = _small_view(sc)
+    out = []
+    seen = int(view.mask.sum())
+    inside = 1.0 - int(view.shaded.sum()) / seen if seen else 0.0
+    if inside > INSIDE_WARN:
+        out.append(f"scene {sc.name!r}: {inside:.0%} of the mesh in view is its inside (an "
+                   "open mesh seen from behind or through an opening), which is drawn black; "
+                   "turn camera.rotate toward the mesh's front")
+    if config.texture.projection not in ("planar", "planar-back"):
+        return out
     share = hidden_side_share(tmap, view)
     if share <= HIDDEN_SIDE_WARN:
-        return []
-    return [f"scene {sc.name!r}: {share:.0%} of the view is a side of the mesh that the "
-            "planar projection shades with the other side's texels (their normals, their "
-            "light): seen from the side, the two sides' texels interleave; view it more "
-            "nearly face on, or use mesh.projection = \"cylindrical\""]
+        return out
+    return out + [
+        f"scene {sc.name!r}: {share:.0%} of the view is a side of the mesh that the "
+        "planar projection shades with the other side's texels (their normals, their "
+        "light): seen from the side, the two sides' texels interleave; view it more "
+        "nearly face on, or use mesh.projection = \"cylindrical\""]
 
 
 def unused_overrides(sc, overrides) -> list[str]:

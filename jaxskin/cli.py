@@ -38,6 +38,7 @@ from typing import NoReturn
 from . import __version__, cluster
 from .checks import (
     check_scene,
+    empty_picture,
     idle_map_keys,
     picture_warnings,
     read_instead,
@@ -908,8 +909,7 @@ def _render(args, run: _Run) -> int:
                     outputs.done(path)
                     if not np.any(image) and i not in empty:  # once per scene
                         empty.add(i)
-                        _say(f"jaxskin: warning: {path.name}: the mesh is not in view (every "
-                             f"pixel is background); check camera.zoom and camera.center")
+                        _say(f"jaxskin: warning: {path.name}: {empty_picture(sc)}")
             seconds[i] += dt + time.perf_counter() - t0
             if k + 1 == len(targets) or targets[k + 1][0] != i:  # the scene's last unit
                 config = sc.config

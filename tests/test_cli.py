@@ -476,6 +476,27 @@ def test_a_render_that_sees_no_mesh_is_warned_about(tmp_path, capsys):
     assert "not in view" not in capsys.readouterr().err
 
 
+def test_a_view_of_the_meshs_inside_is_warned_about(tmp_path, capsys):
+    """The face from behind (an open mesh: the inside, drawn black) was warned of as "not
+    in view" after the render (a trial): it is now warned of before, by what it is, and the
+    black picture named as the inside; the face from the front gets neither warning."""
+    import imageio.v3 as iio
+
+    assert main(["render", "face", "-o", str(tmp_path), *SMALL,
+                 "-D", "camera.rotate=[0, 180, 0]"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == ("jaxskin: warning: scene 'face': 100% of the mesh in view is its inside "
+                      "(an open mesh seen from behind or through an opening), which is drawn "
+                      "black; turn camera.rotate toward the mesh's front"), err
+    assert err[1].endswith(": every pixel is black: the camera sees the mesh's inside only (an "
+                           "open mesh from behind), drawn black; turn camera.rotate toward "
+                           "its front"), err
+    (png,) = tmp_path.glob("*rotate*.png")
+    assert not iio.imread(png).any()
+    assert main(["render", "face", "-o", str(tmp_path), *SMALL]) == 0
+    assert "inside" not in capsys.readouterr().err
+
+
 def test_a_file_named_like_a_builtin_scene_is_named_in_a_warning(tmp_path, monkeypatch, capsys):
     """`jaxskin render hand` with a file `hand` in the folder rendered the built-in hand and
     said nothing of the file (a trial): a warning names it and how to render it."""
