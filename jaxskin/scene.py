@@ -91,8 +91,9 @@ roughness = 0.3                    # its highlight: Kelemen m
 specular = 0.1                     # its highlight: Kelemen rho_s
 s_scale = 1.0                      # multiplies the material's S(λ)
 k_scale = 1.0                      # multiplies the material's K(λ)
-image = "blush.png"                # a greyscale map (0–1 × thickness_mm), or regions below;
-                                   #   none of image, ellipse, polygon: everywhere
+# image = "blush.png"              # a greyscale map (0–1 × thickness_mm), or the regions
+                                   #   below, not both; none of image, ellipse, polygon:
+                                   #   everywhere
 [[layer.ellipse]]                  # ellipses on the mesh's UVs (u right, v up), feathered;
                                    #   the map is the union of the regions
 center = [0.28, 0.47]              # uv

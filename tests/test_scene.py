@@ -452,6 +452,24 @@ def test_the_modules_example_scene_shows_the_defaults(tmp_path):
         assert shown[key] == (list(default) if isinstance(default, tuple) else default), key
 
 
+def test_the_modules_cosmetics_example_is_a_valid_scene(tmp_path):
+    """The second example (the cosmetics model's keys) gave a layer both `image` and
+    regions, which the parser refuses: copied into a file it failed (a trial). With the
+    model it names and its images made, it parses, and its layer is the regions'."""
+    import tomllib
+
+    from jaxskin import scene
+
+    example = tomllib.loads(scene.__doc__.split("```toml")[2].split("```")[0])
+    example["material"] = {"model": "spectral"}
+    for name in ("melanin.png", "m.png", "h.png"):
+        iio.imwrite(tmp_path / name, np.full((8, 8), 128, np.uint8))
+    parsed = scene.parse_scene(example, tmp_path / "example.toml")
+    (layer,) = example["layer"]
+    assert "image" not in layer and layer["ellipse"] and layer["polygon"]
+    assert parsed.values["layer.blush.thickness_mm"] == 0.01
+
+
 def test_a_cosmetic_layer_millimetres_thick_is_warned():
     """`-D layer.foundation.thickness_mm=10` meant as 10 µm was accepted (the key allows up
     to 10 mm) and rendered an opaque mask, silently (a trial)."""
