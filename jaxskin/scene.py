@@ -493,11 +493,33 @@ def load_scene(name_or_path, overrides=(), *, flag: str = "override") -> Scene:
         raw = path.read_bytes()
     except OSError as e:
         raise InputError(f"cannot read ({e.strerror or e.__class__.__name__})", path) from None
+    if raw.startswith((b"\x89PNG", b"\xff\xd8\xff", b"\x76\x2f\x31\x01", b"II*\x00",
+                       b"MM\x00*")):  # PNG, JPEG, OpenEXR, TIFF
+        raise InputError("an image, not a TOML scene file: an image is named in a scene "
+                         "(a [[layer]]'s image, skin.melanin_image, ...); render takes "
+                         "scenes", path)
     try:
         doc = tomllib.loads(toml_text(raw, path))
     except tomllib.TOMLDecodeError as e:
-        raise _toml_error(e, path) from None
+        other = _other_file(raw, path)
+        raise (InputError(other, path) if other else _toml_error(e, path)) from None
     return parse_scene(doc, path, overrides, flag=flag)
+
+
+def _other_file(raw: bytes, path) -> str | None:
+    """What a file given as a scene that is not TOML is, when it is one of the project's
+    other files (a material JSON, a measurement CSV): render once said only "not valid
+    TOML" of a material that calibrate wrote (a trial)."""
+    head = raw[:4096].decode("utf-8-sig", "replace").lstrip()
+    if path.suffix.lower() == ".json" or head.startswith("{"):
+        return ("a JSON file, not a TOML scene file: a calibrated material (what calibrate "
+                "writes) is named by a scene's [[layer]] material = \"FILE.json\", a "
+                "Lafortune fit (fit-brdf) by material.brdf")
+    if path.suffix.lower() in (".csv", ".tsv", ".txt") and re.search(r"[,;\t]", head):
+        return ("a table, not a TOML scene file: measurements are calibrated with 'jaxskin "
+                "calibrate', BRDF samples fitted with 'jaxskin fit-brdf', skin spectra with "
+                "'jaxskin fit-skin'; render takes TOML scenes (docs/reference/scene.md)")
+    return None
 
 
 def _toml_error(e, path) -> InputError:

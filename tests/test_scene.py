@@ -82,6 +82,25 @@ def test_invalid_toml_and_unknown_scene(tmp_path):
         load_scene("elbow")
 
 
+@pytest.mark.parametrize("name, content, words", [
+    ("rouge.json", b'{"name": "rouge", "S": [1.0]}\n', "a JSON file, not a TOML scene file: a "
+     "calibrated material (what calibrate writes) is named by a scene's [[layer]] material"),
+    ("fit", b'\xef\xbb\xbf  {"lobes": []}', "a JSON file, not a TOML scene file"),
+    ("m.csv", b"wavelength_nm,R_inf\n400,0.3\n", "a table, not a TOML scene file: "
+     "measurements are calibrated with 'jaxskin calibrate'"),
+    ("blush.png", b"\x89PNG\r\n\x1a\n\x00\x00", "an image, not a TOML scene file"),
+    ("a.jpg", b"\xff\xd8\xff\xe0\x00\x10JFIF", "an image, not a TOML scene file"),
+])
+def test_another_kind_of_file_given_as_a_scene_is_named(tmp_path, name, content, words):
+    """`jaxskin render rouge.json` (a material calibrate wrote) said "not valid TOML:
+    Invalid statement" (a trial): a JSON file, a table or an image is named as what it is."""
+    path = tmp_path / name
+    path.write_bytes(content)
+    with pytest.raises(InputError) as info:
+        load_scene(path)
+    assert str(info.value).startswith(f"{path}: {words}"), str(info.value)
+
+
 def test_overrides_are_checked_like_the_file(tmp_path):
     path = tmp_path / "s.toml"
     path.write_text(GOOD)
