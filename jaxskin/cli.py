@@ -789,7 +789,11 @@ def _sweep_suffixes(sweep, ext: str) -> list[str]:
         return []
     (key, values), = sweep
     width = max(2, len(str(len(values))))
-    return [f"_sweep-{i + 1:0{width}d}_{slug(key)}-{slug(f'{v:g}')}.{ext}"
+    # Six significant digits, more where two values would read alike (0.1:0.1000002:3 was
+    # named 0.1 three times: a trial), up to the float's own shortest form.
+    digits = next((d for d in range(6, 17) if len({f"{v:.{d}g}" for v in values})
+                   == len(set(map(float, values)))), 17)
+    return [f"_sweep-{i + 1:0{width}d}_{slug(key)}-{slug(f'{v:.{digits}g}')}.{ext}"
             for i, v in enumerate(values)]
 
 

@@ -595,3 +595,20 @@ def test_a_signal_inside_lists_imports_prints_no_line_of_it():
     proc = _python(script)
     assert (proc.returncode, proc.stdout) == (143, ""), proc
     assert proc.stderr == "jaxskin: terminated (SIGTERM) while listing; no file was written\n"
+
+
+def test_a_sweeps_names_tell_its_values_apart():
+    """Sweep values were named to six significant digits: `0.1:0.1000002:3` named three
+    files `..._material.melanin-0.1` (a trial); the digits grow until the names differ."""
+    import numpy as np
+
+    from jaxskin.cli import _sweep_suffixes
+
+    def names(start, stop, count):
+        return [s.split("_k-")[1] for s in _sweep_suffixes([("k", np.linspace(start, stop,
+                                                                               count))], "png")]
+
+    assert names(0.1, 0.1000002, 3) == ["0.1.png", "0.1000001.png", "0.1000002.png"]
+    assert names(0, 1, 5) == ["0.png", "0.25.png", "0.5.png", "0.75.png", "1.png"]
+    assert names(0, 1, 12)[1] == "0.0909091.png"  # six digits where they suffice
+    assert names(2, 2, 3) == ["2.png"] * 3  # one value thrice: the index tells them apart
