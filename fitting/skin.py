@@ -421,8 +421,10 @@ def fit_warnings(result: SkinFit, fixed=()) -> list[str]:
     (within 0.5 % of the range, in the fitted log scale: melanin, haemoglobin, epidermis,
     scattering; the fractions eumelanin and oxygenation end at 0 or 1 naturally), where the
     best fit may lie outside the model's range; at most five names each."""
-    def names(mask):
-        picked = [n for n, m in zip(result.names, mask, strict=True) if m]
+    def names(mask, values=None):
+        picked = [n if values is None else f"{n} = {v:.3g}"
+                  for n, m, v in zip(result.names, mask,
+                                     values if values is not None else mask, strict=True) if m]
         more = f" and {len(picked) - 5} more" if len(picked) > 5 else ""
         return ", ".join(picked[:5]) + more
 
@@ -441,8 +443,9 @@ def fit_warnings(result: SkinFit, fixed=()) -> list[str]:
             if at.any():
                 bound = bp.RANGES[p][0 if end == "lower" else 1]
                 k = int(at.sum())
-                out.append(f"{p} ends at the {end} end of its range ({bound:g}) for {k} "
-                           f"{'spectrum' if k == 1 else 'spectra'} ({names(at)}): the best "
-                           "fit may lie "
-                           "outside the model's range; check their rms and dE2000")
+                out.append(f"{p} ends at the {end} end of its range ({bound:g}, within "
+                           f"0.5 % of the range's log) for {k} "
+                           f"{'spectrum' if k == 1 else 'spectra'} "
+                           f"({names(at, result.params[p])}): the best fit may lie outside "
+                           "the model's range; check their rms and dE2000")
     return out

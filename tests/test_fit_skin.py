@@ -263,17 +263,20 @@ def test_fits_at_the_ends_of_the_range_or_not_converged_are_named():
     assert fit_warnings(result, {"haemoglobin": 0.1}) == [
         "2 of 7 spectra did not converge (s0, s6): their rows say converged=false; more "
         "--starts may help",
-        "melanin ends at the upper end of its range (0.5) for 2 spectra (s1, s2): the best "
-        "fit may lie outside the model's range; check their rms and dE2000",
-        "scattering ends at the lower end of its range (0.5) for 1 spectrum (s3): the best "
-        "fit may lie outside the model's range; check their rms and dE2000"]
+        "melanin ends at the upper end of its range (0.5, within 0.5 % of the range's log) "
+        "for 2 spectra (s1 = 0.5, s2 = 0.5): the best fit may lie outside the model's range; "
+        "check their rms and dE2000",
+        "scattering ends at the lower end of its range (0.5, within 0.5 % of the range's "
+        "log) for 1 spectrum (s3 = 0.5): the best fit may lie outside the model's range; "
+        "check their rms and dE2000"]
     params["melanin"][:] = 0.2
     assert len(fit_warnings(result, {"haemoglobin": 0.1})) == 2
     converged[:] = True
     params["scattering"][:] = 2.0
-    assert fit_warnings(result) == ["haemoglobin ends at the upper end of its range (0.1) "
-                                    "for 1 spectrum (s4): the best fit may lie outside the "
-                                    "model's range; check their rms and dE2000"]
+    assert fit_warnings(result) == ["haemoglobin ends at the upper end of its range (0.1, "
+                                    "within 0.5 % of the range's log) for 1 spectrum (s4 = "
+                                    "0.1): the best fit may lie outside the model's range; "
+                                    "check their rms and dE2000"]
 
 
 def test_dark_noise_below_zero_reads_as_zero_as_calibrate_does(tmp_path):
