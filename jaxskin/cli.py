@@ -909,6 +909,11 @@ def _render(args, run: _Run) -> int:
                 _write_maps(sc, files[i], outputs, result)
             else:
                 for image, path in zip(result if sweep else [result], paths, strict=False):
+                    bad = int(np.size(image) - np.count_nonzero(np.isfinite(image)))
+                    if bad:  # a NaN is a black pixel in a PNG: never written as a picture
+                        raise FitError(f"the render has {bad} non-finite values (NaN or "
+                                       "infinity: a value outside what float32 holds?); "
+                                       f"{path.name} not written", sc.source)
                     maps.write_render(image, path, args.format)
                     outputs.done(path)
                     if not np.any(image) and i not in empty:  # once per scene

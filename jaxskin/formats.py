@@ -46,6 +46,9 @@ __all__ = ["MaterialFile", "Table", "nist_reflectance", "nist_spectrum", "read_j
 DELIMITERS = (",", "\t", ";")
 MAX_BYTES = 256 * 2**20  # a spectrum at 0.01 nm with 50 columns is ~40 MB
 WAVELENGTH_RANGE_NM = (200.0, 3000.0)  # what a spectroradiometer can measure, generously
+# S and K of a material file above this (per mm) are refused: cosmetics measure 1e-3 to 1e5, and
+# the float32 render of 1e300 (or of 1e37 with its scales at 100) was NaN, a black image (a trial).
+MAX_SK_PER_MM = 1e9
 # The first column: wavelength_nm (the format's name) or what instrument software and
 # spreadsheets write: "Wavelength", "Wavelength (nm)", "Wavelength nm", "wavelength/nm",
 # "wavelength [µm]", "lambda", "λ", "wl", "nm", and in German, French, Spanish, Italian,
@@ -616,6 +619,11 @@ def read_material(path) -> MaterialFile:
         if np.any(v <= 0):
             i = int(np.flatnonzero(v <= 0)[0])
             raise InputError(f"must be > 0 at every band; entry {i} ({wl[i]:g} nm) is "
+                             f"{v[i]:g}", path, key=k)
+        if np.any(v > MAX_SK_PER_MM):  # the float32 render overflowed to a black image
+            i = int(np.flatnonzero(v > MAX_SK_PER_MM)[0])
+            raise InputError(f"must be at most {MAX_SK_PER_MM:g} per mm at every band "
+                             f"(cosmetics: about 1e-3 to 1e5); entry {i} ({wl[i]:g} nm) is "
                              f"{v[i]:g}", path, key=k)
     extrapolate = doc.get("extrapolate")
     if extrapolate is not None and extrapolate not in EXTRAPOLATE:

@@ -287,6 +287,9 @@ CASES = {
         1.0, "12,5", *good_material()["S_per_mm"][2:]]}),
     "material-K-zero": lambda t: material(t, {**good_material(), "K_per_mm": [
         1.0, 1.0, 0.0, *good_material()["K_per_mm"][3:]]}),
+    # S of 1e300 passed (finite, > 0) and rendered a NaN, all-black image, exit 0 (a trial)
+    "material-S-huge": lambda t: material(t, {**good_material(), "S_per_mm": [
+        1e300] * len(good_material()["S_per_mm"])}),
     # a fit-brdf output as a layer's material said 'wavelength_nm: expected a list', and a
     # "model" that is not Kubelka-Munk was not read at all (a trial)
     "material-is-a-lafortune-brdf": lambda t: material(t, {
@@ -492,6 +495,8 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
                               "S_per_mm, K_per_mm"),
     ("material-entry-text", "key 'S_per_mm': entry 1 is \"12,5\": expected a finite number"),
     ("material-K-zero", "key 'K_per_mm': must be > 0 at every band; entry 2 ("),
+    ("material-S-huge", "key 'S_per_mm': must be at most 1e+09 per mm at every band "
+                        "(cosmetics: about 1e-3 to 1e5); entry 0 ("),
     ("fit-brdf-header-typo", "typo.csv:2: column 'theta_in': unknown column (did you mean "
                              "'theta_in_deg'?)"),
     ("fit-brdf-header-typo-windows", "typo.csv:3: column 'theta_in': unknown column (did "

@@ -612,3 +612,22 @@ def test_a_sweeps_names_tell_its_values_apart():
     assert names(0, 1, 5) == ["0.png", "0.25.png", "0.5.png", "0.75.png", "1.png"]
     assert names(0, 1, 12)[1] == "0.0909091.png"  # six digits where they suffice
     assert names(2, 2, 3) == ["2.png"] * 3  # one value thrice: the index tells them apart
+
+
+def test_a_render_with_non_finite_values_is_not_written(tmp_path, capsys, monkeypatch):
+    """A NaN render (a material past float32's range, before the files' S and K were
+    bounded) was written as an all-black PNG with exit 0 (a trial): it is an error now,
+    exit 1, and its file is not written."""
+    import numpy as np
+
+    from jaxskin import cluster
+
+    def nan_render(unit):
+        return np.full((32, 32, 3), np.nan, np.float32)
+
+    monkeypatch.setattr(cluster, "render_unit", nan_render)
+    assert main(["render", "hand", "-o", str(tmp_path / "o"), *SMALL]) == 1
+    err = capsys.readouterr().err
+    assert "jaxskin: error: " in err and ": the render has 3072 non-finite values (NaN or " \
+        "infinity: a value outside what float32 holds?); hand_" in err, err
+    assert not list((tmp_path / "o").glob("*.png"))
