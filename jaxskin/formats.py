@@ -120,7 +120,11 @@ def read_text(path, fallback: str | None = None, expected: str = "a CSV table (e
         if size > MAX_BYTES:
             raise InputError(f"{size / 2**20:.0f} MiB is larger than the {MAX_BYTES >> 20} MiB "
                              "a table may be", path)
-        raw = path.read_bytes()
+        with open(path, "rb") as f:  # bounded: a device or a pipe has no size (/dev/zero
+            raw = f.read(MAX_BYTES + 1)  # grew to 24 GB, a trial)
+        if len(raw) > MAX_BYTES:
+            raise InputError(f"larger than the {MAX_BYTES >> 20} MiB a table may be (a "
+                             "device or a pipe?)", path)
     except FileNotFoundError:
         raise InputError("no such file", path) from None
     except IsADirectoryError:

@@ -846,6 +846,9 @@ def _layer(i, e, path, values, materials=None, allow=lambda key, file: None) -> 
                          "by jaxskin calibrate", source, key=f"{where}.material")
     file = cosmetics.material_path(material, base)
     allow(f"{where}.material", file.resolve())
+    if file.exists() and not file.is_file():  # /dev/zero said "no material file" (a trial)
+        raise InputError(f"not a regular file: {file} (expected a material JSON written by "
+                         "jaxskin calibrate)", source, key=f"{where}.material")
     if not file.is_file():
         shipped = cosmetics.shipped_materials()
         near = difflib.get_close_matches(material, shipped, n=1, cutoff=0.75)

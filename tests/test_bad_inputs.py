@@ -262,6 +262,8 @@ CASES = {
                                                f"skin.melanin_image={t / 'nope.png'}"),
     "melanin-image-dev-null": lambda t: layered(t, "blush_rose", "", "-D",
                                                 "skin.melanin_image=/dev/null"),
+    "material-dev-zero": lambda t: layered(t, "blush_rose", "", "-D",
+                                           "layer.blush.material=/dev/zero"),
     # --- polygons
     "polygon-vertex-missing": lambda t: polygon(t, "vertices = [1, 2, 99999]"),
     "polygon-two-points": lambda t: polygon(t, "points = [[0.1, 0.1], [0.2, 0.2]]"),
@@ -477,6 +479,7 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
     ("D-brdf-missing", "jaxskin: error: -D material.brdf=nope.json: key 'material.brdf'"),
     ("melanin-image-missing", "key 'skin.melanin_image': no such file: "),
     ("out-a-file-name", "-o: expected the folder to write into, got a file name ('fit.json'"),
+    ("material-dev-zero", "key 'layer.blush.material': not a regular file: /dev/zero"),
     ("melanin-image-dev-null", "key 'skin.melanin_image': not a regular file: /dev/null"),  # not "expected
     # a greyscale image file, got ..." (a trial)
     ("sweep-static-key", "static setting (each value compiles its own program): render each "

@@ -663,3 +663,14 @@ def test_a_row_repeated_exactly_is_read_once(tmp_path):
     with pytest.raises(InputError, match="wavelengths must increase"):
         read_measurement(write(tmp_path, "\n".join(lines[:3] + [other] + lines[3:]) + "\n",
                                "other.csv"))
+
+
+def test_a_device_or_pipe_is_read_no_further_than_the_limit(monkeypatch):
+    """`calibrate /dev/zero` grew to 24 GB and ignored Ctrl-C (a trial): a device or pipe
+    reports no size, so the limit is on what is read."""
+    from jaxskin import formats
+
+    monkeypatch.setattr(formats, "MAX_BYTES", 4096)
+    with pytest.raises(InputError, match=r"/dev/zero: larger than the 0 MiB a table may be "
+                                         r"\(a device or a pipe\?\)"):
+        read_measurement("/dev/zero")
