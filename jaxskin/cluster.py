@@ -181,6 +181,49 @@ def pool(address: str | None = None, timeout: float | None = None) -> Iterator[P
             client.close(timeout=5)
 
 
+def _within(seconds: float, fn):
+    """`fn()`, or `TimeoutError` once `seconds` have passed (`fn` is left running in a
+    daemon thread): a server that accepts the connection and never answers held
+    `distributed.Client` past its own timeout for good (a trial: over 100 s)."""
+    import threading
+
+    out: dict = {}
+
+    def run():
+        try:
+            out["value"] = fn()
+        except BaseException as e:  # noqa: BLE001  (handed to the caller)
+            out["error"] = e
+
+    thread = threading.Thread(target=run, daemon=True, name="jaxskin-connect")
+    thread.start()
+    thread.join(seconds)
+    if thread.is_alive():
+        raise TimeoutError("a connection was accepted, but no answer to Dask's handshake "
+                           "came back")
+    if "error" in out:
+        raise out["error"]
+    return out["value"]
+
+
+def _drop_client(error, cls) -> None:
+    """Close, quickly and quietly, the half-made `distributed.Client` that `error` came out
+    of (found in its traceback's frames): left to the garbage collector, its `__del__`
+    closed it with a 20 s timeout and printed a traceback after our error line (a trial:
+    a service that is not Dask at the address)."""
+    tb = error.__traceback__
+    while tb is not None:
+        client = tb.tb_frame.f_locals.get("self")
+        if isinstance(client, cls):
+            with contextlib.suppress(Exception):
+                client.close(timeout=1)
+            with contextlib.suppress(Exception):
+                client._Client__loop = None  # __del__: "failed early, nothing to do"
+            break
+        tb = tb.tb_next
+    error.__traceback__ = None
+
+
 def connect(address: str, timeout: float | None = None):
     """A `distributed.Client` on `address`, or an `InputError` saying why not: Dask missing,
     the scheduler not answering, workers without this jaxskin."""
@@ -195,11 +238,16 @@ def connect(address: str, timeout: float | None = None):
     for name in ("distributed.client", "distributed.comm.tcp", "distributed.core"):
         logging.getLogger(name).setLevel(logging.CRITICAL)
     try:
-        client = distributed.Client(address, timeout=timeout, set_as_default=False)
+        client = _within(timeout + 5.0, lambda: distributed.Client(
+            address, timeout=timeout, set_as_default=False))
     except Exception as e:  # noqa: BLE001  (OSError, TimeoutError, comm errors: all unreachable)
+        _drop_client(e, distributed.Client)
         why = " ".join(str(e).split())[:160] or e.__class__.__name__
-        raise InputError(f"--cluster: no Dask scheduler answered at {address} within "
-                         f"{timeout:g} s ({why})") from None
+        if isinstance(e, (OSError, TimeoutError)):
+            raise InputError(f"--cluster: no Dask scheduler answered at {address} within "
+                             f"{timeout:g} s ({why})") from None
+        raise InputError(f"--cluster: what answers at {address} is not a Dask scheduler "
+                         f"({e.__class__.__name__}: {why})") from None
     try:
         found = client.run(_versions)
     except Exception as e:  # noqa: BLE001  (a worker that cannot even unpickle our function)

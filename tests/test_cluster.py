@@ -6,6 +6,7 @@ One `LocalCluster` (2 worker processes, 1 thread each) serves the module: starti
 the workers' first JAX import take seconds.
 """
 
+import contextlib
 import hashlib
 import logging
 import os
@@ -294,3 +295,43 @@ def test_fit_image_on_the_cluster_matches_the_local_bytes(tmp_path, capsys, dask
     assert (iio.imread(tmp_path / "local" / "hand_fit.png").shape
             == iio.imread(tmp_path / "cluster" / "hand_fit.png").shape)
     assert "material.melanin" in (tmp_path / "cluster" / "hand.toml").read_text()
+
+
+@pytest.mark.parametrize("reply, why", [
+    (b"HTTP/1.1 400 Bad Request\r\n\r\n", "is not a Dask scheduler (MemoryError: "),
+    (None, "no Dask scheduler answered at tcp://127.0.0.1:{port} within 1 s (a connection "
+           "was accepted, but no answer to Dask's handshake came back)"),
+])
+def test_a_service_that_is_not_dask_is_one_line_and_exit_2(tmp_path, reply, why):
+    """An HTTP server at the address printed distributed's traceback after our line and
+    took 22 s; a server that accepts and never answers held the command for good (a
+    trial). Both are one line, exit 2, within the timeout and a few seconds."""
+    import socket
+    import threading
+
+    server = socket.create_server(("127.0.0.1", 0))
+    port = server.getsockname()[1]
+    held = []
+
+    def serve():
+        with contextlib.suppress(OSError):
+            while True:
+                conn, _ = server.accept()
+                held.append(conn)
+                if reply is not None:
+                    conn.sendall(reply)
+
+    threading.Thread(target=serve, daemon=True).start()
+    code = ("import sys; from jaxskin import cluster; cluster.CONNECT_TIMEOUT = 1.0; "
+            "from jaxskin.cli import main; sys.exit(main(sys.argv[1:]))")
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-c", code, "render", "hand", "-o",
+                           str(tmp_path / "out"), "--cluster", f"tcp://127.0.0.1:{port}"],
+                          capture_output=True, text=True, timeout=120)
+    seconds = time.perf_counter() - t0
+    server.close()
+    err = proc.stderr.splitlines()
+    assert proc.returncode == 2 and len(err) == 1, proc.stderr
+    assert err[0].startswith("jaxskin: error: --cluster: ") and why.format(port=port) in err[0]
+    assert seconds < 60, seconds
+    assert not (tmp_path / "out").exists()
