@@ -547,6 +547,15 @@ def test_the_command_line_serves_where_asked(monkeypatch, capsys, tmp_path):
     assert cli.main(["edit", "hand", "--no-browser", "-D", "material.melanin=6"]) == 2
     assert "jaxskin: error: -D: key 'material.melanin': must be in [0, 1], got 6.0" in (
         capsys.readouterr().err)
+    # -o checked as render checks it, before serving: a file served, and Save failed with
+    # an internal error (a trial)
+    (tmp_path / "afile").write_text("hi")
+    n = len(served)
+    for out, words in ((tmp_path / "afile", "-o: expected a folder, but this is a file"),
+                       (tmp_path / "ed" / "x.toml", "-o: expected the folder to write into")):
+        assert cli.main(["edit", "hand", "--no-browser", "-o", str(out)]) == 2
+        assert words in capsys.readouterr().err
+    assert len(served) == n and not (tmp_path / "ed").exists()
 
 
 def test_the_command_line(monkeypatch, capsys):

@@ -45,6 +45,11 @@ def command(args, run) -> int:
                   "can read and write scenes in the editor's folders; the default 127.0.0.1 "
                   "is reachable from this machine only", file=sys.stderr, flush=True)
     run.stage = "loading the scene"
+    from ..outputs import check_folder
+
+    # as render checks it, before the server starts: `-o afile` served, and Save failed
+    # with an internal error (a trial); Save names its files, so `-o ed/x.toml` is a slip
+    check_folder(args.output, "-o")
     try:
         session = Session(args.scene or "hand", args.output)
         pairs = []
