@@ -46,7 +46,7 @@ from .checks import (
     unused_overrides,
 )
 from .io import FitError, InputError
-from .outputs import MAX_NAME, MAX_NAME_BYTES, Outputs, check_name, slug
+from .outputs import MAX_NAME, MAX_NAME_BYTES, Outputs, _control, check_name, slug
 
 EXIT_FAILURE, EXIT_INPUT, EXIT_SIGINT, EXIT_SIGTERM = 1, 2, 130, 143
 
@@ -1137,8 +1137,11 @@ def _pipe_safe_stdout():
 
 
 def _say(line: str) -> None:
-    """One line on stderr, whatever the message holds (newlines become spaces)."""
-    print(" ".join(line.split()) if len(line.splitlines()) > 1 else line, file=sys.stderr,
+    """One line on stderr, whatever the message holds: newlines become spaces, and any other
+    control character its escape (`-D name=` with U+009B, a terminal's escape, was echoed
+    raw: a trial), so that a message cannot drive the terminal."""
+    line = " ".join(line.split()) if len(line.splitlines()) > 1 else line
+    print("".join(ascii(c)[1:-1] if _control(c) else c for c in line), file=sys.stderr,
           flush=True)
 
 

@@ -17,6 +17,7 @@ import hashlib
 import os
 import re
 import tempfile
+import unicodedata
 from pathlib import Path
 
 from .io import InputError
@@ -30,9 +31,16 @@ MAX_NAME_BYTES = 240
 _UNSAFE = re.compile(r"[^A-Za-z0-9._+=-]+")
 
 
+# Bidirectional controls: they reorder how a name is shown (U+202E made "x\u202eyz.png"
+# read "xgnp.zy"), so they disguise a file name (a trial).
+_BIDI = frozenset("\u061c\u200e\u200f\u202a\u202b\u202c\u202d\u202e\u2066\u2067\u2068\u2069")
+
+
 def _control(text: str) -> bool:
-    """Whether `text` holds a control character (a newline, a NUL, DEL)."""
-    return any(ord(c) < 32 or ord(c) == 127 for c in text)
+    """Whether `text` holds a control character: C0 and C1 controls (a newline, a NUL, DEL,
+    U+009B, a terminal's escape), line and paragraph separators, bidirectional controls.
+    Zero-width joiners (U+200C, U+200D) are letters' business in some scripts: allowed."""
+    return any(unicodedata.category(c) in ("Cc", "Zl", "Zp", "Cs") or c in _BIDI for c in text)
 
 
 def check_name(name: str, where=None, key: str | None = "name") -> str:

@@ -194,6 +194,12 @@ CASES = {
     # a blank name wrote " _texture.size-64_camera.size-32.png" (a newcomer's trial)
     "name-blank": lambda t: scene(t, 'name = " "\n'),
     "name-trailing-space": lambda t: scene(t, 'name = "hand "\n'),
+    # a right-to-left override disguised the file's name, a line separator broke the
+    # listing, U+009B (a terminal's escape) passed and was echoed raw (a trial)
+    "name-bidi-override": lambda t: scene(t, 'name = "x\\u202eyz"\n'),
+    "name-line-separator": lambda t: scene(t, 'name = "x\\u2028y"\n'),
+    "name-c1-escape": lambda t: ["render", "hand", "-o", str(t / "o"), "-D",
+                                 "name=a\u009b31mRED"],
     # made a folder whose name held a newline (a newcomer's trial)
     # an edit pointing out of the planar projection's plane gave deep furrows in an
     # arbitrary direction; a point 173 units away snapped to a vertex (a trial)
@@ -512,6 +518,10 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
     ("mesh-missing", "s.toml: key 'mesh.file': expected a built-in mesh (hand, "),
     ("cli-noise-zero", "argument --noise: expected a finite number > 0"),
     ("name-blank", "' ' starts or ends with a space"),
+    ("name-bidi-override", "'x\\u202eyz' contains a control character"),
+    ("name-line-separator", "'x\\u2028y' contains a control character"),
+    ("name-c1-escape", "-D name=a\\x9b31mRED: key 'name': an output name must be one plain "
+                       "file name"),
     ("edit-across-the-plane", "s.toml: key 'fields.edit[0].d1': [0, 0, 1.5] at vertex 268 is "
                               "almost perpendicular to the x-y plane the planar projection "
                               "keeps (only 0% of it lies along it)"),
