@@ -558,9 +558,14 @@ def test_the_command_line_serves_where_asked(monkeypatch, capsys, tmp_path):
     assert len(served) == n and not (tmp_path / "ed").exists()
 
 
-def test_the_command_line(monkeypatch, capsys):
+def test_the_command_line(monkeypatch, capsys, tmp_path):
     assert cli.main(["edit", "no_such_scene.toml", "--no-browser"]) == 2
     assert "no scene file" in capsys.readouterr().err
+    bad = tmp_path / "bad1.toml"  # the file and key once twice (a trial)
+    bad.write_text('[camera]\nsize = "big"\n')
+    assert cli.main(["edit", str(bad), "--no-browser"]) == 2
+    assert capsys.readouterr().err == (f"jaxskin: error: {bad}: key 'camera.size': expected "
+                                       "int, got 'big'\n")
     with pytest.raises(SystemExit) as e:
         cli.main(["edit", "--port", "70000"])
     assert e.value.code == 2

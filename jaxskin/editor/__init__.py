@@ -59,8 +59,9 @@ def command(args, run) -> int:
                 raise InputError(f"expected -D key=value, got {item!r}")
             pairs.append([key, value])
         refused = session.open(session.source, pairs)
-    except EditorError as e:
-        raise InputError(e.message, key=e.key) from None
+    except EditorError as e:  # a scene's own error names its file and key already (they
+        named = e.key is not None and f"key '{e.key}'" not in e.message  # came twice: a trial)
+        raise InputError(e.message, key=e.key if named else None) from None
     if refused:
         raise InputError(refused[0]["error"], "-D", key=refused[0]["key"])
     # Bound before the address is printed or a browser opened: a port in use is an error
