@@ -278,7 +278,15 @@ def write_csv(result: SkinFit, path) -> None:
 
 
 def _cell(text: str) -> str:
-    return f'"{text}"' if any(ch in text for ch in ',"\n') else text
+    """A name as a CSV cell: quoted where it holds a comma, a quote or a line break (inner
+    quotes doubled), and led by `'` where it starts like a spreadsheet formula (`=`, `+`,
+    `-`, `@`, a tab or a return: a spectrum named `=cmd|...` would have run as one; a
+    trial), as OWASP advises for CSV files."""
+    if text[:1] in ("=", "+", "-", "@", "\t", "\r"):
+        text = "'" + text
+    if any(ch in text for ch in ',"\n\r'):
+        text = '"' + text.replace('"', '""') + '"'
+    return text
 
 
 def write_report(result: SkinFit, path, samples: int = 6) -> None:

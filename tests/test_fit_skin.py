@@ -359,3 +359,24 @@ def test_spectra_in_micrometres_are_named_as_such(tmp_path):
                                          r"um; this reader takes nm: give them in nm, as "
                                          r"wavelength_nm\)$"):
         formats.read_spectra(path)
+
+
+@pytest.mark.parametrize("name, cell", [
+    ("subject_12", "subject_12"),
+    ("a,b", '"a,b"'),
+    ('say "hi"', '"say ""hi"""'),
+    ("=cmd|' /C calc'!A0", "'=cmd|' /C calc'!A0"),
+    ("+1", "'+1"), ("-x", "'-x"), ("@sum", "'@sum"),
+    ("=a,b", "\"'=a,b\""),
+])
+def test_a_spectrums_name_is_a_safe_csv_cell(name, cell):
+    """A spectrum named `=cmd|' /C calc'!A0` went into `*_fit.csv` as it was, where a
+    spreadsheet may run it as a formula; an inner quote was not doubled (a trial). A CSV
+    reader reads the name back, led by `'` where it started like a formula."""
+    import io
+
+    from jaxskin.fitting.skin import _cell
+
+    assert _cell(name) == cell
+    formula = name[:1] in "=+-@"
+    assert next(csv.reader(io.StringIO(cell + ",1\n"))) == [("'" if formula else "") + name, "1"]
