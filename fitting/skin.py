@@ -356,6 +356,9 @@ def _fixed(items, path=None) -> dict[str, float]:
         lo, hi = bp.RANGES[name]
         if not (math.isfinite(value) and lo <= value <= hi):
             raise InputError(f"--fix {name}: expected a number in [{lo:g}, {hi:g}], got {text!r}")
+        if name in out and out[name] != value:  # the last one was taken, silently (a trial)
+            raise InputError(f"--fix {name} given twice ({out[name]:g} and {value:g}); give it "
+                             "once")
         out[name] = value
     if len(out) == len(bp.PARAMS):
         raise InputError("--fix: every parameter is fixed; nothing is left to fit")

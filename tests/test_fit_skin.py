@@ -205,6 +205,9 @@ BAD = [
      "--fix expects name=value"),
     ("fix out of range", "wavelength_nm,a\n" + _good_rows(), ["--fix", "melanin=0.9"],
      "expected a number in [0.005, 0.5]"),
+    ("fix twice", "wavelength_nm,a\n" + _good_rows(), ["--fix", "melanin=0.1", "--fix",
+                                                       "melanin=0.2"],
+     "--fix melanin given twice (0.1 and 0.2); give it once"),
     ("starts 0", "wavelength_nm,a\n" + _good_rows(), ["--starts", "0"], "--starts"),
 ]
 
