@@ -766,7 +766,7 @@ def _name_value(key: str, value: str) -> str:
     from .scene import _parse_override
 
     def short(x) -> str:
-        text = repr(float(x))
+        text = repr(float(x) + 0.0)  # -0.0 + 0.0 is 0.0: `=-0` named the file `k--0`
         return text[:-2] if text.endswith(".0") else text
 
     def number(x) -> bool:

@@ -754,6 +754,8 @@ def _parse_override(item: str, flag: str = "-D"):
         value = tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
         value = text  # a bare word: a string
+        if re.fullmatch(r"[+-]?(\.\d+|\d+\.)([eE][+-]?\d+)?", text):  # .5 and 5. (TOML
+            value = float(text)  # wants digits on both sides of the point; a trial's .5)
         spec = SCHEMA.get(key)
         if spec is not None and spec.kind in ("vec2", "vec3"):  # numbers with commas, as
             try:  # typed without brackets (camera.rotate=0,60,0 was a string; a trial); a

@@ -416,6 +416,7 @@ def test_one_number_spelt_two_ways_names_one_file(capsys):
     names = {_base_name(sc, [f"material.melanin={v}"]) for v in ("0.1", "1e-1", "0.10", ".1")}
     assert names == {"hand_material.melanin-0.1"}, names
     assert _base_name(sc, ["texture.size=512.0"]) == "hand_texture.size-512"
+    assert _base_name(sc, ["material.melanin=-0"]) == "hand_material.melanin-0"  # not --0
     assert _base_name(sc, ["material.melanin=0.1234567"]) != _base_name(
         sc, ["material.melanin=0.1234568"])  # not rounded to 6 digits, as :g would
     assert _base_name(sc, ["material.model=blinn"]) == "hand_material.model-blinn"

@@ -538,3 +538,16 @@ def test_a_list_given_to_D_without_brackets_is_the_list():
     with pytest.raises(InputError, match=r"expected three finite numbers \(\[x, y, z\]\), got "
                                          r"'sideways'"):
         load_scene("face", ["camera.rotate=sideways"])
+
+
+@pytest.mark.parametrize("text, value", [(".5", 0.5), ("5.", 5.0), ("-.5e1", -5.0),
+                                         ("+.25", 0.25), ("0,5", "0,5"), ("abc", "abc")])
+def test_a_number_without_a_digit_before_or_after_the_point_is_a_number(text, value):
+    """`-D material.melanin=.5` was "expected a finite number, got '.5'" (TOML wants digits
+    on both sides of the point; a trial): such numbers are read as numbers."""
+    from jaxskin.scene import _parse_override
+
+    assert _parse_override(f"material.melanin={text}") == ("material.melanin", value)
+    if isinstance(value, float) and 0 <= value <= 1:
+        assert load_scene("hand", [f"material.melanin={text}"]).values[
+            "material.melanin"] == value
