@@ -1033,6 +1033,9 @@ def main(argv=None, early=None) -> int:
     handlers are in place (`_signals`) it goes on noting them there, and they end the
     command before any work."""
     early = [] if early is None else early
+    for stream in (sys.stdout, sys.stderr):  # a terminal that cannot show a name (an ASCII
+        with contextlib.suppress(AttributeError, ValueError):  # locale) gets its escapes,
+            stream.reconfigure(errors="backslashreplace")  # not a UnicodeEncodeError
     old = {}
     if threading.current_thread() is threading.main_thread():
         old = {sig: signal.signal(sig, lambda signum, frame: early.append(signum))

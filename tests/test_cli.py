@@ -632,3 +632,20 @@ def test_a_render_with_non_finite_values_is_not_written(tmp_path, capsys, monkey
     assert "jaxskin: error: " in err and ": the render has 3072 non-finite values (NaN or " \
         "infinity: a value outside what float32 holds?); hand_" in err, err
     assert not list((tmp_path / "o").glob("*.png"))
+
+
+def test_a_terminal_that_cannot_show_a_name_gets_its_escapes(tmp_path):
+    """With an ASCII terminal (PYTHONIOENCODING=ascii) a scene named 日本語 was written, then
+    the listing raised UnicodeEncodeError: exit 1 (a trial). The name is shown escaped."""
+    import subprocess
+    import sys
+
+    scene = tmp_path / "jp.toml"
+    scene.write_text('name = "日本語"\n[texture]\nsize = 64\n[camera]\nsize = 32\n',
+                     encoding="utf-8")
+    proc = subprocess.run([sys.executable, "-m", "jaxskin", "render", str(scene), "-o",
+                           str(tmp_path / "o")], capture_output=True, timeout=300,
+                          env={**__import__("os").environ, "PYTHONIOENCODING": "ascii"})
+    assert proc.returncode == 0, proc.stderr
+    assert b"o/\\u65e5\\u672c\\u8a9e.png" in proc.stdout, proc.stdout
+    assert (tmp_path / "o" / "日本語.png").is_file()
