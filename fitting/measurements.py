@@ -127,6 +127,9 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
         """The columns to skip; the others classified before any row is read (so that an
         unknown text column is named as unknown, not as a cell that is no number)."""
         names = [n for n in header[1:] if any(fnmatch.fnmatchcase(n, p) for p in ignore)]
+        if header[0] in ignore:  # named, not matched by a pattern: ran as if not given (a trial)
+            raise InputError("--ignore names the first column, the wavelengths, which cannot "
+                             "be ignored", path, line, header[0])
         if "ignore" in meta:
             value, number = meta["ignore"]
             for name in filter(None, (n.strip() for n in re.split(r"[,;]", value))):

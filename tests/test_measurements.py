@@ -674,3 +674,14 @@ def test_a_device_or_pipe_is_read_no_further_than_the_limit(monkeypatch):
     with pytest.raises(InputError, match=r"/dev/zero: larger than the 0 MiB a table may be "
                                          r"\(a device or a pipe\?\)"):
         read_measurement("/dev/zero")
+
+
+def test_ignoring_the_wavelength_column_by_name_is_refused(tmp_path):
+    """`calibrate --ignore wavelength_nm` ran as if the option were not given (a trial); a
+    pattern that happens to match it (`w*`) still passes it by."""
+    path = write(tmp_path, GOOD)
+    with pytest.raises(InputError, match=r"m.csv:2: column 'wavelength_nm': --ignore names the "
+                                         r"first column, the wavelengths, which cannot be "
+                                         r"ignored"):
+        read_measurement(path, ignore=["wavelength_nm"])
+    assert read_measurement(path, ignore=["w*"]).wavelength_nm.size > 0
