@@ -151,6 +151,13 @@ def _a(what: str) -> str:
     return f"{'an' if what[:1] in 'aeiou' else 'a'} {what}"
 
 
+def _max_pixels() -> str:
+    """Pillow's limit on an image's pixels (its guard against decompression bombs)."""
+    from PIL import Image
+
+    return f"{Image.MAX_IMAGE_PIXELS * 2:,}" if Image.MAX_IMAGE_PIXELS else "unbounded"
+
+
 def read_image(path, what: str = "image", key=None):
     """A PNG (or any image imageio reads) as display values in [0, 1]: `(rgb (H, W, 3),
     alpha (H, W) or None)`; grey is repeated to RGB; integer samples at the full scale of
@@ -170,6 +177,8 @@ def read_image(path, what: str = "image", key=None):
         img = np.asarray(iio.imread(path)) if img is None else img
     except Exception as e:  # noqa: BLE001  (imageio raises many kinds; all mean unreadable)
         why = (e.strerror if isinstance(e, OSError) and e.strerror else
+               f"larger than the {_max_pixels()} pixels an image may be"
+               if type(e).__name__ == "DecompressionBombError" else  # a trial's 30000²
                "not a file format imageio decodes, or a truncated or damaged one")
         raise InputError(f"cannot read as {_a(what)}: {why}", path, key=key) from None
     if img.dtype.kind not in "uifb" or img.size == 0 or not (

@@ -403,3 +403,20 @@ def test_blur_names_a_wrong_shape():
         sss.blur(jnp.ones((8, 8)), 0.1)
     with pytest.raises(ValueError, match=r"mask \(4, 4\) must be the image's"):
         sss.blur(jnp.ones((8, 8, 3)), 0.1, mask=jnp.ones((4, 4)))
+
+
+def test_an_image_past_pillows_pixel_limit_is_named_so(tmp_path, monkeypatch):
+    """A 30000² PNG was "not a file format imageio decodes, or a truncated or damaged one",
+    where Pillow had refused its size (a trial); here the limit is lowered to 1000 pixels
+    (Pillow refuses past twice it)."""
+    from PIL import Image
+
+    from jaxskin.io import InputError
+    from jaxskin.maps import read_image
+
+    path = tmp_path / "big.png"
+    iio.imwrite(path, np.zeros((100, 100), np.uint8))
+    monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 1000)
+    with pytest.raises(InputError, match=r"big.png: cannot read as an image: larger than the "
+                                         r"2,000 pixels an image may be"):
+        read_image(path)
