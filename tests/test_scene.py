@@ -317,8 +317,11 @@ def test_a_scene_saved_with_a_byte_order_mark_and_crlf_reads_as_without(tmp_path
     with pytest.raises(InputError, match="wide.toml: is UTF-16 text; a TOML file is UTF-8"):
         load_scene(tmp_path / "wide.toml")
     (tmp_path / "image.toml").write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00")
-    with pytest.raises(InputError, match=r"image.toml: is not UTF-8 text \(byte 0\)"):
+    with pytest.raises(InputError, match=r"image.toml: an image, not a TOML scene file"):
         load_scene(tmp_path / "image.toml")
+    (tmp_path / "binary.toml").write_bytes(b"\x80\x81\x00\x00")
+    with pytest.raises(InputError, match=r"binary.toml: is not UTF-8 text \(byte 0\)"):
+        load_scene(tmp_path / "binary.toml")
 
 
 @pytest.mark.parametrize("region", [
