@@ -29,6 +29,7 @@ import numpy as np
 import optimistix as optx
 
 from jaxskin import km
+from jaxskin.formats import MAX_SK_PER_MM
 from jaxskin.io import FitError, InputError
 from jaxskin.precision import einsum, matmul
 
@@ -438,6 +439,12 @@ def fit(m: Measurement, smooth: float = 0.0, noise: float = DEFAULT_NOISE,
         where = f" at {wl[bad[0]]:g} nm" if bad.size else ""
         raise FitError(f"the fit failed: S, K or the residual is not finite{where}",
                        m.path, m.header_line)
+    big = np.flatnonzero(np.maximum(S, K) > MAX_SK_PER_MM)
+    if big.size:  # the renderer refuses such a file (float32): not written as if usable
+        raise FitError(f"the fit ran S or K past {MAX_SK_PER_MM:g} per mm at {big.size} "
+                       f"band(s) (first {wl[big[0]]:g} nm: S {S[big[0]]:.3g}, K "
+                       f"{K[big[0]]:.3g}); cosmetics measure about 1e-3 to 1e5: check the "
+                       "thickness and the units of the readings", m.path, m.header_line)
     return KMFit(
         name=m.name, wavelength_nm=wl, S_per_mm=S, K_per_mm=K,
         identifiable=ident, rmse=float(np.sqrt(np.mean(residual**2))), R_fit=R_fit,

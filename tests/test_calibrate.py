@@ -679,3 +679,19 @@ def test_far_extrapolation_is_measured_from_the_nearest_datum():
     said = far_extrapolation(m, steep, "linear", grid)
     assert len(said) == 1 and said[0].startswith("--extrapolate linear takes K from 2 per mm "
                                                  "at 800 nm to ") and "at 380 nm" in said[0], said
+
+
+def test_a_fit_past_what_the_renderer_reads_is_not_written():
+    """S and K above `formats.MAX_SK_PER_MM` are refused by the renderer (float32 made such
+    a render NaN: a trial), so a fit that lands there (films of 1e-11 mm read as mm: S and K
+    5e9 and 2e9 per mm, recovered exactly) is a FitError naming the band, not a material
+    the renderer would then refuse."""
+    from jaxskin.io import FitError
+
+    S, K = np.full_like(WL, 5e9), np.full_like(WL, 2e9)
+    m = synthetic(S, K, [2e-11, 6e-11], BLACK)
+    np.testing.assert_allclose(fkm.closed_form(m)[0], S, rtol=1e-6)
+    with pytest.raises(FitError, match=r"synthetic.csv:1: the fit ran S or K past 1e\+09 per "
+                                       r"mm at \d+ band\(s\) \(first \d+ nm: S 5e\+09, K "
+                                       r"2e\+09\); cosmetics measure about 1e-3 to 1e5"):
+        fkm.fit(m)
