@@ -238,6 +238,10 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
 _WAVELENGTH_CELL = re.compile(r"(?i)\d+(?:\.\d+)?\s*(?:nm)?")
 
 
+# A reading's column written in lower case (r_0.05mm, r_inf, e_white), for `_other_layout`.
+_LOWER_READING = re.compile(r"r_[\d.]+\s*(mm|um|µm)|r_?inf|r_?g|e_\S+")
+
+
 def _other_layout(path):
     """`(line, message)` when a table with no header row is laid out in a way the format
     is not: wavelengths along a row (one row per sample, as some instruments export), or
@@ -255,7 +259,7 @@ def _other_layout(path):
                 and not any(_is_reading(c) for c in cells[1:])):
             shown = ", ".join(repr(c) for c in cells[1:3]) + (", ..." if len(cells) > 3 else "")
             reads = "calibrate reads R_<X>mm, R_inf, R_g or E_... columns"
-            if any(c[:1] in "re" for c in cells[1:]):  # r_0.05mm: the case
+            if any(_LOWER_READING.fullmatch(c) for c in cells[1:]):  # r_0.05mm: the case
                 return number, (f"no column is a cosmetic's reading ({shown}): {reads}, "
                                 "with a capital R or E")
             return number, (f"no column is a cosmetic's reading ({shown}; {reads}): skin "

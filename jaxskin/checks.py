@@ -339,21 +339,23 @@ def unused_overrides(sc, overrides) -> list[str]:
     return out
 
 
-def read_instead(sc, item: str) -> str | None:
+def read_instead(sc, item: str, overrides=()) -> str | None:
     """For a `-D` item that changes nothing in scene `sc` (`unused_overrides`), a key of the
     same last name that the scene does read, or `None`: `material.melanin` for
     `skin.melanin=0.3` on the Blinn hand (a trial's first guess; the two sections are the
-    two skin models). Found by trying the value under each such key."""
+    two skin models). Found by trying the value under each such key, with the command's
+    other `overrides` (`-D material.model=lafortune` reads neither)."""
     from .scene import _parse_override, load_scene
 
     key, value = _parse_override(item)
     leaf = key.rsplit(".", 1)[-1]
     for other in sorted(k for k in sc.values if k != key and k.rsplit(".", 1)[-1] == leaf):
+        rest = [o for o in overrides if _parse_override(o)[0] not in (key, other)]
         trial = f"{other}={value}"
         try:
-            changed = load_scene(sc.source, [trial], flag="-D")
+            changed = load_scene(sc.source, [*rest, trial], flag="-D")
         except InputError:
             continue
-        if not unused_overrides(changed, [trial]):
+        if trial not in unused_overrides(changed, [*rest, trial]):
             return other
     return None

@@ -791,8 +791,9 @@ def _sweep_suffixes(sweep, ext: str) -> list[str]:
     width = max(2, len(str(len(values))))
     # Six significant digits, more where two values would read alike (0.1:0.1000002:3 was
     # named 0.1 three times: a trial), up to the float's own shortest form.
+    values = [float(v) + 0.0 for v in values]  # -0.0 + 0.0 is 0.0 (not named --0)
     digits = next((d for d in range(6, 17) if len({f"{v:.{d}g}" for v in values})
-                   == len(set(map(float, values)))), 17)
+                   == len(set(values))), 17)
     return [f"_sweep-{i + 1:0{width}d}_{slug(key)}-{slug(f'{v:.{digits}g}')}.{ext}"
             for i, v in enumerate(values)]
 
@@ -863,13 +864,13 @@ def _render(args, run: _Run) -> int:
         idle = idle_map_keys(sc)  # errors (-D serves every scene)
         for item in unused_overrides(sc, args.overrides):
             if _parse_override(item)[0] not in idle:  # an idle map's own line says more
-                other = read_instead(sc, item)
+                other = read_instead(sc, item, args.overrides)
                 hint = f"; it reads {other}" if other else ""
                 _say(f"jaxskin: warning: -D {item} changes nothing in scene {sc.name!r} "
                      f"(its material model or settings do not use it{hint})")
         if skip:
             key, _, spec = args.sweep[0].partition("=")
-            other = read_instead(sc, f"{key.strip()}={spec.split(':')[0]}")
+            other = read_instead(sc, f"{key.strip()}={spec.split(':')[0]}", args.overrides)
             hint = f"; it reads {other}" if other else ""
             _say(f"jaxskin: warning: --sweep {args.sweep[0]} changes nothing in scene "
                  f"{sc.name!r} (not one of its parameters{hint}): it is rendered once, "
@@ -1033,9 +1034,12 @@ def main(argv=None, early=None) -> int:
     handlers are in place (`_signals`) it goes on noting them there, and they end the
     command before any work."""
     early = [] if early is None else early
-    for stream in (sys.stdout, sys.stderr):  # a terminal that cannot show a name (an ASCII
-        with contextlib.suppress(AttributeError, ValueError):  # locale) gets its escapes,
-            stream.reconfigure(errors="backslashreplace")  # not a UnicodeEncodeError
+    errors = {}  # a terminal that cannot show a name (an ASCII locale) gets its escapes, not
+    for stream in (sys.stdout, sys.stderr):  # a UnicodeEncodeError; restored at the end
+        with contextlib.suppress(AttributeError, ValueError):
+            before = stream.errors
+            stream.reconfigure(errors="backslashreplace")
+            errors[stream] = before
     old = {}
     if threading.current_thread() is threading.main_thread():
         old = {sig: signal.signal(sig, lambda signum, frame: early.append(signum))
@@ -1045,6 +1049,9 @@ def main(argv=None, early=None) -> int:
     finally:
         for sig, handler in old.items():
             signal.signal(sig, handler)
+        for stream, before in errors.items():
+            with contextlib.suppress(AttributeError, ValueError):
+                stream.reconfigure(errors=before)
 
 
 def _main(argv, early: list) -> int:

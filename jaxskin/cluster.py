@@ -181,29 +181,51 @@ def pool(address: str | None = None, timeout: float | None = None) -> Iterator[P
             client.close(timeout=5)
 
 
-def _within(seconds: float, fn):
-    """`fn()`, or `TimeoutError` once `seconds` have passed (`fn` is left running in a
-    daemon thread): a server that accepts the connection and never answers held
-    `distributed.Client` past its own timeout for good (a trial: over 100 s)."""
+def _within(seconds: float, fn, cleanup):
+    """`fn()`, or `TimeoutError` once `seconds` have passed: a server that accepts the
+    connection and never answers held `distributed.Client` past its own timeout for good
+    (a trial: over 100 s). `fn` is then left to finish in a daemon thread, and `cleanup` is
+    called on what it returns or raises (a client or an error) when it does: not leaked to
+    a library caller who goes on (a review)."""
     import threading
 
     out: dict = {}
+    lock = threading.Lock()
 
     def run():
         try:
-            out["value"] = fn()
-        except BaseException as e:  # noqa: BLE001  (handed to the caller)
-            out["error"] = e
+            result = fn()
+        except BaseException as e:  # noqa: BLE001  (handed to the caller, or cleaned up)
+            result, key = e, "error"
+        else:
+            key = "value"
+        with lock:
+            if out.get("abandoned"):
+                with contextlib.suppress(Exception):
+                    cleanup(result)
+                return
+            out[key] = result
 
     thread = threading.Thread(target=run, daemon=True, name="jaxskin-connect")
     thread.start()
     thread.join(seconds)
-    if thread.is_alive():
-        raise TimeoutError("a connection was accepted, but no answer to Dask's handshake "
-                           "came back")
+    with lock:
+        if not ("value" in out or "error" in out):
+            out["abandoned"] = True
+            raise TimeoutError(f"a connection was accepted, but no answer to Dask's "
+                               f"handshake came back in {seconds:g} s")
     if "error" in out:
         raise out["error"]
     return out["value"]
+
+
+def _close_late(cls, result) -> None:
+    """What a connection that was given up on returned at last: a client, closed; an error,
+    its half-made client dropped (`_drop_client`)."""
+    if isinstance(result, cls):
+        result.close(timeout=1)
+    elif isinstance(result, BaseException):
+        _drop_client(result, cls)
 
 
 def _drop_client(error, cls) -> None:
@@ -239,7 +261,8 @@ def connect(address: str, timeout: float | None = None):
         logging.getLogger(name).setLevel(logging.CRITICAL)
     try:
         client = _within(timeout + 5.0, lambda: distributed.Client(
-            address, timeout=timeout, set_as_default=False))
+            address, timeout=timeout, set_as_default=False), functools.partial(
+            _close_late, distributed.Client))
     except Exception as e:  # noqa: BLE001  (OSError, TimeoutError, comm errors: all unreachable)
         _drop_client(e, distributed.Client)
         why = " ".join(str(e).split())[:160] or e.__class__.__name__

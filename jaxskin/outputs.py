@@ -31,16 +31,20 @@ MAX_NAME_BYTES = 240
 _UNSAFE = re.compile(r"[^A-Za-z0-9._+=-]+")
 
 
-# Bidirectional controls: they reorder how a name is shown (U+202E made "x\u202eyz.png"
-# read "xgnp.zy"), so they disguise a file name (a trial).
-_BIDI = frozenset("\u061c\u200e\u200f\u202a\u202b\u202c\u202d\u202e\u2066\u2067\u2068\u2069")
+# Bidirectional controls reorder how a name is shown (U+202E made "x\u202eyz.png" read
+# "xgnp.zy"), so they disguise a file name (a trial); the invisible zero-width space, word
+# joiner and byte-order mark make two names that look alike.
+_HIDDEN = frozenset("\u061c\u200e\u200f\u202a\u202b\u202c\u202d\u202e\u2066\u2067\u2068"
+                    "\u2069\u200b\u2060\ufeff")
 
 
 def _control(text: str) -> bool:
     """Whether `text` holds a control character: C0 and C1 controls (a newline, a NUL, DEL,
-    U+009B, a terminal's escape), line and paragraph separators, bidirectional controls.
-    Zero-width joiners (U+200C, U+200D) are letters' business in some scripts: allowed."""
-    return any(unicodedata.category(c) in ("Cc", "Zl", "Zp", "Cs") or c in _BIDI for c in text)
+    U+009B, a terminal's escape), line and paragraph separators, bidirectional controls and
+    invisible spaces (`_HIDDEN`). Zero-width joiners (U+200C, U+200D) are letters' business
+    in some scripts, and a file name's bytes that are not UTF-8 (read as surrogates: a
+    Latin-1 `café.toml`) name files as well as any: both allowed."""
+    return any(unicodedata.category(c) in ("Cc", "Zl", "Zp") or c in _HIDDEN for c in text)
 
 
 def check_name(name: str, where=None, key: str | None = "name") -> str:

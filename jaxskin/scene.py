@@ -515,7 +515,10 @@ def _other_file(raw: bytes, path) -> str | None:
         return ("a JSON file, not a TOML scene file: a calibrated material (what calibrate "
                 "writes) is named by a scene's [[layer]] material = \"FILE.json\", a "
                 "Lafortune fit (fit-brdf) by material.brdf")
-    if path.suffix.lower() in (".csv", ".tsv", ".txt") and re.search(r"[,;\t]", head):
+    first = next((line for line in head.splitlines()
+                  if line.strip() and not line.lstrip().startswith("#")), "")
+    if (path.suffix.lower() in (".csv", ".tsv", ".txt") and "=" not in first
+            and re.search(r"[,;\t]", first)):  # a row of cells, not a TOML line
         return ("a table, not a TOML scene file: measurements are calibrated with 'jaxskin "
                 "calibrate', BRDF samples fitted with 'jaxskin fit-brdf', skin spectra with "
                 "'jaxskin fit-skin'; render takes TOML scenes (docs/reference/scene.md)")
@@ -746,17 +749,24 @@ def _check(key: str, value, where, layers=()):
     return value
 
 
+# A number's point with no digit before it (.5) or after it (5.), where a number may stand:
+# a 0 is put there (0.5, 5.0) before TOML reads it.
+_POINT_ALONE = re.compile(r"(?:(?<=^)|(?<=[\s,\[+-]))(\.)(?=\d)|(?<=\d)(\.)(?![\d\w])")
+
+
 def _parse_override(item: str, flag: str = "-D"):
     if "=" not in item:
         raise InputError(f"expected {flag} key=value, got {item!r}")
     key, text = (s.strip() for s in item.split("=", 1))
+    spec = SCHEMA.get(key)
+    numeric = (spec.kind in (float, int, "vec2", "vec3") if spec is not None else
+               key.startswith("layer.") and key.rsplit(".", 1)[-1] in LAYER_SCHEMA)
+    if numeric:  # .5 and 5. as 0.5 and 5.0 (TOML wants digits on both sides of the point:
+        text = _POINT_ALONE.sub(lambda m: "0." if m[1] else ".0", text)  # a trial's .5)
     try:
         value = tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
         value = text  # a bare word: a string
-        if re.fullmatch(r"[+-]?(\.\d+|\d+\.)([eE][+-]?\d+)?", text):  # .5 and 5. (TOML
-            value = float(text)  # wants digits on both sides of the point; a trial's .5)
-        spec = SCHEMA.get(key)
         if spec is not None and spec.kind in ("vec2", "vec3"):  # numbers with commas, as
             try:  # typed without brackets (camera.rotate=0,60,0 was a string; a trial); a
                 items = tomllib.loads(f"v = [{text}]")["v"]  # scalar's 0,5 stays '0,5'

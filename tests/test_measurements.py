@@ -481,6 +481,9 @@ def test_spreadsheet_exports_decimal_commas_empty_rows_and_a_footer(tmp_path):
      "no column is a cosmetic's reading ('subject_12', 'subject_44', ...; calibrate reads "
      "R_<X>mm, R_inf, R_g or E_... columns): skin reflectance spectra, one per column, are "
      "fitted with 'jaxskin fit-skin "),
+    # columns that merely start with r or e are no lower-case readings (a review)
+    ("wavelength_nm,reflectance_arm,e1\n400,0.21,0.05\n410,0.22,0.06\n", 1,
+     "no column is a cosmetic's reading ('reflectance_arm', 'e1'; calibrate reads "),
 ])
 def test_other_layouts_are_named(tmp_path, text, line, words):
     """A transposed export or a sample-name column first said "no header row" with no line

@@ -361,3 +361,17 @@ def test_an_output_folder_named_like_a_file(tmp_path):
     assert check_folder(tmp_path / "v1.json", named_files=False) == tmp_path / "v1.json"
     (tmp_path / "renders.png").mkdir()
     assert check_folder(tmp_path / "renders.png") == tmp_path / "renders.png"
+
+
+def test_a_name_from_a_file_name_that_is_not_utf8_is_kept():
+    """A Latin-1 file name `café.toml` reads (on POSIX) with a surrogate for é; refusing
+    surrogates as control characters refused the scene that had rendered before (a
+    review). Invisible characters that make two names look alike are refused."""
+    from jaxskin.io import InputError
+    from jaxskin.outputs import check_name
+
+    assert check_name("caf\udce9") == "caf\udce9"
+    assert check_name("نامه\u200cها") == "نامه\u200cها"  # a zero-width non-joiner: Persian
+    for hidden in ("a\u200bb", "a\ufeffb", "a\u2060b"):
+        with pytest.raises(InputError, match="contains a control character"):
+            check_name(hidden)

@@ -191,7 +191,12 @@ def test_a_sweep_over_a_key_one_scene_lacks_renders_that_scene_once(tmp_path):
     assert not (tmp_path / "bad").exists()
 
 
-    # a key of the other skin model: each warning names the key the scene reads
+
+def test_a_key_of_the_other_skin_model_is_warned_with_the_key_the_scene_reads(tmp_path):
+    """`-D skin.melanin=0.3` on the Blinn hand and `--sweep material.melanin` on the
+    spectral face: each warning names the key that scene reads (a trial's first guesses)."""
+    out = tmp_path / "out"
+    small = ["-D", "texture.size=64", "-D", "camera.size=32"]
     proc = subprocess.run([sys.executable, "-m", "jaxskin.cli", "render", "hand", "face", "-o",
                            str(out), *small, "-D", "skin.melanin=0.3", "--sweep",
                            "material.melanin=0.1:0.4:2"], capture_output=True, text=True)

@@ -259,6 +259,9 @@ def test_an_unused_override_names_the_key_the_scene_reads():
     assert read_instead(load_scene("face", small), "material.melanin=0.3") == "skin.melanin"
     assert read_instead(load_scene("hand", small), "skin.subject=50") is None
     assert read_instead(load_scene("hand", small), "camera.fov=60") is None
+    # with the command's other -D values: Lafortune reads neither melanin (a review)
+    lafortune = [*small, "material.model=lafortune", "skin.melanin=0.3"]
+    assert read_instead(load_scene("hand", lafortune), "skin.melanin=0.3", lafortune) is None
 
 
 def test_a_layers_material_is_set_with_D(tmp_path, monkeypatch):
@@ -554,3 +557,25 @@ def test_a_number_without_a_digit_before_or_after_the_point_is_a_number(text, va
     if isinstance(value, float) and 0 <= value <= 1:
         assert load_scene("hand", [f"material.melanin={text}"]).values[
             "material.melanin"] == value
+
+
+@pytest.mark.parametrize("item, value", [
+    ("camera.rotate=.5,0,0", [0.5, 0, 0]), ("camera.rotate=[0, 60., 0]", [0, 60.0, 0]),
+    ("layer.blush.thickness_mm=.01", 0.01), ("texture.size=512.", 512.0),
+    # text keys keep what was typed (a review: name=5. became 5.0)
+    ("name=5.", "5."), ("material.brdf=.5.json", ".5.json"),
+    ("layer.blush.material=.5.json", ".5.json"),
+])
+def test_a_point_alone_is_completed_in_numbers_only(item, value):
+    from jaxskin.scene import _parse_override
+
+    assert _parse_override(item)[1] == value
+
+
+def test_a_scene_with_a_txt_ending_and_a_toml_error_gets_the_toml_error(tmp_path):
+    """A `.txt` scene with a syntax error was called "a table" for its commas (a review):
+    only a first row of cells without `=` is a table."""
+    path = tmp_path / "s.txt"
+    path.write_text("# my scene\n[camera]\nrotate = [0, 60, 0\n")
+    with pytest.raises(InputError, match=r"s.txt: not valid TOML: Unclosed array"):
+        load_scene(path)
