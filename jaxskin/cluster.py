@@ -111,7 +111,7 @@ class Pool:
 
     @staticmethod
     def _here(fn, units, bar):
-        with bar:
+        with bar, _ticking(bar):
             for u in units:
                 out = _timed(fn, u)
                 bar.update()
@@ -179,6 +179,32 @@ def pool(address: str | None = None, timeout: float | None = None) -> Iterator[P
         p.cancel()
         with contextlib.suppress(Exception):
             client.close(timeout=5)
+
+
+@contextlib.contextmanager
+def _ticking(bar, every: float = 1.0):
+    """Redraw `bar` every `every` seconds while the block runs: tqdm draws only on an update,
+    so one long unit (a single scene at 1024², 30 s) showed `0/1 [00:00<?]` until it ended
+    (a trial); now its elapsed time counts."""
+    import threading
+
+    if bar.disable:
+        yield
+        return
+    stop = threading.Event()
+
+    def tick():
+        while not stop.wait(every):
+            with contextlib.suppress(Exception):
+                bar.refresh()
+
+    thread = threading.Thread(target=tick, daemon=True, name="jaxskin-progress")
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join()
 
 
 def _within(seconds: float, fn, cleanup):

@@ -357,3 +357,26 @@ def test_a_connection_given_up_on_is_closed_when_it_ends():
         time.sleep(0.02)
     assert cleaned == ["client"]
     assert cluster._within(1.0, lambda: 7, cleaned.append) == 7 and cleaned == ["client"]
+
+
+def test_a_long_unit_keeps_its_progress_bar_counting():
+    """tqdm draws only on an update: one long unit (a single scene) showed `0/1 [00:00<?]`
+    until it ended (a trial). `_ticking` redraws the bar while the work runs, and stops."""
+    class Bar:
+        disable, refreshed = False, 0
+
+        def refresh(self):
+            self.refreshed += 1
+
+    bar = Bar()
+    with cluster._ticking(bar, every=0.05):
+        time.sleep(0.3)
+    seen = bar.refreshed
+    assert seen >= 3, seen
+    time.sleep(0.15)
+    assert bar.refreshed == seen  # stopped with the block
+    off = Bar()
+    off.disable = True
+    with cluster._ticking(off, every=0.01):
+        time.sleep(0.05)
+    assert off.refreshed == 0
