@@ -129,7 +129,7 @@ class Pool:
         index = {f.key: i for i, f in enumerate(futures)}
         ready: dict[int, tuple] = {}
         following = 0
-        with bar:
+        with bar, _ticking(bar):
             for f in as_completed(futures, loop=client.loop):
                 try:
                     ready[index[f.key]] = f.result()  # a task's own exception is raised here
