@@ -782,6 +782,13 @@ def _name_value(key: str, value: str) -> str:
     return value
 
 
+def _reads_instead(sc, item: str, overrides) -> str:
+    """`"; it reads KEY"` for an unused `-D` or `--sweep` item whose key's twin scene `sc`
+    reads (`checks.read_instead`), else `""`: the end of the warning's parenthesis."""
+    other = read_instead(sc, item, overrides)
+    return f"; it reads {other}" if other else ""
+
+
 def _sweep_suffixes(sweep, ext: str) -> list[str]:
     """What a sweep's files add to the scene's output name: `_sweep-NN_KEY-VALUE.EXT` per
     value (none without a sweep)."""
@@ -864,14 +871,12 @@ def _render(args, run: _Run) -> int:
         idle = idle_map_keys(sc)  # errors (-D serves every scene)
         for item in unused_overrides(sc, args.overrides):
             if _parse_override(item)[0] not in idle:  # an idle map's own line says more
-                other = read_instead(sc, item, args.overrides)
-                hint = f"; it reads {other}" if other else ""
                 _say(f"jaxskin: warning: -D {item} changes nothing in scene {sc.name!r} "
-                     f"(its material model or settings do not use it{hint})")
+                     f"(its material model or settings do not use it"
+                     f"{_reads_instead(sc, item, args.overrides)})")
         if skip:
             key, _, spec = args.sweep[0].partition("=")
-            other = read_instead(sc, f"{key.strip()}={spec.split(':')[0]}", args.overrides)
-            hint = f"; it reads {other}" if other else ""
+            hint = _reads_instead(sc, f"{key.strip()}={spec.split(':')[0]}", args.overrides)
             _say(f"jaxskin: warning: --sweep {args.sweep[0]} changes nothing in scene "
                  f"{sc.name!r} (not one of its parameters{hint}): it is rendered once, "
                  "unswept")
