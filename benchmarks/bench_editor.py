@@ -23,7 +23,7 @@ import time
 
 from common import machine, table, write_section
 
-from jaxskin.cli import _enable_compilation_cache
+from jaxskin import compile_cache
 from jaxskin.editor.state import Session
 
 REPEAT = 5
@@ -96,7 +96,7 @@ def measure() -> list[tuple]:
 
 
 def main(argv=()) -> int:
-    _enable_compilation_cache()
+    compile_cache.enable()
     rows = measure()
     body = table(["request", "scene", "render", "first call", "warm (median)",
                   "CPU time (median)", "aim"],

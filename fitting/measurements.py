@@ -526,3 +526,4 @@ def _reflectances(data, header, columns, path, numbers, percent, notes, white_R=
                              path, numbers[bad[0]], name)
         out[name if kind == "thin" else kind] = values
     return out
+THIN_COLUMN = _THIN  # TEMP

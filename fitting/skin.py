@@ -22,8 +22,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-import sys
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -35,8 +33,6 @@ from jaxskin import biophysical as bp
 from jaxskin.formats import haemoglobin_table
 from jaxskin.io import FitError, InputError, atomic_write
 from jaxskin.spectral import Grid
-
-from .measurements import _THIN
 
 __all__ = ["FIT_RANGE", "LOG_PARAMS", "SkinFit", "delta_e2000", "fit", "from_z", "to_z",
            "write_csv", "write_report"]
@@ -339,91 +335,6 @@ def write_report(result: SkinFit, path, samples: int = 6) -> None:
     with atomic_write(path, "wb") as fh:
         fig.savefig(fh, format="png", dpi=90)
     plt.close(fig)
-
-
-def _fixed(items, path=None) -> dict[str, float]:
-    """`--fix name=value` items, checked against `biophysical.RANGES`."""
-    out = {}
-    for item in items:
-        name, sep, text = (s.strip() for s in item.partition("="))
-        if not sep or name not in bp.RANGES:
-            raise InputError(f"--fix expects name=value with a name among {', '.join(bp.PARAMS)}"
-                             f", got {item!r}")
-        try:
-            value = float(text)
-        except ValueError:
-            value = math.nan
-        lo, hi = bp.RANGES[name]
-        if not (math.isfinite(value) and lo <= value <= hi):
-            raise InputError(f"--fix {name}: expected a number in [{lo:g}, {hi:g}], got {text!r}")
-        if name in out and out[name] != value:  # the last one was taken, silently (a trial)
-            raise InputError(f"--fix {name} given twice ({out[name]:g} and {value:g}); give it "
-                             "once")
-        out[name] = value
-    if len(out) == len(bp.PARAMS):
-        raise InputError("--fix: every parameter is fixed; nothing is left to fit")
-    return out
-
-
-def command(args, run) -> int:
-    """The body of `jaxskin fit-skin` (`args` from the CLI's parser; `run` its record of
-    written files and the current stage)."""
-    import time
-
-    from tqdm import tqdm
-
-    from jaxskin.formats import read_spectra, wavelength_gaps
-    from jaxskin.outputs import Outputs, slug
-
-    outputs = Outputs(args.output, [args.file])
-    fixed = _fixed(args.fix)
-    notes = []
-    names, wavelengths, R = read_spectra(args.file, percent=args.percent or None, notes=notes)
-    if any(_THIN.match(n) for n in names) and {"R_inf", "R_g"} & set(names):
-        raise InputError("a cosmetic's measurement (columns R_<X>mm, R_inf, R_g), not skin "
-                         f"spectra: calibrate it with 'jaxskin calibrate {args.file} -o DIR'",
-                         args.file)
-    if wavelengths[0] > NEEDED[0] or wavelengths[-1] < NEEDED[1]:
-        raise InputError(f"the spectra cover {wavelengths[0]:g}-{wavelengths[-1]:g} nm; the "
-                         f"fit needs at least {NEEDED[0]:g}-{NEEDED[1]:g} nm", args.file)
-    stem = f"{slug(Path(args.file).stem)}_fit"  # by the input: two fits in one folder
-    csv_path = outputs.plan(f"{stem}.csv", "the fit")  # keep both (fit.csv; a trial)
-    png_path = None if args.no_report else outputs.plan(f"{stem}.png", "the report")
-    run.outputs.append(outputs)
-    for note in notes:
-        print(f"jaxskin: note: {note}", file=sys.stderr)
-    for line in wavelength_gaps(wavelengths):
-        print(f"jaxskin: warning: {args.file}: {line}", file=sys.stderr)
-    run.stage = f"fitting {len(names)} spectra"
-    t0 = time.perf_counter()
-    if args.cluster:
-        from jaxskin import cluster
-
-        with cluster.pool(args.cluster) as pool:
-            result = fit(names, wavelengths, R, starts=args.starts, seed=args.seed,
-                         fixed=fixed, path=args.file,
-                         map_units=pool.mapper(desc="fit-skin", unit="chunk"))
-    else:
-        with tqdm(total=len(names), desc="fit-skin", unit="spectrum", disable=None) as bar:
-            result = fit(names, wavelengths, R, starts=args.starts, seed=args.seed,
-                         fixed=fixed, progress=bar.update, path=args.file)
-    seconds = time.perf_counter() - t0
-    write_csv(result, csv_path)
-    outputs.done(csv_path)
-    if png_path is not None:
-        run.stage = "writing the report"
-        write_report(result, png_path)
-        outputs.done(png_path)
-    de, rms = result.dE2000, result.rms
-    print(f"{len(names)} spectra, {args.starts} starts each, {seconds:.1f} s: ΔE2000 median "
-          f"{np.median(de):.2f}, max {de.max():.2f} ({result.names[int(np.argmax(de))]}); RMS "
-          f"reflectance error median {np.median(rms):.4f}, max {rms.max():.4f}")
-    for line in fit_warnings(result, fixed):
-        print(f"jaxskin: warning: {line}", file=sys.stderr)
-    print(f"wrote {len(outputs.written)} file(s) to {outputs.folder}/:")
-    for p in outputs.written:
-        print(f"  {p}")
-    return 0
 
 
 def fit_warnings(result: SkinFit, fixed=()) -> list[str]:

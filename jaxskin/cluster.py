@@ -11,11 +11,8 @@ one here. Leaving the `pool` block by an exception (Ctrl-C included) cancels eve
 submitted.
 
 Each unit is the same computation in both places (the same function, the same array shapes),
-so the outputs are the same bytes: a sweep is cut into batches of `SWEEP_BATCH` values
-(every one padded to that size, a short sweep's too: `sweep_batches`), each one call of
-one compiled, vmapped program, whether it runs here or on a worker; a worker compiles a
-configuration once and reuses it for every batch it gets. Within one process with several
-JAX devices a batch is sharded across them (`shard_sweep`).
+so the outputs are the same bytes (`jaxskin.batch` makes a render's units so); a worker
+compiles a configuration once and reuses it for every unit it gets.
 
 Workers need jaxskin (the same version) and the files a scene names (meshes, materials,
 layer images, BRDF files) at the same paths: a shared file system, as on any render farm.
@@ -34,17 +31,11 @@ import sys
 import time
 import warnings
 from collections.abc import Callable, Iterable, Iterator
-from typing import TYPE_CHECKING
 
 from .io import InputError
 
-if TYPE_CHECKING:
-    import numpy as np
+__all__ = ["Pool", "add_option", "check_address", "connect", "pool"]
 
-__all__ = ["SWEEP_BATCH", "Pool", "add_option", "check_address", "connect", "pool",
-           "render_batch", "render_unit", "scene_maps", "shard_sweep", "sweep_batches"]
-
-SWEEP_BATCH = 8  # sweep values per task (and per compiled call when run here)
 CONNECT_TIMEOUT = 10.0  # seconds to reach the scheduler
 RETRIES = 2  # times a failed task is tried again (a lost worker's tasks are resubmitted anyway)
 INSTALL = "pip install 'jaxskin[cluster]'"
@@ -332,105 +323,10 @@ def _versions() -> tuple[str, str]:
     return v, version("jax")
 
 
-# --- the render's units --------------------------------------------------------------------
-
-
-def sweep_batches(values, size: int = SWEEP_BATCH) -> list["np.ndarray"]:
-    """`values` cut into batches of `size`, each padded with its last value to that length,
-    however few the values: one shape, one compiled program, and the same bytes for a value
-    whatever the sweep around it. (XLA compiles a vmapped program per batch size, and the
-    programs round differently: on a 2-core CPU a batch of 1 and one of 8 gave makeup
-    renders 1.6e-4 apart in display values, a few 8-bit samples off by one.) A sweep of
-    fewer than `size` values pays for `size` renders."""
-    import numpy as np
-
-    values = np.asarray(values, np.float32)
-    n = size
-    out = []
-    for i in range(0, len(values), n):
-        b = values[i:i + n]
-        out.append(np.concatenate([b, np.repeat(b[-1:], n - len(b))]))
-    return out
-
-
-def shard_sweep(values, devices=None):
-    """Sweep values padded to a multiple of the device count and, with several devices,
-    placed one slice per device (`NamedSharding` over a 1-D mesh): a jitted vmap over them
-    then runs on every device at once. Returns `(values, sharding)`, the sharding `None`
-    with one device."""
-    import jax
-    import numpy as np
-    from jax.sharding import Mesh, NamedSharding, PartitionSpec
-
-    devices = jax.devices() if devices is None else devices
-    values = np.asarray(values, np.float32)
-    extra = -len(values) % len(devices)
-    values = np.concatenate([values, np.repeat(values[-1:], extra)])
-    if len(devices) == 1:
-        return values, None
-    mesh = Mesh(np.asarray(devices), ("sweep",))
-    return jax.device_put(values, NamedSharding(mesh, PartitionSpec("sweep"))), \
-        NamedSharding(mesh, PartitionSpec())
-
-
-@functools.lru_cache(maxsize=16)
-def _sweep_program(config, key: str, output: str):
-    """One compiled program per (configuration, swept key, output): the scene's parameters
-    and prepared arrays are its arguments, so scenes sharing a configuration share it."""
-    import jax
-
-    from . import render
-
-    def one(v, params, arrays):
-        return render.render_prepared(config, {**params, key: v}, arrays, output)
-
-    return jax.jit(jax.vmap(one, in_axes=(0, None, None)))
-
-
-def render_unit(unit):
-    """A unit of `jaxskin render`: `("images", config, params, key, values, output)` →
-    `render_batch`, `("maps", config, params, glb)` → `scene_maps`."""
-    kind, *rest = unit
-    return render_batch(tuple(rest)) if kind == "images" else scene_maps(tuple(rest))
-
-
-def scene_maps(unit) -> dict:
-    """A scene's texture-space maps, `(config, params, glb)` → `height (H, W)`,
-    `normals (H, W, 3)` and, with `glb`, the GLB's `albedo`, as NumPy arrays."""
-    import numpy as np
-
-    from . import render, texture
-
-    config, params, glb = unit
-    out = {k: np.asarray(v) for k, v in texture.texture_maps(config, params).items()}
-    if glb:
-        out["albedo"] = np.asarray(render.albedo(config, params))
-    return out
-
-
-def render_batch(unit) -> "np.ndarray":
-    """A render unit, `(config, params, key, values, output)`: the images `(B, H, W, C)` of
-    a batch of sweep values of `key` (all its values, padding included), or with `key`
-    None one image `(H, W, C)` of the scene as it is. Runs here or on a worker."""
-    import jax
-    import numpy as np
-
-    from . import render
-
-    config, params, key, values, output = unit
-    if key is None:
-        return np.asarray(render.render(config, params, output))
-    arrays = render.prepare(config).arrays
-    values, replicated = shard_sweep(values)
-    if replicated is not None:
-        params, arrays = jax.device_put((params, arrays), replicated)
-    return np.asarray(_sweep_program(config, key, output)(values, params, arrays))
-
-
 @functools.cache
 def _compile_cache_once() -> None:
     """A worker keeps compiled programs on disk like the command does (same switch): a
     worker that restarts, or the next run, loads them instead of compiling again."""
-    from .cli import _enable_compilation_cache
+    from . import compile_cache
 
-    _enable_compilation_cache()
+    compile_cache.enable()

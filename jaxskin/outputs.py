@@ -22,7 +22,7 @@ from pathlib import Path
 
 from .io import InputError
 
-__all__ = ["Outputs", "check_folder", "check_name", "slug"]
+__all__ = ["Outputs", "check_folder", "check_name", "control", "slug"]
 
 MAX_NAME = 200
 # A file name's bytes (UTF-8) at most: file systems allow 255, and `io.atomic_write`'s
@@ -38,7 +38,7 @@ _HIDDEN = frozenset("\u061c\u200e\u200f\u202a\u202b\u202c\u202d\u202e\u2066\u206
                     "\u2069\u200b\u2060\ufeff")
 
 
-def _control(text: str) -> bool:
+def control(text: str) -> bool:
     """Whether `text` holds a control character: C0 and C1 controls (a newline, a NUL, DEL,
     U+009B, a terminal's escape), line and paragraph separators, bidirectional controls and
     invisible spaces (`_HIDDEN`). Zero-width joiners (U+200C, U+200D) are letters' business
@@ -52,7 +52,7 @@ def check_name(name: str, where=None, key: str | None = "name") -> str:
     why = None
     if not isinstance(name, str) or not name:
         why = "is empty"
-    elif _control(name):
+    elif control(name):
         why = "contains a control character"
     elif name != name.strip():  # " " wrote " _texture.size-64.png"
         why = "starts or ends with a space"
@@ -127,7 +127,7 @@ def check_folder(path, option: str = "-o", named_files: bool = True) -> Path:
     if not probe.is_dir():
         raise InputError(f"{option}: cannot create the folder: {probe} is a file", path)
     new = path.relative_to(probe) if probe != path else Path()
-    if _control(str(new)):  # a newline made a folder
+    if control(str(new)):  # a newline made a folder
         raise InputError(f"{option}: a folder to create must not contain control characters "
                          f"(a newline?); got {str(path)!r}")
     try:

@@ -976,3 +976,4 @@ def check_value(key: str, value, where, layers=()):
     """`value` for `key`, checked as a scene file's or `-D`'s value is (type, range); an
     `InputError` naming `where` and the key otherwise. `layers`: the scene's layer names."""
     return _check(key, value, where, tuple(layers))
+parse_override = _parse_override  # TEMP

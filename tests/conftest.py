@@ -86,7 +86,7 @@ def _no_persistent_cache_in_process():
     `test_persistent_compilation_cache` checks it there. Session-scoped: module fixtures
     (e.g. test_fit_skin's `fitted`) call `main()` before any function fixture is set up."""
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr("jaxskin.cli._enable_compilation_cache", lambda: None)
+        mp.setattr("jaxskin.compile_cache.enable", lambda: None)
         yield
 
 

@@ -548,7 +548,7 @@ def test_the_cli_bounds_are_the_fits_bounds(tmp_path, capsys):
 
 
 def _calibrate_actions():
-    from jaxskin.cli import _parser
+    from jaxskin.cli import parser as _parser
 
     sub = [a for a in _parser()._actions if a.choices and "calibrate" in a.choices][0]
     return sub.choices["calibrate"]._actions

@@ -169,7 +169,7 @@ def test_a_signal_inside_the_garbage_collector_is_not_lost(tmp_path, monkeypatch
             for _ in range(1000):  # Python runs the handler here, inside the collector
                 pass
 
-    monkeypatch.setattr(cli, "_render", command)
+    monkeypatch.setattr(cli.COMMANDS["render"], "run", command)
     gc.callbacks.append(callback)
     try:
         assert main(["render", "hand", "-o", str(tmp_path)]) == code
@@ -219,7 +219,7 @@ def test_a_signal_inside_an_import_is_not_lost(tmp_path, monkeypatch, capsys):
         run.stage = "rendering the next scene"  # held signal raised here
         raise AssertionError("the held signal was not raised")
 
-    monkeypatch.setattr(cli, "_render", command)
+    monkeypatch.setattr(cli.COMMANDS["render"], "run", command)
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
     assert main(["render", "hand", "-o", str(tmp_path)]) == 130
     err = capsys.readouterr().err
@@ -370,17 +370,17 @@ def test_a_sweep_key_typo_gets_a_suggestion():
     """`--sweep layer.lipstik.thickness_mm=…` once answered with the scene's 28 parameters;
     a near miss now names the one meant, a static key says to use -D, anything else gets
     the list."""
-    from jaxskin.cli import _parse_sweep
+    from jaxskin.cli._names import parse_sweep
     from jaxskin.io import InputError
     from jaxskin.scene import load_scene
 
     makeup = load_scene("makeup")
     with pytest.raises(InputError, match="did you mean 'layer.lipstick.thickness_mm'"):
-        _parse_sweep("layer.lipstik.thickness_mm=0:0.03:3", makeup)
+        parse_sweep("layer.lipstik.thickness_mm=0:0.03:3", makeup)
     with pytest.raises(InputError, match="static setting .* -D camera.size=VALUE instead"):
-        _parse_sweep("camera.size=16:32:2", makeup)
+        parse_sweep("camera.size=16:32:2", makeup)
     with pytest.raises(InputError, match="parameters: wrinkles.k_noise"):
-        _parse_sweep("zzzz=0:1:2", makeup)
+        parse_sweep("zzzz=0:1:2", makeup)
 
 
 def test_list_shows_each_scene_description_whole(capsys):
@@ -397,9 +397,9 @@ def test_list_shows_each_scene_description_whole(capsys):
 def test_a_key_given_twice_with_D_is_warned_about(capsys):
     """`-D camera.size=64 -D camera.size=32` used the last silently, and the file name
     listed both; the same value twice is no conflict."""
-    from jaxskin.cli import _warn_repeated
+    from jaxskin.cli._names import warn_repeated
 
-    _warn_repeated(["camera.size=64", "material.melanin=0.3", "camera.size = 32",
+    warn_repeated(["camera.size=64", "material.melanin=0.3", "camera.size = 32",
                     "material.melanin=0.3"])
     assert capsys.readouterr().err.splitlines() == [
         "jaxskin: warning: -D camera.size is given 2 times (64, 32): the last, 32, is used"]
@@ -410,32 +410,32 @@ def test_one_number_spelt_two_ways_names_one_file(capsys):
     trial): a number is named in its shortest exact form; other values as given."""
     from types import SimpleNamespace
 
-    from jaxskin.cli import _base_name, _warn_repeated
+    from jaxskin.cli._names import base_name, warn_repeated
 
     sc = SimpleNamespace(name="hand", source="hand")
-    names = {_base_name(sc, [f"material.melanin={v}"]) for v in ("0.1", "1e-1", "0.10", ".1")}
+    names = {base_name(sc, [f"material.melanin={v}"]) for v in ("0.1", "1e-1", "0.10", ".1")}
     assert names == {"hand_material.melanin-0.1"}, names
-    assert _base_name(sc, ["texture.size=512.0"]) == "hand_texture.size-512"
-    assert _base_name(sc, ["material.melanin=-0"]) == "hand_material.melanin-0"  # not --0
-    assert _base_name(sc, ["material.melanin=0.1234567"]) != _base_name(
+    assert base_name(sc, ["texture.size=512.0"]) == "hand_texture.size-512"
+    assert base_name(sc, ["material.melanin=-0"]) == "hand_material.melanin-0"  # not --0
+    assert base_name(sc, ["material.melanin=0.1234567"]) != base_name(
         sc, ["material.melanin=0.1234568"])  # not rounded to 6 digits, as :g would
-    assert _base_name(sc, ["material.model=blinn"]) == "hand_material.model-blinn"
+    assert base_name(sc, ["material.model=blinn"]) == "hand_material.model-blinn"
     many = [f"key{i}=0.5" for i in range(40)]  # long: a digest, the same for either spelling
-    assert _base_name(sc, many).startswith("hand_D-")
-    assert _base_name(sc, many) == _base_name(sc, [f"key{i}=5e-1" for i in range(40)])
-    assert _base_name(sc, many) != _base_name(sc, [f"key{i}=0.6" for i in range(40)])
-    _warn_repeated(["material.melanin=0.1", "material.melanin=1e-1"])
+    assert base_name(sc, many).startswith("hand_D-")
+    assert base_name(sc, many) == base_name(sc, [f"key{i}=5e-1" for i in range(40)])
+    assert base_name(sc, many) != base_name(sc, [f"key{i}=0.6" for i in range(40)])
+    warn_repeated(["material.melanin=0.1", "material.melanin=1e-1"])
     # a list with or without brackets (a review): one name, no "given twice"
-    assert _base_name(sc, ["camera.rotate=0,60,0"]) == _base_name(
+    assert base_name(sc, ["camera.rotate=0,60,0"]) == base_name(
         sc, ["camera.rotate=[0, 60.0, 0]"]) == "hand_camera.rotate-0_60_0"
-    _warn_repeated(["camera.rotate=0,60,0", "camera.rotate=[0, 60, 0]"])
+    warn_repeated(["camera.rotate=0,60,0", "camera.rotate=[0, 60, 0]"])
     assert capsys.readouterr().err == ""
     # a file's ending as _ending: not `..._skin.melanin_image-mel.png.png` (a trial), and
     # still apart from mel.exr, and a preset `skin` from a file skin.json (a review)
-    assert _base_name(sc, ["skin.melanin_image=maps/mel.png"]) == \
+    assert base_name(sc, ["skin.melanin_image=maps/mel.png"]) == \
         "hand_skin.melanin_image-maps_mel_png"
-    assert _base_name(sc, ["skin.melanin_image=mel.exr"]) == "hand_skin.melanin_image-mel_exr"
-    assert _base_name(sc, ["material.brdf=skin"]) != _base_name(sc, ["material.brdf=skin.json"])
+    assert base_name(sc, ["skin.melanin_image=mel.exr"]) == "hand_skin.melanin_image-mel_exr"
+    assert base_name(sc, ["material.brdf=skin"]) != base_name(sc, ["material.brdf=skin.json"])
 
 
 def test_the_last_line_after_a_stop_names_only_the_last_files():
@@ -445,7 +445,7 @@ def test_the_last_line_after_a_stop_names_only_the_last_files():
 
     from jaxskin import cli
 
-    run = cli._Run()
+    run = cli.Run()
     run.outputs.append(SimpleNamespace(written=[Path(f"/o/r_{i:03d}.png") for i in range(190)]))
     line = run.finished()
     assert line == ("190 file(s) complete in /o: … (182 more), "
@@ -520,8 +520,9 @@ def test_the_editor_loop_holds_every_signal_for_its_poll():
     import signal
 
     from jaxskin import cli
+    from jaxskin.cli import _process
 
-    with cli._signals(), cli.holding_signals():
+    with _process.handling_signals(), cli.holding_signals():
         for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGINT):
             os.kill(os.getpid(), sig)
             for _ in range(1000):  # the handler runs between bytecodes, here
@@ -529,7 +530,7 @@ def test_the_editor_loop_holds_every_signal_for_its_poll():
         assert cli.pending_signal() is True  # held, taken once
         assert cli.pending_signal() is False
         assert cli.signals_received() == 3
-    assert not cli._holding[0]
+    assert not _process.holding[0]
     with pytest.raises(KeyboardInterrupt):
         cli.raise_received()  # the command's end raises the last one received
 
@@ -570,8 +571,8 @@ def test_exit_now_says_the_line_and_ends_without_waiting_for_threads():
     script = ("import signal, threading, time\n"
               "from jaxskin import cli\n"
               "threading.Thread(target=time.sleep, args=(60,)).start()  # not a daemon\n"
-              "cli._received[:] = [signal.SIGINT, signal.SIGTERM]\n"
-              "run = cli._Run(); run.stage = 'serving'\n"
+              "cli._process.received[:] = [signal.SIGINT, signal.SIGTERM]\n"
+              "run = cli.Run(); run.stage = 'serving'\n"
               "print('before', flush=True)\n"
               "cli.exit_now(run)\n")
     proc = _python(script, timeout=30)
@@ -603,10 +604,10 @@ def test_a_sweeps_names_tell_its_values_apart():
     files `..._material.melanin-0.1` (a trial); the digits grow until the names differ."""
     import numpy as np
 
-    from jaxskin.cli import _sweep_suffixes
+    from jaxskin.cli._names import sweep_suffixes
 
     def names(start, stop, count):
-        return [s.split("_k-")[1] for s in _sweep_suffixes([("k", np.linspace(start, stop,
+        return [s.split("_k-")[1] for s in sweep_suffixes([("k", np.linspace(start, stop,
                                                                                count))], "png")]
 
     assert names(0.1, 0.1000002, 3) == ["0.1.png", "0.1000001.png", "0.1000002.png"]
@@ -621,12 +622,12 @@ def test_a_render_with_non_finite_values_is_not_written(tmp_path, capsys, monkey
     exit 1, and its file is not written."""
     import numpy as np
 
-    from jaxskin import cluster
+    from jaxskin import batch
 
     def nan_render(unit):
         return np.full((32, 32, 3), np.nan, np.float32)
 
-    monkeypatch.setattr(cluster, "render_unit", nan_render)
+    monkeypatch.setattr(batch, "render_unit", nan_render)
     assert main(["render", "hand", "-o", str(tmp_path / "o"), *SMALL]) == 1
     err = capsys.readouterr().err
     assert "jaxskin: error: " in err and ": the render has 3072 non-finite values (NaN or " \

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jaxskin import cluster
+from jaxskin import batch, cluster
 from jaxskin.cli import main
 
 distributed = pytest.importorskip("distributed")
@@ -80,7 +80,7 @@ def test_a_worker_killed_mid_run_has_its_task_retried_and_the_run_completes(
     assert main([*args, "-o", str(tmp_path / "local")]) == 0
     before = set(client.run(os.getpid).values())
     marker = str(tmp_path / "a worker died")
-    render_unit = cluster.render_unit
+    render_unit = batch.render_unit
 
     def dies_once(unit):  # a closure: pickled by value, run on the worker
         # O_EXCL: exactly one task dies. A check-then-create let the first tasks of both
@@ -91,7 +91,7 @@ def test_a_worker_killed_mid_run_has_its_task_retried_and_the_run_completes(
             return render_unit(unit)
         os.kill(os.getpid(), signal.SIGKILL)
 
-    monkeypatch.setattr(cluster, "render_unit", dies_once)
+    monkeypatch.setattr(batch, "render_unit", dies_once)
     assert main([*args, "-o", str(tmp_path / "cluster"), "--cluster",
                  lc.scheduler_address]) == 0
     assert os.path.exists(marker)
@@ -141,7 +141,7 @@ def test_an_input_a_worker_cannot_read_is_named_with_the_reason(tmp_path, capsys
 
         raise InputError("no such file", "/shared/meshes/head.obj")
 
-    monkeypatch.setattr(cluster, "render_unit", cannot_read)
+    monkeypatch.setattr(batch, "render_unit", cannot_read)
     rc = main(["render", "hand", *SMALL, "-o", str(tmp_path / "out"), "--cluster",
                lc.scheduler_address])
     err = capsys.readouterr().err.splitlines()
@@ -250,10 +250,10 @@ def test_without_dask_the_option_says_what_to_install(tmp_path, capsys, monkeypa
 
 SHARDED = """
 import jax, sys
-from jaxskin import cluster
+from jaxskin import batch
 from jaxskin.cli import main
 assert len(jax.devices()) == 2, jax.devices()
-values, replicated = cluster.shard_sweep([0.0, 0.5, 1.0])
+values, replicated = batch.shard_sweep([0.0, 0.5, 1.0])
 assert values.shape == (4,) and len(values.sharding.device_set) == 2 and replicated is not None
 sys.exit(main(sys.argv[1:]))
 """

@@ -77,7 +77,7 @@ def test_toml_descriptions_follow_continued_comments():
 
 
 def test_the_cli_page_has_every_command_and_option():
-    from jaxskin.cli import _parser
+    from jaxskin.cli import parser as _parser
 
     text = reference.cli_page()
     parser = _parser()

@@ -947,7 +947,7 @@ def test_a_scene_the_page_uploads_or_opens_may_not_name_files_outside(tmp_path):
                                           f"folders this editor may read ({s._roots_text()})")
     s.open("makeup")  # shipped files: allowed
     # what the page wrote is in the last line after a signal ("no file was written" was)
-    run = cli._Run()
+    run = cli.Run()
     run.outputs.append(s)
     assert run.finished() == "no file was written"
     s.upload("ok.toml", SCENE.encode())

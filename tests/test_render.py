@@ -312,20 +312,20 @@ def test_scene_params_first_read_inside_jit_are_concrete():
 
 def test_a_sweep_frame_does_not_depend_on_the_sweep_around_it():
     """A value's frame is the same float32 image whether the sweep has 1 value or 3: every
-    batch has `cluster.SWEEP_BATCH` values (padded), one compiled program. (Batches of 1
+    batch has `batch.SWEEP_BATCH` values (padded), one compiled program. (Batches of 1
     and 3 once differed by 1.6e-4 in display values, the makeup over skin.melanin on 2
     CPU cores: XLA rounds each batch size's program differently.) A single render, not
     vmapped, is a program of its own: it is bounded here, not equal (measured 1.6e-4 at
     128², about 1/25 of an 8-bit step)."""
-    from jaxskin import cluster
+    from jaxskin import batch
 
     scene = load_scene("makeup", ["texture.size=64", "camera.size=32"])
     params = jax.tree.map(np.asarray, scene.params)
 
     def frames(values):
-        batches = cluster.sweep_batches(values)
-        assert all(len(b) == cluster.SWEEP_BATCH for b in batches)
-        return np.concatenate([cluster.render_batch((scene.config, params, "skin.melanin", b,
+        batches = batch.sweep_batches(values)
+        assert all(len(b) == batch.SWEEP_BATCH for b in batches)
+        return np.concatenate([batch.render_batch((scene.config, params, "skin.melanin", b,
                                                      "display")) for b in batches])
 
     alone, among = frames([2.0])[0], frames([0.0, 1.0, 2.0])[2]

@@ -1,7 +1,7 @@
 """The reference pages, generated from the code: the API pages (one per public module of
 `jaxskin` and `jaxskin.fitting`), the scene format from `jaxskin.scene.SCHEMA` and
 `LAYER_SCHEMA` (descriptions from the commented TOML example in `jaxskin/scene.py`'s
-docstring), the command line from `jaxskin.cli._parser()`. Each function returns Markdown
+docstring), the command line from `jaxskin.cli.parser()`. Each function returns Markdown
 and the problems it found (a public name without a docstring, a scene key without a
 description); `docs/gen_ref.py` writes the pages at build time and turns each problem into
 a warning, which fails `mkdocs build --strict`; `tests/test_docs.py` checks the problems
@@ -282,20 +282,20 @@ def builtin_names() -> str:
     import contextlib
     import io
 
-    from jaxskin.cli import _list, _Run
+    from jaxskin.cli import COMMANDS, Run
 
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
-        _list(None, _Run())
+        COMMANDS["list"].run(None, Run())
     return out.getvalue()
 
 
 # --- The command line, from argparse ----------------------------------------------------------
 
 def cli_page() -> str:
-    from jaxskin.cli import _parser
+    from jaxskin import cli
 
-    parser = _parser()
+    parser = cli.parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     helps = {c.dest: c.help for c in sub._choices_actions}
 
@@ -331,7 +331,7 @@ def cli_page() -> str:
         return out
 
     lines = ["# Command line", "",
-             "Generated from `jaxskin.cli._parser()`, the parser the `jaxskin` command uses "
+             "Generated from `jaxskin.cli.parser()`, the parser the `jaxskin` command uses "
              "(`python docs/_ext/reference.py` rewrites this page; the suite fails when it "
              "is stale). "
              "`jaxskin COMMAND --help` prints the same text. "
