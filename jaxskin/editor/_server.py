@@ -38,7 +38,8 @@ from pathlib import Path
 
 from aiohttp import web
 
-from .state import EditorError, Session
+from ._document import EditorError
+from ._session import Session
 
 __all__ = ["MAX_BODY", "make_app"]
 
