@@ -1,4 +1,4 @@
-"""`jaxskin edit`: an interactive editor in the browser (issue 15).
+"""`jaxskin edit`: an interactive editor in the browser.
 
 A local web application over the same renderer as `jaxskin render`: sliders for every
 scene value, direction-field edits picked on the mesh (Bando 2001 §3.1), cosmetic layers

@@ -25,8 +25,8 @@ from ._document import EditorError
 __all__ = ["HISTORY", "LAYER_SET", "PATH_KEYS", "Changes"]
 
 HISTORY = 50  # undo steps kept
-# Every scene key that names a file: confined to the session's folders (the skin's map
-# images once were not: the page could have the server open any file).
+# Every scene key that names a file (the skin's map images too): confined to the session's
+# folders, else the page could have the server open any file.
 PATH_KEYS = ("mesh.file", "material.brdf", *(image for _, image in SKIN_MAPS.values()))
 LAYER_SET = ("material", *LAYER_SCHEMA)  # what the page may set on a layer
 
@@ -123,7 +123,7 @@ class Changes:
             return value
         path = self.confine(value, key, self.path.parent)
         if not path.is_file():  # then each folder: an upload lands in the output folder
-            path = self.confine(value, key)  # (a trial: 'm.json' was not found there)
+            path = self.confine(value, key)
         if not path.is_file():
             raise EditorError(f"no material file {value!r} (shipped materials: "
                               f"{', '.join(cosmetics.shipped_materials())}; or a calibrated "

@@ -45,7 +45,7 @@ class Painting:
                    and math.isfinite(v) for v in (x, y)):
             raise EditorError("expected pixel coordinates x, y (numbers)", 400)
         H, W = view.mask.shape
-        if not (0 <= y * k < H and 0 <= x * k < W):  # before floor: 1e308 * k is inf (a 500)
+        if not (0 <= y * k < H and 0 <= x * k < W):  # before floor: 1e308 * k is inf
             raise EditorError(f"pixel ({x}, {y}) is outside the {W // k}x{H // k} image", 400)
         return int(math.floor(y * k)), int(math.floor(x * k))
 
@@ -121,7 +121,7 @@ class Painting:
                 raise EditorError(f"{name}: expected a number in [{lo:g}, {hi:g}], got {v!r}")
         H, W = (n // config.supersample for n in view.mask.shape)
         far = [p for p in points if not (-W <= p[0] <= 2 * W and -H <= p[1] <= 2 * H)]
-        if far:  # a drag may leave the image, not by more than its size (1e300 was a 200)
+        if far:  # a drag may leave the image, not by more than its size
             raise EditorError(f"points: {far[0]} is far outside the {W}x{H} image (at most "
                               "one image size beyond its edges)", 400)
         k = config.supersample

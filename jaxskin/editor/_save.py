@@ -30,7 +30,7 @@ class Saving:
         grey) beside it: a scene `jaxskin render` renders to the image shown. The session
         then edits the saved file."""
         if isinstance(name, str) and name.lower().endswith(".toml"):
-            name = name[:-5]  # "my_makeup.toml" wrote my_makeup.toml.toml
+            name = name[:-5]  # "my_makeup.toml" writes my_makeup.toml, not .toml.toml
         try:
             check_name(name, "save")
         except InputError as e:
@@ -99,8 +99,8 @@ class Saving:
                 else:
                     doc = tomllib.loads(toml_text(data, name))
                     scene = parse_scene(doc, target, allow=lambda k, f: self._allow(k, f, name))
-                    check_name(scene.name, target)  # as render checks it (a trial: a
-                    # name = "../../x" was uploaded, and refused only by a later render)
+                    check_name(scene.name, target)  # as render checks it: a
+                    # name = "../../x" is refused here, not only by a later render
             except InputError as e:
                 raise EditorError(f"{name}: {e.message}", 400, e.key) from None
             except (UnicodeDecodeError, tomllib.TOMLDecodeError) as e:

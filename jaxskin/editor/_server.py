@@ -95,13 +95,12 @@ def _loopback(host: str | None) -> bool:
 def _guard(local: bool):
     """Requests only from the editor's own page. Any web page the user opens may send a
     browser's "simple" requests (a POST with a text/plain body, no preflight) to
-    127.0.0.1: before this, one overwrote the scene the editor started from (a newcomer's
-    trial). So: a request whose Origin is not this server's is refused (browsers send
-    Origin with every cross-origin POST; curl sends none); served on loopback, a Host that
-    is not a loopback name is refused (DNS rebinding: a foreign name resolved to
-    127.0.0.1, same-origin to the browser); a JSON endpoint's body must be declared
-    application/json, which no page can send elsewhere without a preflight this server
-    never allows."""
+    127.0.0.1, and one could overwrite the scene the editor started from. So: a request
+    whose Origin is not this server's is refused (browsers send Origin with every
+    cross-origin POST; curl sends none); served on loopback, a Host that is not a loopback
+    name is refused (DNS rebinding: a foreign name resolved to 127.0.0.1, same-origin to
+    the browser); a JSON endpoint's body must be declared application/json, which no page
+    can send elsewhere without a preflight this server never allows."""
     @web.middleware
     async def guard(request, handler):
         if local and not _loopback(request.url.host):

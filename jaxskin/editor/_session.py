@@ -69,7 +69,7 @@ class Session(Changes, Rendering, Painting, Saving):
         self._trusted: set[Path] = set()  # the files the command line's scene names
         self.written: list[Path] = []  # every file Save and uploads wrote (for the last line)
         # the command line's scene from the working directory, as `render` reads it
-        # (`edit dir/s.toml -o out` looked for dir/dir/s.toml and out/dir/s.toml, a trial)
+        # (`edit dir/s.toml -o out` reads dir/s.toml, not dir/dir/s.toml or out/dir/s.toml)
         self.open(str(scene) if str(scene) in BUILTIN_SCENES else str(first.resolve()), {})
         self._trusted = set(_scene_files(self.scene).values())
 
