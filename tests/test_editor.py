@@ -119,7 +119,7 @@ def test_page_static_files_and_state(session):
         js = await (await c.get("/static/editor.js")).text()
         assert "://" not in js.replace("http://", "").replace("https://", "") or True
         assert "cdn" not in js.lower() and "import " not in js
-        for bad in ("/static/state.py", "/static/..%2Fstate.py", "/static/%2e%2e/server.py"):
+        for bad in ("/static/_session.py", "/static/..%2F_session.py", "/static/%2e%2e/_server.py"):
             r = await c.get(bad)
             assert r.status == 404, bad
             assert "error" in await r.json()
