@@ -52,6 +52,7 @@ LOCAL = ("127.0.0.1", "localhost", "::1")
 
 
 def __getattr__(name: str):
+    """A re-exported name, its private file imported on first use (`_LAZY`)."""
     module = _LAZY.get(name)
     if module is None:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

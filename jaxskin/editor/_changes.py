@@ -34,8 +34,6 @@ LAYER_SET = ("material", *LAYER_SCHEMA)  # what the page may set on a layer
 class Changes:
     """The `Session`'s changes (its `set`, `undo` and `redo`)."""
 
-    # --- changes -------------------------------------------------------------------------
-
     def set(self, values: dict, record: bool = True) -> None:
         """Apply `{key: value}` changes (value None: back to the file's value), all or none."""
         if not isinstance(values, dict) or not values:

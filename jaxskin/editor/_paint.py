@@ -34,8 +34,6 @@ class Stroke:
 class Painting:
     """The `Session`'s view tools (its `pick`, `fields` and `paint_stroke`)."""
 
-    # --- the view: picking, arrows, painting ---------------------------------------------
-
     def _view(self):
         config = self.scene.config
         return config, render.prepare(self._prepared_config(config)).view

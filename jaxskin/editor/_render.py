@@ -29,8 +29,6 @@ __all__ = ["Rendering"]
 class Rendering:
     """The `Session`'s renders (its `render`, `png`, `image_file` and `arrays`)."""
 
-    # --- rendering -----------------------------------------------------------------------
-
     def _key(self, config: SceneConfig) -> SceneConfig:
         """The configuration to compile `config` as: the first seen that differs only in
         what `arrays` passes in (edits, layer materials and maps, the shadow's direction,

@@ -23,8 +23,6 @@ __all__ = ["Saving", "keep_comments"]
 class Saving:
     """The `Session`'s files written (its `save` and `upload`)."""
 
-    # --- saving --------------------------------------------------------------------------
-
     def save(self, name: str, overwrite: bool = False) -> list[str]:
         """Write `<output>/<name>.toml` and each painted map as `<name>_<layer>.png` (16-bit
         grey) beside it: a scene `jaxskin render` renders to the image shown. The session
