@@ -24,7 +24,7 @@ import time
 from common import machine, table, write_section
 
 from jaxskin import compile_cache
-from jaxskin.editor.state import Session
+from jaxskin.editor import Session
 
 REPEAT = 5
 NOTE = """\

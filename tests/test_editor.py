@@ -30,9 +30,7 @@ from jaxskin import (  # noqa: E402
     render,
     texture,  # noqa: E402
 )
-from jaxskin.editor import state as state_module  # noqa: E402
-from jaxskin.editor.server import MAX_BODY, make_app  # noqa: E402
-from jaxskin.editor.state import EditorError, Session  # noqa: E402
+from jaxskin.editor import MAX_BODY, EditorError, Session, _changes, make_app  # noqa: E402
 from jaxskin.maps import write_image  # noqa: E402
 from jaxskin.toml_writer import dumps  # noqa: E402
 
@@ -121,7 +119,7 @@ def test_page_static_files_and_state(session):
         js = await (await c.get("/static/editor.js")).text()
         assert "://" not in js.replace("http://", "").replace("https://", "") or True
         assert "cdn" not in js.lower() and "import " not in js
-        for bad in ("/static/state.py", "/static/..%2Fstate.py", "/static/%2e%2e/server.py"):
+        for bad in ("/static/_session.py", "/static/..%2F_session.py", "/static/%2e%2e/_server.py"):
             r = await c.get(bad)
             assert r.status == 404, bad
             assert "error" in await r.json()
@@ -766,7 +764,7 @@ def test_the_brush_dab_and_stroke_spacing():
     2 pi r^2 * int_0^1 (1 - u^2)^2 u du = pi r^2 / 3); measured 7e-6 off at r = 20
     (texel centres), tolerance 1e-4. Across a wrapping texture's seam it continues on the
     other side; a stroke is filled in to a third of the radius apart."""
-    from jaxskin.editor import brush
+    from jaxskin.editor import _brush as brush
 
     mask = np.zeros((100, 100))
     brush.dab(mask, 50.0, 50.0, 20.0, wrap=False)
@@ -801,7 +799,7 @@ def test_a_save_keeps_the_scene_files_comments(tmp_path):
     removed one dropped, and the file reads back equal to the plain writer's."""
     import tomllib
 
-    from jaxskin.editor.state import keep_comments
+    from jaxskin.editor import keep_comments
 
     source = ('# my notes on this scene\nname = "mine"\n[mesh]\nfile = "hand"  # the low-res one\n'
               '[material]\n# tuned by eye\nmelanin = 0.3\nblood = 0.4  # a bit pale\n'
@@ -851,7 +849,7 @@ def test_a_save_elsewhere_rewrites_the_skin_map_images_paths(tmp_path):
     """Saved into another folder, a scene's relative paths are rewritten to still name the
     same files: the skin's map images too (they were left as they were, so the saved
     scene named files that are not there)."""
-    from jaxskin.editor.document import relocate
+    from jaxskin.editor import relocate
 
     doc = {"skin": {"melanin_image": "maps/m.png", "haemoglobin_image": "h.png"},
            "layer": [{"name": "blush", "material": "blush_rose", "image": "b.png"}]}
@@ -869,7 +867,7 @@ def test_a_link_with_paint_says_on_another_editor_that_the_paint_stayed_behind(t
     (tmp_path / "tiny.toml").write_text(SCENE)
     s = Session(str(tmp_path / "tiny.toml"), tmp_path / "out")
     s.set({"light.ambient": 0.2})
-    t = texture.mapped(*state_module._texture_key(s.scene.config))[1]
+    t = texture.mapped(*_changes._texture_key(s.scene.config))[1]
     s.paint = {"blush": np.ones((t.height, t.width), np.uint16)}
     link = s.query()
     assert link == [["light.ambient", "0.2"], ["painted", "blush"]]
@@ -887,7 +885,7 @@ def test_saved_paint_is_not_modified_until_painted_again(tmp_path):
     (tmp_path / "tiny.toml").write_text(SCENE)
     s = Session(str(tmp_path / "tiny.toml"), tmp_path / "out")
     assert s.state()["modified"] is False
-    t = texture.mapped(*state_module._texture_key(s.scene.config))[1]
+    t = texture.mapped(*_changes._texture_key(s.scene.config))[1]
     s.paint = {"blush": np.ones((t.height, t.width), np.uint16)}
     assert s.state()["modified"] is True
     s.save("painted")
@@ -903,7 +901,7 @@ def test_a_scene_the_page_uploads_or_opens_may_not_name_files_outside(tmp_path):
     data, as /api/set is; the scene the editor was started on keeps the files it names."""
     import imageio.v3 as iio
 
-    from jaxskin.editor.state import EditorError
+    from jaxskin.editor import EditorError
 
     (tmp_path / "private").mkdir()
     photo = tmp_path / "private" / "photo.png"
@@ -1056,7 +1054,7 @@ def test_save_names_files_and_far_points(tmp_path):
     with pytest.raises(EditorError, match="far outside the 64x64 image"):
         s.paint_stroke("far", "blush", [[32.0, 32.0], [1e300, 60.0]], 3.0, 1.0)
     assert len(s.undo_stack) == 0  # refused before the stroke's undo step
-    from jaxskin.editor import brush
+    from jaxskin.editor import _brush as brush
 
     assert len(brush.dabs([(0.0, 0.0), (1e12, 0.0)], 3.0)) == brush.MAX_DABS
 

@@ -54,7 +54,7 @@ def run(args, record: Run) -> int:
         import aiohttp  # noqa: F401
     except ImportError:
         raise InputError("jaxskin edit needs aiohttp: pip install 'jaxskin[edit]'") from None
-    from ..editor.server import make_app
+    from ..editor import make_app
 
     local = _is_local(args.host)
     record.stage = "loading the scene"
@@ -100,7 +100,7 @@ def _open_session(args):
     """The editor's session on `args.scene` with the `-D` values, the output folder checked
     as `render` checks it (before the server starts: Save names its own files, so
     `-o ed/x.toml` is a slip); `InputError` as the command line says it."""
-    from ..editor.state import EditorError, Session
+    from ..editor import EditorError, Session
     from ..outputs import check_folder
 
     check_folder(args.output, "-o")
@@ -140,7 +140,7 @@ def _serve(app, sock, record: Run) -> None:
 
     from aiohttp import web
 
-    from ..editor.server import WATCH, WORK
+    from ..editor import WATCH, WORK
 
     async def watch(app):
         """The poll task raises KeyboardInterrupt whatever the signal, as asyncio lets only

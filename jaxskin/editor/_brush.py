@@ -17,7 +17,7 @@ __all__ = ["MIN_RADIUS", "dab", "dabs", "texels_per_pixel"]
 MIN_RADIUS = 0.75  # texels: a smaller dab could fall between texel centres and paint nothing
 
 
-MAX_DABS = 20000  # per request: a segment of 1e300 pixels made a list as long
+MAX_DABS = 20000  # per request: else a segment of 1e300 pixels makes a list as long
 
 
 def dabs(points: list, radius: float) -> list:

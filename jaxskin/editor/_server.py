@@ -38,7 +38,8 @@ from pathlib import Path
 
 from aiohttp import web
 
-from .state import EditorError, Session
+from ._document import EditorError
+from ._session import Session
 
 __all__ = ["MAX_BODY", "make_app"]
 
@@ -94,13 +95,12 @@ def _loopback(host: str | None) -> bool:
 def _guard(local: bool):
     """Requests only from the editor's own page. Any web page the user opens may send a
     browser's "simple" requests (a POST with a text/plain body, no preflight) to
-    127.0.0.1: before this, one overwrote the scene the editor started from (a newcomer's
-    trial). So: a request whose Origin is not this server's is refused (browsers send
-    Origin with every cross-origin POST; curl sends none); served on loopback, a Host that
-    is not a loopback name is refused (DNS rebinding: a foreign name resolved to
-    127.0.0.1, same-origin to the browser); a JSON endpoint's body must be declared
-    application/json, which no page can send elsewhere without a preflight this server
-    never allows."""
+    127.0.0.1, and one could overwrite the scene the editor started from. So: a request
+    whose Origin is not this server's is refused (browsers send Origin with every
+    cross-origin POST; curl sends none); served on loopback, a Host that is not a loopback
+    name is refused (DNS rebinding: a foreign name resolved to 127.0.0.1, same-origin to
+    the browser); a JSON endpoint's body must be declared application/json, which no page
+    can send elsewhere without a preflight this server never allows."""
     @web.middleware
     async def guard(request, handler):
         if local and not _loopback(request.url.host):
@@ -158,28 +158,63 @@ def make_app(session: Session, log=print, local: bool = True) -> web.Application
     app = web.Application(middlewares=[_errors, _guard(local)], client_max_size=MAX_BODY)
     app[LOG] = log
     work = _Worker()
-    latest: dict[str, int] = {}
-    counter = iter(range(1, 1 << 62))
-    lock = threading.Lock()
-    cache: dict = {}
+    app.add_routes(_Api(session, work).routes())
+    app.on_cleanup.append(_close)
+    app[WORK] = work
+    return app
 
-    async def page(request):
+
+async def _close(app) -> None:
+    """On the server's cleanup: the worker stops, calls not yet started cancelled."""
+    app[WORK].pool.shutdown(wait=False, cancel_futures=True)
+
+
+class _Api:
+    """The route handlers: each request's body checked here, the session's work done on
+    the worker thread (`work`)."""
+
+    def __init__(self, session: Session, work: _Worker):
+        self.session, self.work = session, work
+        self.latest: dict[str, int] = {}  # client → its newest render request's number
+        self.counter = iter(range(1, 1 << 62))
+        self.lock = threading.Lock()
+        self.cache: dict = {}  # the last image made: its key, bytes, type and seconds
+
+    def routes(self) -> list:
+        """Every route of the API (the table in the module's docstring)."""
+        return [
+            web.get("/", self.page), web.get("/static/{name}", self.static),
+            web.get("/favicon.ico", _no_content),
+            web.get("/api/state", self.state), web.get("/api/files", self.files),
+            web.post("/api/open", self.open_), web.post("/api/set", self.set_),
+            web.post("/api/undo", self.undo), web.post("/api/redo", self.redo),
+            web.post("/api/pick", self.pick), web.get("/api/fields", self.fields),
+            web.post("/api/paint", self.paint), web.get("/api/render", self.render),
+            web.post("/api/save", self.save), web.post("/api/upload", self.upload),
+        ]
+
+    async def page(self, request):
+        """GET `/`: the page."""
         return web.FileResponse(_static_dir() / "index.html",
                                 headers={"Cache-Control": "no-store"})
 
-    async def static(request):
+    async def static(self, request):
+        """GET `/static/<file>`: the page's script and style (only those)."""
         name = request.match_info["name"]
         if name not in STATIC:
             raise EditorError(f"no such file {name!r}", 404)
         return web.FileResponse(_static_dir() / name, headers={"Cache-Control": "no-store"})
 
-    async def state(request):
-        return web.json_response(await work(session.state))
+    async def state(self, request):
+        """GET `/api/state`: the session (`Session.state`)."""
+        return web.json_response(await self.work(self.session.state))
 
-    async def files(request):
-        return web.json_response(await work(session.files))
+    async def files(self, request):
+        """GET `/api/files`: the scenes and materials the page may open."""
+        return web.json_response(await self.work(self.session.files))
 
-    async def open_(request):
+    async def open_(self, request):
+        """POST `/api/open` `{scene, changes?}`: the state, and the changes `refused`."""
         body = await _body(request)
         scene, changes = body.get("scene"), body.get("changes", {})
         if not isinstance(scene, str) or not isinstance(changes, (dict, list)):
@@ -187,68 +222,75 @@ def make_app(session: Session, log=print, local: bool = True) -> web.Application
                               "[[key, TOML value], ...]}", 400)
 
         def run():
-            refused = session.open(scene, changes)
-            return {**session.state(), "refused": refused}
-        return web.json_response(await work(run))
+            refused = self.session.open(scene, changes)
+            return {**self.session.state(), "refused": refused}
+        return web.json_response(await self.work(run))
 
-    async def set_(request):
+    async def set_(self, request):
+        """POST `/api/set` `{changes: {key: value or null}}`: the state."""
         body = await _body(request)
         changes = body.get("changes")
 
         def run():
-            session.set(changes)
-            return session.state()
-        return web.json_response(await work(run))
+            self.session.set(changes)
+            return self.session.state()
+        return web.json_response(await self.work(run))
 
-    def stepper(method):
-        async def handler(request):
-            def run():
-                getattr(session, method)()
-                return session.state()
-            return web.json_response(await work(run))
-        return handler
+    async def undo(self, request):
+        """POST `/api/undo`: the state."""
+        return await self._stepped(self.session.undo)
 
-    async def pick(request):
+    async def redo(self, request):
+        """POST `/api/redo`: the state."""
+        return await self._stepped(self.session.redo)
+
+    async def _stepped(self, step):
+        """`step` (undo or redo) on the worker: the state after it."""
+        def run():
+            step()
+            return self.session.state()
+        return web.json_response(await self.work(run))
+
+    async def pick(self, request):
+        """POST `/api/pick` `{x, y}` (image pixels): the nearest vertex."""
         body = await _body(request)
-        return web.json_response(await work(session.pick, body.get("x"), body.get("y")))
+        return web.json_response(await self.work(self.session.pick, body.get("x"),
+                                                 body.get("y")))
 
-    async def fields(request):
+    async def fields(self, request):
+        """GET `/api/fields?step=`: the arrows and the edits' markers."""
         try:
             step = int(request.query.get("step", "24"))
         except ValueError:
             raise EditorError("step: expected an integer", 400) from None
         if not 4 <= step <= 256:
             raise EditorError("step: expected an integer in [4, 256]", 400)
-        return web.json_response(await work(session.fields, step))
+        return web.json_response(await self.work(self.session.fields, step))
 
-    async def paint(request):
+    async def paint(self, request):
+        """POST `/api/paint` `{stroke, layer, points, radius, strength, erase}`: `{dabs}`,
+        with the version and the seconds it took."""
         body = await _body(request)
         args = {k: body.get(k) for k in ("stroke", "layer", "points", "radius", "strength")}
         if not isinstance(args["stroke"], str) or not isinstance(args["layer"], str):
             raise EditorError("expected {stroke: id, layer: name, points: [[x, y], ...], "
                               "radius, strength, erase}", 400)
         t0 = time.perf_counter()
-        out = await work(session.paint_stroke, erase=bool(body.get("erase", False)), **args)
-        return web.json_response({**out, "version": session.version,
+        out = await self.work(self.session.paint_stroke, erase=bool(body.get("erase", False)),
+                              **args)
+        return web.json_response({**out, "version": self.session.version,
                                   "seconds": time.perf_counter() - t0})
 
-    async def render(request):
+    async def render(self, request):
+        """GET `/api/render?client=&preview=1`: the view as `image/png` (a preview:
+        `image/bmp`); 409 `superseded` when a newer request of the same client came
+        before this one started."""
         client = request.query.get("client", "")[:100]
         preview = request.query.get("preview", "0") == "1"
-        with lock:
-            n = next(counter)
-            latest[client] = n
-
-        def run():
-            if latest.get(client) != n:
-                return None
-            key = (session.version, preview)
-            if cache.get("key") != key:
-                t0 = time.perf_counter()
-                data, kind = session.image_file(preview)
-                cache.update(key=key, data=data, kind=kind, seconds=time.perf_counter() - t0)
-            return cache["data"], cache["kind"], cache["seconds"], session.version
-        out = await work(run)
+        with self.lock:
+            n = next(self.counter)
+            self.latest[client] = n
+        out = await self.work(self._image, client, n, preview)
         if out is None:
             return web.json_response({"error": "superseded by a newer render request",
                                       "superseded": True}, status=409)
@@ -257,7 +299,21 @@ def make_app(session: Session, log=print, local: bool = True) -> web.Application
             "Cache-Control": "no-store", "X-Render-Seconds": f"{seconds:.4f}",
             "X-Version": str(version)})
 
-    async def save(request):
+    def _image(self, client: str, n: int, preview: bool):
+        """On the worker: render request `n`'s image `(bytes, type, seconds, version)`,
+        made again only when the view changed; None when `client` asked again since."""
+        if self.latest.get(client) != n:
+            return None
+        key = (self.session.version, preview)
+        if self.cache.get("key") != key:
+            t0 = time.perf_counter()
+            data, kind = self.session.image_file(preview)
+            self.cache.update(key=key, data=data, kind=kind, seconds=time.perf_counter() - t0)
+        return (self.cache["data"], self.cache["kind"], self.cache["seconds"],
+                self.session.version)
+
+    async def save(self, request):
+        """POST `/api/save` `{name, overwrite?}`: the files written, and the state."""
         body = await _body(request)
         name = body.get("name")
         overwrite = body.get("overwrite", False)
@@ -266,29 +322,14 @@ def make_app(session: Session, log=print, local: bool = True) -> web.Application
                               "name")
 
         def run():
-            written = session.save(name, overwrite)
-            return {"written": written, **session.state()}
-        return web.json_response(await work(run))
+            written = self.session.save(name, overwrite)
+            return {"written": written, **self.session.state()}
+        return web.json_response(await self.work(run))
 
-    async def upload(request):
+    async def upload(self, request):
+        """POST `/api/upload?name=` with the file's bytes: `{path}`, kept in the output
+        folder."""
         name = request.query.get("name", "")
         data = await request.read()
-        path = await work(session.upload, name, data)
+        path = await self.work(self.session.upload, name, data)
         return web.json_response({"path": path})
-
-    app.add_routes([
-        web.get("/", page), web.get("/static/{name}", static),
-        web.get("/favicon.ico", _no_content),
-        web.get("/api/state", state), web.get("/api/files", files),
-        web.post("/api/open", open_), web.post("/api/set", set_),
-        web.post("/api/undo", stepper("undo")), web.post("/api/redo", stepper("redo")),
-        web.post("/api/pick", pick), web.get("/api/fields", fields),
-        web.post("/api/paint", paint), web.get("/api/render", render),
-        web.post("/api/save", save), web.post("/api/upload", upload),
-    ])
-
-    async def close(app):
-        work.pool.shutdown(wait=False, cancel_futures=True)
-    app.on_cleanup.append(close)
-    app[WORK] = work
-    return app
