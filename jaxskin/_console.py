@@ -1,11 +1,11 @@
 """The `jaxskin` command's entry point: takes SIGINT and SIGTERM from its first moment.
 
-Importing the command line imports JAX (about a second). A signal in that second went
-Python's default way: a traceback, an `ImportError` from an extension interrupted while it
-loaded, a crash, or — raised inside JAX's garbage-collector callback, where Python prints
-and drops it — no effect at all, the command running to the end with exit 0 (a trial).
-Here a signal before the command line's own handlers is only noted, and `cli.main` ends
-with 130 / 143 and its one line before doing any work.
+Running a command imports JAX (about a second). A signal in that second would go Python's
+default way: a traceback, an `ImportError` from an extension interrupted while it loaded, a
+crash, or — raised inside JAX's garbage-collector callback, where Python prints and drops
+it — no effect at all, the command running to the end with exit 0. Here a signal before
+the command line's own handlers is only noted, and `cli.main` ends with 130 / 143 and its
+one line before doing any work.
 """
 
 import signal

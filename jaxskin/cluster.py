@@ -175,8 +175,8 @@ def pool(address: str | None = None, timeout: float | None = None) -> Iterator[P
 @contextlib.contextmanager
 def _ticking(bar, every: float = 1.0):
     """Redraw `bar` every `every` seconds while the block runs: tqdm draws only on an update,
-    so one long unit (a single scene at 1024², 30 s) showed `0/1 [00:00<?]` until it ended
-    (a trial); now its elapsed time counts."""
+    so one long unit (a single scene at 1024², 30 s) would show `0/1 [00:00<?]` until it
+    ended; this way its elapsed time counts."""
     import threading
 
     if bar.disable:
@@ -200,10 +200,10 @@ def _ticking(bar, every: float = 1.0):
 
 def _within(seconds: float, fn, cleanup):
     """`fn()`, or `TimeoutError` once `seconds` have passed: a server that accepts the
-    connection and never answers held `distributed.Client` past its own timeout for good
-    (a trial: over 100 s). `fn` is then left to finish in a daemon thread, and `cleanup` is
-    called on what it returns or raises (a client or an error) when it does: not leaked to
-    a library caller who goes on (a review)."""
+    connection and never answers holds `distributed.Client` past its own timeout for good.
+    `fn` is then left to finish in a daemon thread, and `cleanup` is called on what it
+    returns or raises (a client or an error) when it does: not leaked to a library caller
+    who goes on."""
     import threading
 
     out: dict = {}
@@ -248,8 +248,8 @@ def _close_late(cls, result) -> None:
 def _drop_client(error, cls) -> None:
     """Close, quickly and quietly, the half-made `distributed.Client` that `error` came out
     of (found in its traceback's frames): left to the garbage collector, its `__del__`
-    closed it with a 20 s timeout and printed a traceback after our error line (a trial:
-    a service that is not Dask at the address)."""
+    closes it with a 20 s timeout and prints a traceback after our error line (a service
+    that is not Dask at the address, say)."""
     tb = error.__traceback__
     while tb is not None:
         client = tb.tb_frame.f_locals.get("self")

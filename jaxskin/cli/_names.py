@@ -101,7 +101,7 @@ def base_name(sc, overrides, room: int = 16) -> str:
     the digest leaves no room."""
     named = [item for item in overrides if item.partition("=")[0].strip() == "name"]
     base = check_name(sc.name, f"-D {named[-1]}" if named else sc.source, key="name")
-    last = {}  # a key given twice: its last value, which is the one used (a trial)
+    last = {}  # a key given twice: its last value, which is the one used
     for item in overrides:
         key, _, value = (s.strip() for s in item.partition("="))
         last.pop(key, None)
@@ -131,9 +131,9 @@ def base_name(sc, overrides, room: int = 16) -> str:
 
 def name_value(key: str, value: str) -> str:
     """A -D value as output names spell it: a number in its shortest exact form, so that
-    `-D k=0.1`, `k=1e-1` and `k=0.10` (one render) name one file (a trial); `512.0` and
-    `512` both `512`; a list of numbers as its numbers joined by `_` (`0,60,0` and
-    `[0, 60, 0]` alike; a review). Anything else as given."""
+    `-D k=0.1`, `k=1e-1` and `k=0.10` (one render) name one file; `512.0` and `512` both
+    `512`; a list of numbers as its numbers joined by `_` (`0,60,0` and `[0, 60, 0]`
+    alike). Anything else as given."""
     from ..scene import parse_override
 
     def short(x) -> str:
@@ -167,8 +167,8 @@ def sweep_suffixes(sweep, ext: str) -> list[str]:
         return []
     (key, values), = sweep
     width = max(2, len(str(len(values))))
-    # Six significant digits, more where two values would read alike (0.1:0.1000002:3 was
-    # named 0.1 three times: a trial), up to the float's own shortest form.
+    # Six significant digits, more where two values would read alike (0.1:0.1000002:3 would
+    # name three files 0.1), up to the float's own shortest form.
     values = [float(v) + 0.0 for v in values]  # -0.0 + 0.0 is 0.0 (not named --0)
     digits = next((d for d in range(6, 17) if len({f"{v:.{d}g}" for v in values})
                    == len(set(values))), 17)

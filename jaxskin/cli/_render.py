@@ -117,12 +117,12 @@ def run(args, record: Run) -> int:
     for name in args.scenes:
         with reading(name):
             scenes.append(load_scene(name, args.overrides, flag="-D"))
-        if name in BUILTIN_SCENES and Path(name).is_file():  # the built-in one wins (a trial)
+        if name in BUILTIN_SCENES and Path(name).is_file():  # the built-in one wins
             warn(f"'{name}' is the built-in scene; the file {name} here is "
                  f"not read (give ./{name} for it)")
     warn_repeated(args.overrides)
     # A sweep over a parameter some of the scenes have: the others are rendered once, with
-    # a warning, as -D does (it stopped the batch; a trial). None has it: the error.
+    # a warning, as -D does, rather than stopping the batch. None has it: the error.
     swept = [bool(args.sweep) and sweeps(sc, args.sweep[0]) for sc in scenes]
     unswept = [bool(args.sweep) and not here and any(swept) for here in swept]
     plans = []
