@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxskin.formats import (
-    _DECIMAL_COMMA,
+    DECIMAL_COMMA,
     NEGATIVE_NOISE,
     PERCENT_MEDIAN,
     PERCENT_UNIT,
@@ -42,6 +42,7 @@ from jaxskin.formats import (
     check_percent,
     decimal_comma_note,
     drop_repeats,
+    is_wavelength_column,
     read_table,
 )
 from jaxskin.io import InputError
@@ -51,18 +52,13 @@ __all__ = ["Measurement", "is_wavelength_column", "read_measurement"]
 
 # A thin layer's column, after `_canonical`: R_0.05mm, R_0.05_mm (from "R 0.05 mm"),
 # R0.05mm, R_50um, R_50µm; E_… for radiance.
-_THIN = re.compile(r"^(?:R|E)_?(?P<x>.+?)_?(?P<unit>mm|um|µm|μm)$")
+THIN_COLUMN = re.compile(r"^(?:R|E)_?(?P<x>.+?)_?(?P<unit>mm|um|µm|μm)$")
 _NAME = re.compile(r"[\w.+-]+")  # a material name (it names the output files)
 MAX_THICKNESS_MM = 100.0  # a cosmetic layer is µm to a few mm; beyond this it is a typo
 # Thin-layer thicknesses outside this are named in a note: cosmetic films are µm to a
 # tenth of a mm; R_3mm for R_3um fits as well with S, K 1000× too small (a trial).
 USUAL_THICKNESS_MM = (1e-4, 1.0)
 MAX_RADIANCE = 1e30  # any unit of radiance or counts; beyond this it is an overflow
-
-
-def is_wavelength_column(name: str) -> bool:
-    """Whether a header cell names the wavelength column (what starts a measurement's table)."""
-    return WAVELENGTH_HEADER.fullmatch(name.strip()) is not None
 
 
 def _is_reading(name: str) -> bool:
@@ -408,7 +404,7 @@ def _classify(header, path, line, bare_thickness):
                     "or pass --thickness", path, line, name,
                 )
             role = ("thin", bare_thickness)
-        elif (m := _THIN.match(short)) and _is_float(_one_number(m["x"])):
+        elif (m := THIN_COLUMN.match(short)) and _is_float(_one_number(m["x"])):
             role = ("thin", _positive(m["x"], path, line, name,
                                       1.0 if m["unit"] == "mm" else 1e-3))
         else:
@@ -437,7 +433,7 @@ def _classify(header, path, line, bare_thickness):
 def _one_number(text: str) -> str:
     """A lone number's text with a decimal comma made a point (`0,05`)."""
     text = text.strip()
-    return text.replace(",", ".") if _DECIMAL_COMMA.fullmatch(text) else text
+    return text.replace(",", ".") if DECIMAL_COMMA.fullmatch(text) else text
 
 
 def _fraction(value, path, line, key) -> float:

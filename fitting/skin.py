@@ -36,7 +36,7 @@ from jaxskin.formats import haemoglobin_table
 from jaxskin.io import FitError, InputError, atomic_write
 from jaxskin.spectral import Grid
 
-from .measurements import _THIN
+from .measurements import THIN_COLUMN
 
 __all__ = ["FIT_RANGE", "LOG_PARAMS", "SkinFit", "delta_e2000", "fit", "from_z", "to_z",
            "write_csv", "write_report"]
@@ -379,7 +379,7 @@ def command(args, run) -> int:
     fixed = _fixed(args.fix)
     notes = []
     names, wavelengths, R = read_spectra(args.file, percent=args.percent or None, notes=notes)
-    if any(_THIN.match(n) for n in names) and {"R_inf", "R_g"} & set(names):
+    if any(THIN_COLUMN.match(n) for n in names) and {"R_inf", "R_g"} & set(names):
         raise InputError("a cosmetic's measurement (columns R_<X>mm, R_inf, R_g), not skin "
                          f"spectra: calibrate it with 'jaxskin calibrate {args.file} -o DIR'",
                          args.file)
