@@ -56,7 +56,7 @@ THIN_COLUMN = re.compile(r"^(?:R|E)_?(?P<x>.+?)_?(?P<unit>mm|um|µm|μm)$")
 _NAME = re.compile(r"[\w.+-]+")  # a material name (it names the output files)
 MAX_THICKNESS_MM = 100.0  # a cosmetic layer is µm to a few mm; beyond this it is a typo
 # Thin-layer thicknesses outside this are named in a note: cosmetic films are µm to a
-# tenth of a mm; R_3mm for R_3um fits as well with S, K 1000× too small (a trial).
+# tenth of a mm; R_3mm for R_3um fits as well with S, K 1000× too small.
 USUAL_THICKNESS_MM = (1e-4, 1.0)
 MAX_RADIANCE = 1e30  # any unit of radiance or counts; beyond this it is an overflow
 
@@ -123,7 +123,7 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
         """The columns to skip; the others classified before any row is read (so that an
         unknown text column is named as unknown, not as a cell that is no number)."""
         names = [n for n in header[1:] if any(fnmatch.fnmatchcase(n, p) for p in ignore)]
-        if header[0] in ignore:  # named, not matched by a pattern: ran as if not given (a trial)
+        if header[0] in ignore:  # named outright (not by a pattern): refused, not passed over
             raise InputError("--ignore names the first column, the wavelengths, which cannot "
                              "be ignored", path, line, header[0])
         if "ignore" in meta:
@@ -422,7 +422,7 @@ def _classify(header, path, line, bare_thickness):
         raise InputError("radiance columns need E_white (the white standard)", path, line,
                          radiance[0])
     reflectance = [n for n in columns if not _is_radiance(n)]
-    if radiance and reflectance:  # an E column relabelled R_inf fitted "perfectly" (a trial)
+    if radiance and reflectance:  # an E column relabelled R_inf would fit "perfectly"
         raise InputError("a reflectance among radiance columns (E_..., E_white): a file's "
                          "readings are all of one kind; name it E_... if it holds radiance, "
                          "or give reflectances (R = E / E_white) throughout", path, line,
@@ -453,7 +453,7 @@ def _reflectances(data, header, columns, path, numbers, percent, notes, white_R=
     """Reflectance per role (thin columns by name), checked to lie in [0, 1]. Reflectance
     columns are read as percent when `percent` (`--percent`), when their header says % (the
     `marked` ones, each alone, even where all its readings are below 1, as a black card's
-    can be; one `R_inf (%)` once made every column percent, a review), or when the median of
+    can be; one `R_inf (%)` does not make every column percent), or when the median of
     the others is above 1.5 (a note is added to `notes`). `--percent` on readings all at
     most 1 is refused (`check_percent`)."""
     index = {name: i + 1 for i, name in enumerate(header[1:])}
@@ -484,7 +484,7 @@ def _reflectances(data, header, columns, path, numbers, percent, notes, white_R=
                          "as percent (/ 100)")
         elif marked:  # some say %, these do not, and read either way: 0.12 beside R_inf (%)
             unmarked = [n for n in columns if not _is_radiance(n) and n not in marked]
-            raise InputError(  # was a fraction, a black card's 0.6 % a white card (reviews)
+            raise InputError(  # a guess is wrong for some: a black card's 0.6 % read as 0.6
                 f"column '{marked[0]}' says %, column{'s' if len(unmarked) > 1 else ''} '"
                 + "', '".join(unmarked) + f"' {'do' if len(unmarked) > 1 else 'does'} not, "
                 f"and their readings (median {np.median(values):.3g}) could be fractions or "
@@ -515,7 +515,7 @@ def _reflectances(data, header, columns, path, numbers, percent, notes, white_R=
         if bad.size:
             hint = ("" if percent or name in marked or _is_radiance(name)
                     else " (percent data? use --percent)")
-            if values[bad[0]] < 0:  # the percent hint was wrong for a reading of -0.0012
+            if values[bad[0]] < 0:  # percent would not explain a reading of -0.0012
                 hint = (f" (below the -{NEGATIVE_NOISE * scale:g} read as noise: "
                         "reflectances cannot be negative)")
             raise InputError(f"{what}, got {values[bad[0]] * scale:g}{hint}",

@@ -16,7 +16,7 @@ from ._tables import WAVELENGTH_RANGE_NM, is_measurement_table
 from ._text import read_text
 
 # S and K of a material file above this (per mm) are refused: cosmetics measure 1e-3 to 1e5, and
-# the float32 render of 1e300 (or of 1e37 with its scales at 100) was NaN, a black image (a trial).
+# the float32 render of 1e300 (or of 1e37 with its scales at 100) is NaN, a black image.
 MAX_SK_PER_MM = 1e9
 
 
@@ -114,17 +114,17 @@ def read_material(path) -> MaterialFile:
         raise InputError("expected a JSON object (a material written by jaxskin calibrate)",
                          path)
     model = doc.get("model", "kubelka-munk")
-    if model == "lafortune" or "lobes" in doc:  # a fit-brdf output (a trial)
+    if model == "lafortune" or "lobes" in doc:  # a fit-brdf output given by mistake
         raise InputError("a Lafortune BRDF (written by jaxskin fit-brdf; it goes in "
                          "material.brdf), expected a Kubelka-Munk material (written by jaxskin "
                          "calibrate)", path, key="model" if "model" in doc else None)
-    if model != "kubelka-munk":  # it was not read at all
+    if model != "kubelka-munk":  # another model is refused, not read as Kubelka-Munk
         raise InputError(f"expected \"kubelka-munk\" (or no model key), got {model!r}", path,
                          key="model")
     arrays = {}
     known = ("wavelength_nm", "S_per_mm", "K_per_mm")
     for k in known:
-        if k not in doc:  # a hand edit renamed it (S_per_mn): name both (a trial)
+        if k not in doc:  # a hand edit may have renamed it (S_per_mn): name both
             others = [o for o in doc if o not in known and o not in _MATERIAL_OTHER_KEYS]
             near = difflib.get_close_matches(k, others, n=1, cutoff=0.6)
             hint = f" (is {near[0]!r} a misspelling of it?)" if near else ""

@@ -148,7 +148,7 @@ def read_spectra(path, percent: bool | None = False, notes: list | None = None
         raise InputError("wavelengths must increase (or all decrease)", path,
                          None if line_of is None else line_of[row], wl_name)
     # A header that says % (`Forearm A (%)`): that spectrum in percent, named without it,
-    # as calibrate reads its columns (the unit stayed in the names; a trial).
+    # as calibrate reads its columns (else the unit would stay in the names).
     columns = list(names)  # as the file spells them, for the messages
     marked = np.array([bool(PERCENT_UNIT.search(n)) for n in names])
     names = [PERCENT_UNIT.sub("", n) if m else n for n, m in zip(names, marked, strict=True)]
@@ -176,7 +176,7 @@ def read_spectra(path, percent: bool | None = False, notes: list | None = None
         check_percent(rest, path)
     tops = np.where(marked | bool(percent), 100.0, 1.0)
     R = R / tops[:, None]
-    noise = (R < 0) & (R >= -NEGATIVE_NOISE)  # as calibrate reads them (it refused -0.001)
+    noise = (R < 0) & (R >= -NEGATIVE_NOISE)  # as calibrate reads them: -0.001 is noise
     for k in np.flatnonzero(noise.any(axis=1)):
         notes.append(f"{path}: spectrum '{names[k]}': {int(noise[k].sum())} reading"
                      f"{'s' if noise[k].sum() > 1 else ''} below 0 (down to "

@@ -18,7 +18,7 @@ WAVELENGTH_RANGE_NM = (200.0, 3000.0)  # what a spectroradiometer can measure, g
 # The first column: wavelength_nm (the format's name) or what instrument software and
 # spreadsheets write: "Wavelength", "Wavelength (nm)", "Wavelength nm", "wavelength/nm",
 # "wavelength [µm]", "lambda", "λ", "wl", "nm", and in German, French, Spanish, Italian,
-# Portuguese and Dutch ("Wellenlänge (nm)" was refused as no header; a trial).
+# Portuguese and Dutch ("Wellenlänge (nm)").
 WAVELENGTH_HEADER = re.compile(
     r"(?i)(?:wave\s*length|wl|lambda|λ|wellenl(?:ä|ae|a)nge|longueur\s*d['’]?\s*onde"
     r"|longitud\s*de\s*onda|lunghezza\s*d['’]?\s*onda|comprimento\s*de\s*onda|golflengte)"
@@ -28,13 +28,13 @@ DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+(?:[eE][+-]?\d+)?")
 _THOUSANDS = re.compile(r"[1-9]\d{0,2}(?:,\d{3})+")  # 1,050: 1050, or 1.05 (µm)?
 _NAMES = {"\t": "tab", ",": "comma", ";": "semicolon"}
 # A reading column's header that says its unit is percent: `R_inf (%)`, `Cheek [%]`, `A %`;
-# not a number's % (`Foundation 30%`, `Intralipid 2 %`: a name; a review).
+# not a number's % (`Foundation 30%`, `Intralipid 2 %`: part of a name).
 PERCENT_UNIT = re.compile(r"\s*[(\[]\s*%\s*[)\]]$|(?<![\d.\s])\s*%$")
 
 
 def decimal_comma_note(example: str) -> str:
-    """The note for a table read with decimal commas, quoting the first of them (a fixed
-    "18,65" read as if it quoted the user's data; a trial)."""
+    """The note for a table read with decimal commas, quoting the first of them (the
+    user's own data, not a fixed example that reads as if it were)."""
     return (f"numbers with a decimal comma ({example}) read with a point "
             f"({example.replace(',', '.')})")
 
@@ -140,7 +140,7 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
         raise InputError(f"not CSV ({e})", path, number) from None
     if header is None:
         seen = ""
-        if first is not None:  # the row above the data (a preamble line was quoted; a review)
+        if first is not None:  # the row above the data, not a preamble line
             known = WAVELENGTH_HEADER.fullmatch(first[1])
             name = expected_header.split(",")[0]
             unit = (known["unit"] or "nm").lower() if known else None
@@ -185,7 +185,7 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
                 raise InputError("empty cell: expected a number", path, number,
                                  header[len(cells)])
             if (not hint and delimiter == "," and len(cells) > len(header)
-                    and all(c.isdigit() for c in cells)):  # 380,54,81 for 380;54,81 (a trial)
+                    and all(c.isdigit() for c in cells)):  # 380,54,81 for 380;54,81
                 hint = (" (decimal commas in a comma-separated file? 0,54 is then two cells: "
                         "export with ';' or tab between cells, or with decimal points)")
             raise InputError(f"{len(cells)} cells where the header has {len(header)}{hint}",
@@ -239,20 +239,20 @@ def read_number(cell: str, path, line: int, column: str) -> float:
 # reading of them has a median of 1.5 % (fractions are at most 1).
 PERCENT_MEDIAN = 1.5
 # Reflectances down to this below 0 are a dark-corrected instrument's noise: read as 0,
-# with a note (a black card's reading of -0.0004 refused the whole file; a trial).
+# with a note (a black card's reading of -0.0004 should not refuse the whole file).
 NEGATIVE_NOISE = 0.005
 
 
 # A step between readings wider than both of these (nm, and times the file's median step)
 # is a hole in the data: the fits bridge it with a straight line (a 110 nm hole across the
-# greens turned a red lipstick orange with no word; a trial).
+# greens can turn a red lipstick orange), so it is named in a warning.
 GAP_MIN_NM, GAP_STEPS = 20.0, 3.0
 
 
 def drop_repeats(data, lines, path, notes: list):
     """`(data, lines)` without rows that repeat the row before them exactly (the same
-    wavelength and readings: an export or a merge script's doubled row, refused as "must
-    increase"; a trial), with a note naming them. A wavelength repeated with other readings
+    wavelength and readings: an export or a merge script's doubled row, which would be
+    refused as "must increase"), with a note naming them. A wavelength repeated with other readings
     is left for the caller's check to refuse."""
     data = np.asarray(data)
     same = np.r_[False, np.all(data[1:] == data[:-1], axis=1)] if len(data) > 1 else \

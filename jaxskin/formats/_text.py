@@ -14,7 +14,7 @@ DELIMITERS = (",", "\t", ";")
 MAX_BYTES = 256 * 2**20  # a spectrum at 0.01 nm with 50 columns is ~40 MB
 
 # Files a table reader is given by mistake, by their first bytes: named in the error
-# (they were "a binary file (a NUL byte)" with the line of that byte).
+# (not just "a binary file (a NUL byte)" with the line of that byte).
 BINARY_KINDS = ((b"\x89PNG\r\n\x1a\n", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"),
                 (b"II*\0", "a TIFF image"), (b"MM\0*", "a TIFF image"),
                 (b"GIF8", "a GIF image"), (b"%PDF", "a PDF document"),
@@ -36,7 +36,7 @@ def read_text(path, fallback: str | None = None, expected: str = "a CSV table (e
             raise InputError(f"{size / 2**20:.0f} MiB is larger than the {MAX_BYTES >> 20} MiB "
                              "a table may be", path)
         with open(path, "rb") as f:  # bounded: a device or a pipe has no size (/dev/zero
-            raw = f.read(MAX_BYTES + 1)  # grew to 24 GB, a trial)
+            raw = f.read(MAX_BYTES + 1)  # would be read without end)
         if len(raw) > MAX_BYTES:
             raise InputError(f"larger than the {MAX_BYTES >> 20} MiB a table may be (a "
                              "device or a pipe?)", path)
@@ -61,7 +61,7 @@ def read_text(path, fallback: str | None = None, expected: str = "a CSV table (e
         raise InputError(f"{kind}, not text: expected {expected}", path)
     if b"\0" in raw:
         text = _utf16_without_mark(raw)
-        if text is not None:  # Windows "Unicode" saved without the mark (a trial)
+        if text is not None:  # Windows "Unicode" saved without the mark
             return text
         line = raw[:raw.index(b"\0")].count(b"\n") + 1
         raise InputError("a binary file (a NUL byte), expected UTF-8 text", path, line)
