@@ -122,39 +122,10 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
     def on_header(header, meta, line):
         """The columns to skip; the others classified before any row is read (so that an
         unknown text column is named as unknown, not as a cell that is no number)."""
-        names = [n for n in header[1:] if any(fnmatch.fnmatchcase(n, p) for p in ignore)]
-        if header[0] in ignore:  # named outright (not by a pattern): refused, not passed over
-            raise InputError("--ignore names the first column, the wavelengths, which cannot "
-                             "be ignored", path, line, header[0])
-        if "ignore" in meta:
-            value, number = meta["ignore"]
-            for name in filter(None, (n.strip() for n in re.split(r"[,;]", value))):
-                found = [n for n in header if fnmatch.fnmatchcase(n, name)]
-                if not found:
-                    raise InputError(f"'# ignore:' names {name!r}, which is no column of the "
-                                     "header", path, number)
-                names += found
-        ignored = list(dict.fromkeys(names))
-        if header[0] in ignored:
-            raise InputError("the first column cannot be ignored", path, line, header[0])
-        seen["comment"] = None
-        if "thickness_mm" in meta:
-            value, number = meta["thickness_mm"]
-            seen["comment"] = _positive(value, path, number, key="thickness_mm")
-        bare = thickness_mm if thickness_mm is not None else seen["comment"]
-        seen["columns"] = _classify([n for n in header if n not in ignored], path, line, bare)
-        seen["ignored"] = ignored
-        return ignored
+        seen.update(_header_columns(path, header, meta, line, ignore, thickness_mm))
+        return seen["ignored"]
 
-    try:
-        table = read_table(path, is_wavelength_column, "wavelength_nm,R_<X>mm,...,R_inf,R_g",
-                           min_rows=2, other_column=_is_reading,
-                           once=("name", "thickness_mm", "ignore", "white_reflectance"),
-                           on_header=on_header, wavelength_first=True)
-    except InputError as e:
-        if "no header row" in str(e) and (layout := _other_layout(path)) is not None:
-            raise InputError(layout[1], path, layout[0]) from None
-        raise
+    table = _read_table(path, on_header)
     meta, header, header_line = table.meta, table.header, table.header_line
     comment_thickness, columns, ignored = seen["comment"], seen["columns"], seen["ignored"]
     repeats = []
@@ -172,33 +143,8 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
                      + ", ".join(ignored))
     if descending:
         notes.append(f"{path}: wavelengths descend: read in increasing order")
-    lo, hi = USUAL_THICKNESS_MM
-    for name, (kind, x) in columns.items():
-        if kind == "thin" and not lo <= x <= hi:
-            notes.append(f"{path}: column '{name}': a {x:g} mm film; cosmetic films are "
-                         f"{lo * 1000:g} µm to {hi:g} mm thick, and S, K scale as 1 / "
-                         f"thickness: {'µm (R_<X>um)' if x > hi else 'mm'} meant?")
-    if comment_thickness is not None:  # said, so not dropped in silence
-        value, number = meta["thickness_mm"]
-        said = f"{path}:{number}: '# thickness_mm: {value}'"
-        if not {"R", "E"} & set(columns):
-            notes.append(f"{said} is not used: no bare R (or E) column; the R_<X>mm columns "
-                         "name their own thicknesses")
-        elif thickness_mm is not None and thickness_mm != comment_thickness:
-            notes.append(f"{said} is overridden by --thickness {thickness_mm:g}")
-    white = 1.0
-    radiance = "white" in {kind for kind, _ in columns.values()}
-    if "white_reflectance" in meta and radiance:
-        value, number = meta["white_reflectance"]
-        white = _fraction(value, path, number, "white_reflectance")
-        if white_reflectance is not None and white_reflectance != white:
-            notes.append(f"{path}:{number}: '# white_reflectance: {value}' is overridden by "
-                         f"--white-reflectance {white_reflectance:g}")
-    if white_reflectance is not None:
-        white = white_reflectance
-    if not radiance and (white != 1.0 or "white_reflectance" in meta):
-        notes.append(f"{path}: the white standard's reflectance is not used: no radiance "
-                     "columns (E_... with E_white)")
+    notes += _thickness_notes(path, columns, meta, thickness_mm, comment_thickness)
+    white = _white_reflectance(path, meta, columns, white_reflectance, notes)
     said = [n for n in columns if PERCENT_UNIT.search(n) and not _is_radiance(n)]
     if said and not percent:  # the header says so: not left to the median's guess
         these = "', '".join(said)
@@ -214,21 +160,112 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
             "R_g equals R_inf at every wavelength: the background must differ from the opaque "
             "layer (a black or white card)", path, header_line, _column_of(columns, "g"),
         )
+    name = _material_name(path, meta, notes)
+    return Measurement(
+        path=path, name=name, wavelength_nm=wl, thickness_mm=np.array([x for x, _ in thin]),
+        R=R, R_inf=R_inf, R_g=R_g, columns=tuple(n for _, n in thin), header_line=header_line,
+        notes=tuple(notes),
+    )
+
+
+def _header_columns(path, header, meta, line, ignore, thickness_mm):
+    """`{"ignored": the columns to skip, "comment": the `# thickness_mm:` line's thickness
+    or None, "columns": the others classified (`_classify`)}`, from the header row and the
+    `# key:` lines before it; `ignore` and `thickness_mm` as `read_measurement` takes them."""
+    names = [n for n in header[1:] if any(fnmatch.fnmatchcase(n, p) for p in ignore)]
+    if header[0] in ignore:  # named outright (not by a pattern): refused, not passed over
+        raise InputError("--ignore names the first column, the wavelengths, which cannot "
+                         "be ignored", path, line, header[0])
+    if "ignore" in meta:
+        value, number = meta["ignore"]
+        for name in filter(None, (n.strip() for n in re.split(r"[,;]", value))):
+            found = [n for n in header if fnmatch.fnmatchcase(n, name)]
+            if not found:
+                raise InputError(f"'# ignore:' names {name!r}, which is no column of the "
+                                 "header", path, number)
+            names += found
+    ignored = list(dict.fromkeys(names))
+    if header[0] in ignored:
+        raise InputError("the first column cannot be ignored", path, line, header[0])
+    comment = None
+    if "thickness_mm" in meta:
+        value, number = meta["thickness_mm"]
+        comment = _positive(value, path, number, key="thickness_mm")
+    bare = thickness_mm if thickness_mm is not None else comment
+    columns = _classify([n for n in header if n not in ignored], path, line, bare)
+    return {"comment": comment, "columns": columns, "ignored": ignored}
+
+
+def _read_table(path, on_header):
+    """The measurement's table (`read_table` with this format's header and `# key:` lines);
+    a file with no header row that is laid out in another way is named as such
+    (`_other_layout`)."""
+    try:
+        return read_table(path, is_wavelength_column, "wavelength_nm,R_<X>mm,...,R_inf,R_g",
+                          min_rows=2, other_column=_is_reading,
+                          once=("name", "thickness_mm", "ignore", "white_reflectance"),
+                          on_header=on_header, wavelength_first=True)
+    except InputError as e:
+        if "no header row" in str(e) and (layout := _other_layout(path)) is not None:
+            raise InputError(layout[1], path, layout[0]) from None
+        raise
+
+
+def _thickness_notes(path, columns, meta, thickness_mm, comment_thickness) -> list[str]:
+    """Notes on the thicknesses: a thin layer outside `USUAL_THICKNESS_MM` (a unit mistaken?),
+    and a `# thickness_mm:` line that is not used or that `--thickness` overrides."""
+    notes = []
+    lo, hi = USUAL_THICKNESS_MM
+    for name, (kind, x) in columns.items():
+        if kind == "thin" and not lo <= x <= hi:
+            notes.append(f"{path}: column '{name}': a {x:g} mm film; cosmetic films are "
+                         f"{lo * 1000:g} µm to {hi:g} mm thick, and S, K scale as 1 / "
+                         f"thickness: {'µm (R_<X>um)' if x > hi else 'mm'} meant?")
+    if comment_thickness is not None:  # said, so not dropped in silence
+        value, number = meta["thickness_mm"]
+        said = f"{path}:{number}: '# thickness_mm: {value}'"
+        if not {"R", "E"} & set(columns):
+            notes.append(f"{said} is not used: no bare R (or E) column; the R_<X>mm columns "
+                         "name their own thicknesses")
+        elif thickness_mm is not None and thickness_mm != comment_thickness:
+            notes.append(f"{said} is overridden by --thickness {thickness_mm:g}")
+    return notes
+
+
+def _white_reflectance(path, meta, columns, white_reflectance, notes) -> float:
+    """The white standard's reflectance: `--white-reflectance`, else the file's
+    `# white_reflectance:` line (read only with radiance columns), else 1; a note when one
+    is given but not used, or overridden."""
+    white = 1.0
+    radiance = "white" in {kind for kind, _ in columns.values()}
+    if "white_reflectance" in meta and radiance:
+        value, number = meta["white_reflectance"]
+        white = _fraction(value, path, number, "white_reflectance")
+        if white_reflectance is not None and white_reflectance != white:
+            notes.append(f"{path}:{number}: '# white_reflectance: {value}' is overridden by "
+                         f"--white-reflectance {white_reflectance:g}")
+    if white_reflectance is not None:
+        white = white_reflectance
+    if not radiance and (white != 1.0 or "white_reflectance" in meta):
+        notes.append(f"{path}: the white standard's reflectance is not used: no radiance "
+                     "columns (E_... with E_white)")
+    return white
+
+
+def _material_name(path, meta, notes) -> str:
+    """The material's name: the file's `# name:` line, checked, or its stem
+    (`_name_from_stem`)."""
     name, line = meta.get("name", ("", 0))
     if not name:
-        name = _name_from_stem(path, notes)
-    elif not _NAME.fullmatch(name):
+        return _name_from_stem(path, notes)
+    if not _NAME.fullmatch(name):
         safe = _safe_name(name)
         hint = f", e.g. '# name: {safe}'" if safe else ""
         raise InputError(
             f"name {name!r} must be letters, digits, '.', '_', '+' or '-' (it names "
             f"files){hint}", path, line,
         )
-    return Measurement(
-        path=path, name=name, wavelength_nm=wl, thickness_mm=np.array([x for x, _ in thin]),
-        R=R, R_inf=R_inf, R_g=R_g, columns=tuple(n for _, n in thin), header_line=header_line,
-        notes=tuple(notes),
-    )
+    return name
 
 
 _WAVELENGTH_CELL = re.compile(r"(?i)\d+(?:\.\d+)?\s*(?:nm)?")

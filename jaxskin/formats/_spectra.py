@@ -92,6 +92,7 @@ def read_spectra(path, percent: bool | None = False, notes: list | None = None
     `InputError` names the file, line and column of anything else.
     """
     path = Path(path)
+    notes = [] if notes is None else notes
     text = read_text(path, fallback="cp1252")
     lines = text.splitlines()
     header_at = None
@@ -100,45 +101,19 @@ def read_spectra(path, percent: bool | None = False, notes: list | None = None
         if cells and _nm_column(cells[0]):
             header_at = i
             break
-    t = None
     if header_at is not None and "Average" in split_row(lines[header_at], ","):
-        header = split_row(lines[header_at], ",")
-        above = next((split_row(lines[j], ",") for j in range(header_at - 1, -1, -1)
-                      if lines[j].strip().strip(",")), [])
-        columns, names = [], []
-        for c, name in enumerate(header):
-            if name == "Average":
-                label = next((above[j] for j in range(min(c, len(above) - 1), 0, -1)
-                              if j < len(above) and above[j]), f"column {c + 1}")
-                names.append(slug(label.strip().lower().replace(" ", "_")))
-                columns.append(c)
-        rows, wl = [], []
-        for number, raw in enumerate(lines[header_at + 1:], start=header_at + 2):
-            cells = split_row(raw.strip(), ",")
-            if not raw.strip() or raw.startswith("#"):
-                continue
-            if len(cells) < len(header):
-                raise InputError(f"{len(cells)} cells where the header has {len(header)}",
-                                 path, number)
-            wl.append(read_number(cells[0], path, number, header[0]))
-            rows.append([read_number(cells[c], path, number, f"{names[k]} Average")
-                         for k, c in enumerate(columns)])
-        if len(wl) < 2:
-            raise InputError("needs at least 2 rows of spectra", path, header_at + 1)
-        wavelengths, R = np.asarray(wl), np.asarray(rows).T
-        header_line, line_of, wl_name = header_at + 1, None, header[0]
+        names, wavelengths, R = _nist_layout(path, lines, header_at)
+        header_line, line_of, wl_name = header_at + 1, None, split_row(lines[header_at], ",")[0]
     else:
         t = read_table(path, _nm_column,
                        "wavelength_nm,<spectrum name>,...", min_rows=2, wavelength_first=True)
         if len(t.header) < 2:
             raise t.error("no spectra: expected wavelength_nm and one column per spectrum")
-        notes = [] if notes is None else notes
         data, line_of = drop_repeats(t.data, t.lines, path, notes)
         names, wavelengths, R = t.header[1:], data[:, 0], data[:, 1:].T
         header_line, wl_name = t.header_line, t.header[0]
-    notes = [] if notes is None else notes
-    if t is not None and t.decimal_comma:
-        notes.append(f"{path}: {decimal_comma_note(t.decimal_comma)}")
+        if t.decimal_comma:
+            notes.append(f"{path}: {decimal_comma_note(t.decimal_comma)}")
     if len(wavelengths) > 1 and np.all(np.diff(wavelengths) < 0):  # long ones first
         wavelengths, R = wavelengths[::-1], R[:, ::-1]
         line_of = None if line_of is None else list(line_of)[::-1]
@@ -147,42 +122,9 @@ def read_spectra(path, percent: bool | None = False, notes: list | None = None
         row = int(np.flatnonzero(np.diff(wavelengths) <= 0)[0]) + 1
         raise InputError("wavelengths must increase (or all decrease)", path,
                          None if line_of is None else line_of[row], wl_name)
-    # A header that says % (`Forearm A (%)`): that spectrum in percent, named without it,
-    # as calibrate reads its columns (else the unit would stay in the names).
     columns = list(names)  # as the file spells them, for the messages
-    marked = np.array([bool(PERCENT_UNIT.search(n)) for n in names])
-    names = [PERCENT_UNIT.sub("", n) if m else n for n, m in zip(names, marked, strict=True)]
-    for k in np.flatnonzero(marked):
-        if not names[k]:
-            raise InputError("a spectrum's name is its unit alone: name the column", path,
-                             header_line, columns[k])
-        if np.max(R[k]) <= 1.0:  # no skin reflects under 1 % at every band
-            raise InputError(f"says %, but every reading is at most 1 (median "
-                             f"{np.median(R[k]):.3g}): these are fractions (0-1); remove the % "
-                             "from the header", path, header_line, columns[k])
-    if marked.any():
-        said = [c for c, m in zip(columns, marked, strict=True) if m]
-        these = "', '".join(said[:3])
-        notes.append(f"{path}: column{'s' if len(said) > 1 else ''} '{these}'"
-                     f"{' ...' if len(said) > 3 else ''} say{'' if len(said) > 1 else 's'} %: "
-                     "read as percent (/ 100)")
-    rest = R[~marked]
-    if percent is None:
-        percent = bool(rest.size) and float(np.median(rest)) > PERCENT_MEDIAN
-        if percent:
-            notes.append(f"{path}: reflectances have a median of {np.median(rest):.3g}: read "
-                         "as percent (/ 100; --percent says so)")
-    elif percent and rest.size:
-        check_percent(rest, path)
-    tops = np.where(marked | bool(percent), 100.0, 1.0)
-    R = R / tops[:, None]
-    noise = (R < 0) & (R >= -NEGATIVE_NOISE)  # as calibrate reads them: -0.001 is noise
-    for k in np.flatnonzero(noise.any(axis=1)):
-        notes.append(f"{path}: spectrum '{names[k]}': {int(noise[k].sum())} reading"
-                     f"{'s' if noise[k].sum() > 1 else ''} below 0 (down to "
-                     f"{R[k][noise[k]].min() * tops[k]:g}, within the "
-                     f"{NEGATIVE_NOISE * tops[k]:g} of noise) read as 0")
-    R = np.where(noise, 0.0, R)
+    names, marked = _percent_columns(path, names, R, header_line, notes)
+    R, tops = _fractions(path, R, names, marked, percent, notes)
     for k, name in enumerate(columns):
         bad = np.flatnonzero((R[k] < 0) | (R[k] > 1.0))
         if bad.size:
@@ -200,3 +142,79 @@ def read_spectra(path, percent: bool | None = False, notes: list | None = None
             raise InputError("two spectra have this name", path, header_line, name)
         seen.add(name)
     return list(names), wavelengths, R
+
+
+def _nist_layout(path, lines, header_at: int):
+    """`(names, wavelengths, R)` of a file in the NIST skin file's layout, whose header is
+    `lines[header_at]`: each `Average` column, named by the `Subject k` cell above it."""
+    header = split_row(lines[header_at], ",")
+    above = next((split_row(lines[j], ",") for j in range(header_at - 1, -1, -1)
+                  if lines[j].strip().strip(",")), [])
+    columns, names = [], []
+    for c, name in enumerate(header):
+        if name == "Average":
+            label = next((above[j] for j in range(min(c, len(above) - 1), 0, -1)
+                          if j < len(above) and above[j]), f"column {c + 1}")
+            names.append(slug(label.strip().lower().replace(" ", "_")))
+            columns.append(c)
+    rows, wl = [], []
+    for number, raw in enumerate(lines[header_at + 1:], start=header_at + 2):
+        cells = split_row(raw.strip(), ",")
+        if not raw.strip() or raw.startswith("#"):
+            continue
+        if len(cells) < len(header):
+            raise InputError(f"{len(cells)} cells where the header has {len(header)}",
+                             path, number)
+        wl.append(read_number(cells[0], path, number, header[0]))
+        rows.append([read_number(cells[c], path, number, f"{names[k]} Average")
+                     for k, c in enumerate(columns)])
+    if len(wl) < 2:
+        raise InputError("needs at least 2 rows of spectra", path, header_at + 1)
+    return names, np.asarray(wl), np.asarray(rows).T
+
+
+def _percent_columns(path, names, R, header_line: int, notes: list):
+    """`(names, marked)`: the spectra whose header says % (`Forearm A (%)`), named without
+    it, as calibrate reads its columns (else the unit would stay in the names); such a
+    column must hold percent, not fractions. A note names them."""
+    columns = list(names)  # as the file spells them, for the messages
+    marked = np.array([bool(PERCENT_UNIT.search(n)) for n in names])
+    names = [PERCENT_UNIT.sub("", n) if m else n for n, m in zip(names, marked, strict=True)]
+    for k in np.flatnonzero(marked):
+        if not names[k]:
+            raise InputError("a spectrum's name is its unit alone: name the column", path,
+                             header_line, columns[k])
+        if np.max(R[k]) <= 1.0:  # no skin reflects under 1 % at every band
+            raise InputError(f"says %, but every reading is at most 1 (median "
+                             f"{np.median(R[k]):.3g}): these are fractions (0-1); remove the % "
+                             "from the header", path, header_line, columns[k])
+    if marked.any():
+        said = [c for c, m in zip(columns, marked, strict=True) if m]
+        these = "', '".join(said[:3])
+        notes.append(f"{path}: column{'s' if len(said) > 1 else ''} '{these}'"
+                     f"{' ...' if len(said) > 3 else ''} say{'' if len(said) > 1 else 's'} %: "
+                     "read as percent (/ 100)")
+    return names, marked
+
+
+def _fractions(path, R, names, marked, percent, notes: list):
+    """`(R as fractions, each spectrum's full scale: 1 or 100)`: the `marked` spectra and,
+    with `percent` (or, when it is None, a median above `PERCENT_MEDIAN`), the others
+    divided by 100; readings just below 0 (`NEGATIVE_NOISE`) read as 0, with a note."""
+    rest = R[~marked]
+    if percent is None:
+        percent = bool(rest.size) and float(np.median(rest)) > PERCENT_MEDIAN
+        if percent:
+            notes.append(f"{path}: reflectances have a median of {np.median(rest):.3g}: read "
+                         "as percent (/ 100; --percent says so)")
+    elif percent and rest.size:
+        check_percent(rest, path)
+    tops = np.where(marked | bool(percent), 100.0, 1.0)
+    R = R / tops[:, None]
+    noise = (R < 0) & (R >= -NEGATIVE_NOISE)  # as calibrate reads them: -0.001 is noise
+    for k in np.flatnonzero(noise.any(axis=1)):
+        notes.append(f"{path}: spectrum '{names[k]}': {int(noise[k].sum())} reading"
+                     f"{'s' if noise[k].sum() > 1 else ''} below 0 (down to "
+                     f"{R[k][noise[k]].min() * tops[k]:g}, within the "
+                     f"{NEGATIVE_NOISE * tops[k]:g} of noise) read as 0")
+    return np.where(noise, 0.0, R), tops

@@ -106,9 +106,32 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
     # and comments); a table's numbers read the same either way.
     text = read_text(path, fallback="cp1252")
     lines = text.splitlines()
+    header, delimiter, header_line, meta = _find_header(
+        path, lines, first_column, expected_header, other_column, once)
+    for i, name in enumerate(header):
+        if name == "":
+            raise InputError(f"header cell {i + 1} is empty", path, header_line)
+        if name in header[:i]:
+            raise InputError("column appears twice", path, header_line, name)
+    skipped = set(on_header(header, meta, header_line)) if on_header is not None else set()
+    kept = [c for c, name in enumerate(header) if name not in skipped]
+    rows, numbers, decimal_comma = _read_rows(path, lines, header, header_line, delimiter,
+                                              kept, wavelength_first)
+    if len(rows) < min_rows:
+        rows_ = "row" if min_rows == 1 else "rows"
+        raise InputError(f"needs at least {min_rows} data {rows_}, found {len(rows)}", path,
+                         header_line)
+    header = [header[c] for c in kept]
+    data = np.asarray(rows, np.float64).reshape(len(rows), len(header))
+    return Table(path, header, header_line, data, numbers, meta, delimiter, decimal_comma)
+
+
+def _find_header(path, lines, first_column, expected_header, other_column, once):
+    """`(header cells, delimiter, header line, meta)`: the first of `lines` that
+    `header_row` accepts, and the `# key: value` lines before it (a key in `once` given
+    twice with another value is an `InputError`). With no header, an `InputError` that says
+    what the row above the data began with (`_no_header`)."""
     meta: dict[str, tuple[str, int]] = {}
-    header = delimiter = None
-    header_line = 0
     first = None  # the last line before the data whose first cell is text: the header meant
     data_seen = False
     try:
@@ -134,32 +157,35 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
                 continue
             row = header_row(line, first_column, other_column)
             if row is not None:
-                (header, delimiter), header_line = row, number
-                break
+                header, delimiter = row
+                return header, delimiter, number, meta
     except csv.Error as e:
         raise InputError(f"not CSV ({e})", path, number) from None
-    if header is None:
-        seen = ""
-        if first is not None:  # the row above the data, not a preamble line
-            known = WAVELENGTH_HEADER.fullmatch(first[1])
-            name = expected_header.split(",")[0]
-            unit = (known["unit"] or "nm").lower() if known else None
-            why = ("a wavelength column, but no later column is one this reader takes"
-                   if unit == "nm" else
-                   f"wavelengths in {unit}; this reader takes nm: give them in nm, as {name}"
-                   if unit else
-                   f"not a name this reader knows for the first column: name it {name}")
-            seen = f" (line {first[0]} begins with {first[1][:40]!r}: {why})"
-        raise InputError(f"no header row; expected a row '{expected_header}' (comma, tab or "
-                         f"semicolon separated) after any preamble{seen}", path)
-    for i, name in enumerate(header):
-        if name == "":
-            raise InputError(f"header cell {i + 1} is empty", path, header_line)
-        if name in header[:i]:
-            raise InputError("column appears twice", path, header_line, name)
-    skipped = set(on_header(header, meta, header_line)) if on_header is not None else set()
-    kept = [c for c, name in enumerate(header) if name not in skipped]
+    raise _no_header(path, expected_header, first)
 
+
+def _no_header(path, expected_header: str, first) -> InputError:
+    """The error for a table with no header row; `first`: `(line, first cell)` of the last
+    line before the data whose first cell is text (the header meant), or None."""
+    seen = ""
+    if first is not None:  # the row above the data, not a preamble line
+        known = WAVELENGTH_HEADER.fullmatch(first[1])
+        name = expected_header.split(",")[0]
+        unit = (known["unit"] or "nm").lower() if known else None
+        why = ("a wavelength column, but no later column is one this reader takes"
+               if unit == "nm" else
+               f"wavelengths in {unit}; this reader takes nm: give them in nm, as {name}"
+               if unit else
+               f"not a name this reader knows for the first column: name it {name}")
+        seen = f" (line {first[0]} begins with {first[1][:40]!r}: {why})"
+    return InputError(f"no header row; expected a row '{expected_header}' (comma, tab or "
+                      f"semicolon separated) after any preamble{seen}", path)
+
+
+def _read_rows(path, lines, header, header_line, delimiter, kept, wavelength_first):
+    """The data rows after the header line: `(rows, their line numbers, the first number
+    written with a decimal comma or "")`, each row the floats of the `kept` columns. Blank,
+    `#` and all-empty rows are skipped; a row with another number of cells is an error."""
     rows, numbers = [], []
     decimal_comma = ""
     for number, raw in enumerate(lines[header_line:], start=header_line + 1):
@@ -173,43 +199,53 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
         if all(c == "" for c in cells):  # a spreadsheet's empty row: ",,,,"
             continue
         if len(cells) != len(header):
-            if not _NUMBER.fullmatch(cells[0]) and not DECIMAL_COMMA.fullmatch(cells[0]):
-                shown = line if len(line) <= 40 else line[:37] + "..."
-                raise InputError(f"a row that is not data ({shown!r}): delete it, or start "
-                                 "it with '#' to make it a comment (one table a file)",
-                                 path, number)
-            others = [_NAMES[d] for d in DELIMITERS if d != delimiter and d in line]
-            hint = (f" (the header is {_NAMES[delimiter]}-separated; this row has "
-                    f"{' and '.join(others)}s)") if others else ""
-            if len(cells) < len(header) and line.endswith(delimiter):
-                raise InputError("empty cell: expected a number", path, number,
-                                 header[len(cells)])
-            if (not hint and delimiter == "," and len(cells) > len(header)
-                    and all(c.isdigit() for c in cells)):  # 380,54,81 for 380;54,81
-                hint = (" (decimal commas in a comma-separated file? 0,54 is then two cells: "
-                        "export with ';' or tab between cells, or with decimal points)")
-            raise InputError(f"{len(cells)} cells where the header has {len(header)}{hint}",
-                             path, number)
+            raise _cell_count_error(path, number, line, cells, header, delimiter)
         if delimiter != ",":  # then 18,65 can only be a decimal comma (Excel in Europe)
-            for c in kept:
-                if (c == 0 and wavelength_first and _THOUSANDS.fullmatch(cells[c])
-                        and int(cells[c].replace(",", "")) <= 3000):  # 1050 nm or 1.05?
-                    raise InputError(f"{cells[c]!r} reads as a thousands separator (a "
-                                     "wavelength over 1000) or a decimal comma: export the "
-                                     "wavelengths without thousands separators", path,
-                                     number, header[0])
-                if DECIMAL_COMMA.fullmatch(cells[c]):
-                    decimal_comma = decimal_comma or cells[c]
-                    cells[c] = cells[c].replace(",", ".")
+            found = _decimal_commas(path, number, cells, header, kept, wavelength_first)
+            decimal_comma = decimal_comma or found
         rows.append([read_number(cells[c], path, number, header[c]) for c in kept])
         numbers.append(number)
-    if len(rows) < min_rows:
-        rows_ = "row" if min_rows == 1 else "rows"
-        raise InputError(f"needs at least {min_rows} data {rows_}, found {len(rows)}", path,
-                         header_line)
-    header = [header[c] for c in kept]
-    data = np.asarray(rows, np.float64).reshape(len(rows), len(header))
-    return Table(path, header, header_line, data, numbers, meta, delimiter, decimal_comma)
+    return rows, numbers, decimal_comma
+
+
+def _cell_count_error(path, number: int, line: str, cells, header, delimiter) -> InputError:
+    """The error for data row `line` (file line `number`), whose `cells` are not as many as
+    the header's: a row that is not data, an empty last cell, or a count that says why."""
+    if not _NUMBER.fullmatch(cells[0]) and not DECIMAL_COMMA.fullmatch(cells[0]):
+        shown = line if len(line) <= 40 else line[:37] + "..."
+        return InputError(f"a row that is not data ({shown!r}): delete it, or start "
+                          "it with '#' to make it a comment (one table a file)",
+                          path, number)
+    others = [_NAMES[d] for d in DELIMITERS if d != delimiter and d in line]
+    hint = (f" (the header is {_NAMES[delimiter]}-separated; this row has "
+            f"{' and '.join(others)}s)") if others else ""
+    if len(cells) < len(header) and line.endswith(delimiter):
+        return InputError("empty cell: expected a number", path, number,
+                          header[len(cells)])
+    if (not hint and delimiter == "," and len(cells) > len(header)
+            and all(c.isdigit() for c in cells)):  # 380,54,81 for 380;54,81
+        hint = (" (decimal commas in a comma-separated file? 0,54 is then two cells: "
+                "export with ';' or tab between cells, or with decimal points)")
+    return InputError(f"{len(cells)} cells where the header has {len(header)}{hint}",
+                      path, number)
+
+
+def _decimal_commas(path, number: int, cells, header, kept, wavelength_first) -> str:
+    """Rewrite the `kept` cells of a `;` or tab row written with a decimal comma (`18,65`)
+    with a point, in place; returns the first such cell as written, or "". With
+    `wavelength_first`, a wavelength such as `1,050` (1050 nm or 1.05?) is an error."""
+    found = ""
+    for c in kept:
+        if (c == 0 and wavelength_first and _THOUSANDS.fullmatch(cells[c])
+                and int(cells[c].replace(",", "")) <= 3000):  # 1050 nm or 1.05?
+            raise InputError(f"{cells[c]!r} reads as a thousands separator (a "
+                             "wavelength over 1000) or a decimal comma: export the "
+                             "wavelengths without thousands separators", path,
+                             number, header[0])
+        if DECIMAL_COMMA.fullmatch(cells[c]):
+            found = found or cells[c]
+            cells[c] = cells[c].replace(",", ".")
+    return found
 
 
 def read_number(cell: str, path, line: int, column: str) -> float:
