@@ -1,26 +1,4 @@
-"""Spectroradiometer measurement CSVs for Kubelka–Munk calibration (Huang et al. 2013 §4).
-
-The format (also in the documentation, docs/reference/formats.md):
-
-    # name: foundation_1          (optional; default: the file's stem, made safe)
-    # thickness_mm: 0.15          (optional; the thickness of a bare `R` column)
-    wavelength_nm,R_0.05mm,R_0.15mm,R_inf,R_g
-    380,0.0712,0.1134,0.2051,0.0398
-    ...
-
-- `R_<X>mm`: reflectance of a thin layer X mm thick over the background (one or more).
-- `R`: a thin layer whose thickness comes from `--thickness` or `# thickness_mm:`.
-- `R_inf`: an opaque layer. `R_g`: the background alone (black or white card).
-- Reflectance factors in [0, 1] (or 0–100 with `percent=True`).
-- Raw radiance instead: the same columns with `E_` in place of `R_` (`E_0.15mm`, `E_inf`,
-  `E_g`; `E_R_0.15mm` is accepted too) plus `E_white`, the barium sulfate standard; then
-  R = E / E_white (eq. 8).
-
-The header is the first row whose first cell names the wavelength (`wavelength_nm`, `nm`,
-`Wavelength (nm)`, ...) and that has a column starting with `R` or `E`.
-
-Anything else is an `InputError` naming the file, the line and the column.
-"""
+"""Reading one measurement CSV (`read_measurement`): its table, its notes, its name."""
 
 from __future__ import annotations
 
@@ -33,13 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxskin.formats import (
-    DECIMAL_COMMA,
-    NEGATIVE_NOISE,
-    PERCENT_MEDIAN,
     PERCENT_UNIT,
-    WAVELENGTH_HEADER,
-    WAVELENGTH_RANGE_NM,
-    check_percent,
     decimal_comma_note,
     drop_repeats,
     is_wavelength_column,
@@ -48,22 +20,21 @@ from jaxskin.formats import (
 from jaxskin.io import InputError
 from jaxskin.outputs import MAX_NAME
 
-__all__ = ["Measurement", "is_wavelength_column", "read_measurement"]
+from ._columns import (
+    MAX_THICKNESS_MM,
+    classify,
+    column_of,
+    fraction,
+    is_radiance,
+    is_reading,
+    positive,
+)
+from ._readings import reflectances, wavelengths_nm
 
-# A thin layer's column, after `_canonical`: R_0.05mm, R_0.05_mm (from "R 0.05 mm"),
-# R0.05mm, R_50um, R_50µm; E_… for radiance.
-THIN_COLUMN = re.compile(r"^(?:R|E)_?(?P<x>.+?)_?(?P<unit>mm|um|µm|μm)$")
 _NAME = re.compile(r"[\w.+-]+")  # a material name (it names the output files)
-MAX_THICKNESS_MM = 100.0  # a cosmetic layer is µm to a few mm; beyond this it is a typo
 # Thin-layer thicknesses outside this are named in a note: cosmetic films are µm to a
 # tenth of a mm; R_3mm for R_3um fits as well with S, K 1000× too small.
 USUAL_THICKNESS_MM = (1e-4, 1.0)
-MAX_RADIANCE = 1e30  # any unit of radiance or counts; beyond this it is an overflow
-
-
-def _is_reading(name: str) -> bool:
-    """Whether a header cell may name a reading: reflectance `R…` or radiance `E…`."""
-    return name.startswith(("R", "E"))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -134,7 +105,7 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
     if descending:  # some instruments export the long wavelengths first
         data, numbers = data[::-1], list(numbers)[::-1]
 
-    wl, notes = _wavelengths_nm(data[:, 0], header[0], path, numbers)
+    wl, notes = wavelengths_nm(data[:, 0], header[0], path, numbers)
     notes += repeats
     if table.decimal_comma:
         notes.append(f"{path}: {decimal_comma_note(table.decimal_comma)}")
@@ -145,12 +116,12 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
         notes.append(f"{path}: wavelengths descend: read in increasing order")
     notes += _thickness_notes(path, columns, meta, thickness_mm, comment_thickness)
     white = _white_reflectance(path, meta, columns, white_reflectance, notes)
-    said = [n for n in columns if PERCENT_UNIT.search(n) and not _is_radiance(n)]
+    said = [n for n in columns if PERCENT_UNIT.search(n) and not is_radiance(n)]
     if said and not percent:  # the header says so: not left to the median's guess
         these = "', '".join(said)
         notes.append(f"{path}: column{'s' if len(said) > 1 else ''} '{these}' say"
                      f"{'' if len(said) > 1 else 's'} %: read as percent (/ 100)")
-    reflectance = _reflectances(data, header, columns, path, numbers, percent, notes, white,
+    reflectance = reflectances(data, header, columns, path, numbers, percent, notes, white,
                                 marked=said)
     thin = sorted((x, name) for name, (kind, x) in columns.items() if kind == "thin")
     R = np.stack([reflectance[name] for _, name in thin])
@@ -158,7 +129,7 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
     if np.all(np.abs(R_g - R_inf) <= 1e-12):
         raise InputError(
             "R_g equals R_inf at every wavelength: the background must differ from the opaque "
-            "layer (a black or white card)", path, header_line, _column_of(columns, "g"),
+            "layer (a black or white card)", path, header_line, column_of(columns, "g"),
         )
     name = _material_name(path, meta, notes)
     return Measurement(
@@ -170,7 +141,7 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
 
 def _header_columns(path, header, meta, line, ignore, thickness_mm):
     """`{"ignored": the columns to skip, "comment": the `# thickness_mm:` line's thickness
-    or None, "columns": the others classified (`_classify`)}`, from the header row and the
+    or None, "columns": the others classified (`classify`)}`, from the header row and the
     `# key:` lines before it; `ignore` and `thickness_mm` as `read_measurement` takes them."""
     names = [n for n in header[1:] if any(fnmatch.fnmatchcase(n, p) for p in ignore)]
     if header[0] in ignore:  # named outright (not by a pattern): refused, not passed over
@@ -190,9 +161,9 @@ def _header_columns(path, header, meta, line, ignore, thickness_mm):
     comment = None
     if "thickness_mm" in meta:
         value, number = meta["thickness_mm"]
-        comment = _positive(value, path, number, key="thickness_mm")
+        comment = positive(value, path, number, key="thickness_mm")
     bare = thickness_mm if thickness_mm is not None else comment
-    columns = _classify([n for n in header if n not in ignored], path, line, bare)
+    columns = classify([n for n in header if n not in ignored], path, line, bare)
     return {"comment": comment, "columns": columns, "ignored": ignored}
 
 
@@ -202,7 +173,7 @@ def _read_table(path, on_header):
     (`_other_layout`)."""
     try:
         return read_table(path, is_wavelength_column, "wavelength_nm,R_<X>mm,...,R_inf,R_g",
-                          min_rows=2, other_column=_is_reading,
+                          min_rows=2, other_column=is_reading,
                           once=("name", "thickness_mm", "ignore", "white_reflectance"),
                           on_header=on_header, wavelength_first=True)
     except InputError as e:
@@ -240,7 +211,7 @@ def _white_reflectance(path, meta, columns, white_reflectance, notes) -> float:
     radiance = "white" in {kind for kind, _ in columns.values()}
     if "white_reflectance" in meta and radiance:
         value, number = meta["white_reflectance"]
-        white = _fraction(value, path, number, "white_reflectance")
+        white = fraction(value, path, number, "white_reflectance")
         if white_reflectance is not None and white_reflectance != white:
             notes.append(f"{path}:{number}: '# white_reflectance: {value}' is overridden by "
                          f"--white-reflectance {white_reflectance:g}")
@@ -267,7 +238,6 @@ def _material_name(path, meta, notes) -> str:
         )
     return name
 
-
 _WAVELENGTH_CELL = re.compile(r"(?i)\d+(?:\.\d+)?\s*(?:nm)?")
 
 
@@ -289,7 +259,7 @@ def _other_layout(path):
                       "reads wavelength_nm,R_<X>mm,... tables")
     for number, cells in text_rows(path):
         if (len(cells) >= 2 and is_wavelength_column(cells[0])
-                and not any(_is_reading(c) for c in cells[1:])):
+                and not any(is_reading(c) for c in cells[1:])):
             shown = ", ".join(repr(c) for c in cells[1:3]) + (", ..." if len(cells) > 3 else "")
             reads = "calibrate reads R_<X>mm, R_inf, R_g or E_... columns"
             if any(_LOWER_READING.fullmatch(c) for c in cells[1:]):  # r_0.05mm: the case
@@ -309,7 +279,7 @@ def _other_layout(path):
                             "column, one column per reading; transpose the table (in a "
                             "spreadsheet: copy, then paste special > transpose)")
         later = [c for c in cells[1:] if is_wavelength_column(c)]
-        if later and any(_is_reading(c) for c in cells):
+        if later and any(is_reading(c) for c in cells):
             before = cells[:cells.index(later[0])]
             return number, (f"the wavelength column '{later[0]}' is not the first: move it "
                             f"first, or delete the column{'s' if len(before) > 1 else ''} "
@@ -342,220 +312,3 @@ def _name_from_stem(path, notes) -> str:
         notes.append(f"{path}: the file name is not a material name (letters, digits, '.', "
                      f"'_', '+', '-'): named it '{name}' (set it with '# name: NAME')")
     return name
-
-
-def _wavelengths_nm(wl, column, path, numbers):
-    """The wavelength column in nm (µm when all under 10 or the header says so), checked."""
-    notes = []
-    unit = (WAVELENGTH_HEADER.fullmatch(column)["unit"] or "").lower()
-    micrometres = unit not in ("", "nm")
-    if not micrometres and np.all(wl < 10):
-        micrometres = True
-        notes.append(f"{path}: wavelengths are all under 10: read as µm (x 1000 to nm)")
-    if micrometres:
-        wl = wl * 1000.0
-    lo, hi = WAVELENGTH_RANGE_NM
-    bad = np.flatnonzero((wl < lo) | (wl > hi))
-    if bad.size:
-        shown = wl[bad[0]] / 1000 if micrometres else wl[bad[0]]
-        units = "µm" if micrometres else "nm"
-        raise InputError(
-            f"wavelength {shown:g} {units} is outside {lo:g}-{hi:g} nm (nm and µm mixed? "
-            f"give all in nm, or all in µm)", path, numbers[bad[0]], column)
-    bad = np.flatnonzero(np.diff(wl) <= 0)
-    if bad.size:
-        raise InputError(
-            f"wavelengths must increase (or all decrease), got "
-            f"{_shown(wl, bad[0], micrometres)} then "
-            f"{_shown(wl, bad[0] + 1, micrometres)}", path, numbers[bad[0] + 1], column)
-    return wl, notes
-
-
-def _shown(wl, i, micrometres):
-    return f"{wl[i] / 1000:g}" if micrometres else f"{wl[i]:g}"
-
-
-def _column_of(columns, role):
-    return next(name for name, (kind, _) in columns.items() if kind == role)
-
-
-def _is_radiance(name: str) -> bool:
-    short = _canonical(name)
-    return short == "E" or short.startswith("E_")
-
-
-def _is_float(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
-def _positive(value, path, line, column=None, scale=1.0, key=None) -> float:
-    """A thickness in mm (`value` times `scale`: 1e-3 for µm), checked; a decimal comma is
-    read as a point (one number alone: no column break to confuse it with). `column`: the
-    header's, or `key`: a `# key:` line's."""
-    try:
-        x = float(_one_number(value)) * scale
-    except ValueError:
-        x = math.nan
-    if not (math.isfinite(x) and 0 < x <= MAX_THICKNESS_MM):
-        raise InputError(f"thickness must be a positive number of mm (at most "
-                         f"{MAX_THICKNESS_MM:g}), got {value!r}", path, line, column, key)
-    return x
-
-
-# A percent unit after a reading column's name: "R_inf (%)", "R_g [%]", "R_g %".
-
-
-def _canonical(name: str) -> str:
-    """A reading column's name in the format's spelling: spaces as `_` (`R 0.05 mm` →
-    `R_0.05_mm`), `E_R_…` as `E_…`, `∞` as `inf`."""
-    short = PERCENT_UNIT.sub("", name.strip())  # "R_inf (%)"
-    short = re.sub(r"\s+", "_", short).replace("∞", "inf")
-    short = "E_" + short[4:] if short.startswith("E_R_") else short
-    return {"Rinf": "R_inf", "Rg": "R_g", "Einf": "E_inf", "Eg": "E_g"}.get(short, short)
-
-
-def _classify(header, path, line, bare_thickness):
-    """Map each header name to (role, thickness); role is thin, inf, g or white."""
-    expected = ("expected R_<X>mm (or R_<X>um), R, R_inf, R_g (or E_… and E_white); skip "
-                "other columns with '# ignore: NAME' or --ignore")
-    columns: dict[str, tuple[str, float]] = {}
-    seen: dict[tuple[str, float], str] = {}
-    for name in header[1:]:
-        if is_wavelength_column(name):
-            raise InputError("a second wavelength column", path, line, name)
-        short = _canonical(name)
-        if short in ("R_inf", "E_inf"):
-            role = ("inf", 0.0)
-        elif short in ("R_g", "E_g"):
-            role = ("g", 0.0)
-        elif short == "E_white":
-            role = ("white", 0.0)
-        elif short in ("R", "E"):
-            if bare_thickness is None:
-                raise InputError(
-                    "a bare thin-layer column needs a thickness: add '# thickness_mm: X' "
-                    "or pass --thickness", path, line, name,
-                )
-            role = ("thin", bare_thickness)
-        elif (m := THIN_COLUMN.match(short)) and _is_float(_one_number(m["x"])):
-            role = ("thin", _positive(m["x"], path, line, name,
-                                      1.0 if m["unit"] == "mm" else 1e-3))
-        else:
-            raise InputError(f"unknown column; {expected}", path, line, name)
-        if role in seen:
-            raise InputError(f"the same quantity as column '{seen[role]}'", path, line, name)
-        seen[role] = name
-        columns[name] = role
-    roles = {kind for kind, _ in columns.values()}
-    for kind, what in (("thin", "R_<X>mm"), ("inf", "R_inf"), ("g", "R_g")):
-        if kind not in roles:
-            raise InputError(f"missing column {what}; {expected}", path, line)
-    radiance = [n for n, (kind, _) in columns.items() if _is_radiance(n) and kind != "white"]
-    if radiance and "white" not in roles:
-        raise InputError("radiance columns need E_white (the white standard)", path, line,
-                         radiance[0])
-    reflectance = [n for n in columns if not _is_radiance(n)]
-    if radiance and reflectance:  # an E column relabelled R_inf would fit "perfectly"
-        raise InputError("a reflectance among radiance columns (E_..., E_white): a file's "
-                         "readings are all of one kind; name it E_... if it holds radiance, "
-                         "or give reflectances (R = E / E_white) throughout", path, line,
-                         reflectance[0])
-    return columns
-
-
-def _one_number(text: str) -> str:
-    """A lone number's text with a decimal comma made a point (`0,05`)."""
-    text = text.strip()
-    return text.replace(",", ".") if DECIMAL_COMMA.fullmatch(text) else text
-
-
-def _fraction(value, path, line, key) -> float:
-    """A `# key:` value that must be a reflectance in (0, 1]."""
-    try:
-        x = float(_one_number(value))
-    except ValueError:
-        x = math.nan
-    if not (math.isfinite(x) and 0 < x <= 1):
-        raise InputError(f"expected a reflectance in (0, 1], got {value!r}", path, line,
-                         key=key)  # a `# key:` line's, not a column
-    return x
-
-
-def _reflectances(data, header, columns, path, numbers, percent, notes, white_R=1.0,
-                  marked=()):
-    """Reflectance per role (thin columns by name), checked to lie in [0, 1]. Reflectance
-    columns are read as percent when `percent` (`--percent`), when their header says % (the
-    `marked` ones, each alone, even where all its readings are below 1, as a black card's
-    can be; one `R_inf (%)` does not make every column percent), or when the median of
-    the others is above 1.5 (a note is added to `notes`). `--percent` on readings all at
-    most 1 is refused (`check_percent`)."""
-    index = {name: i + 1 for i, name in enumerate(header[1:])}
-    for name in columns:
-        if _is_radiance(name):
-            values = data[:, index[name]]
-            # below 0 is left to R = E / E_white's test: a dark-corrected reading's noise
-            bad = np.flatnonzero(np.abs(values) > MAX_RADIANCE)
-            if bad.size:
-                raise InputError(f"radiance must be in [0, {MAX_RADIANCE:g}], got "
-                                 f"{values[bad[0]]:g}", path, numbers[bad[0]], name)
-    white = None
-    white_name = next((n for n, (kind, _) in columns.items() if kind == "white"), None)
-    if white_name is not None:
-        white = data[:, index[white_name]]
-        bad = np.flatnonzero(white <= 0)
-        if bad.size:
-            raise InputError(f"the white standard must be > 0, got {white[bad[0]]:g}",
-                             path, numbers[bad[0]], white_name)
-    plain = [index[n] for n in columns if not _is_radiance(n) and n not in marked]
-    if plain and percent:
-        check_percent(data[:, plain], path)
-    if plain and not percent:
-        values = data[:, plain]
-        if np.median(values) > PERCENT_MEDIAN:  # then [0, 100] is checked below
-            percent = True
-            notes.append(f"{path}: reflectances have a median of {np.median(values):.3g}: read "
-                         "as percent (/ 100)")
-        elif marked:  # some say %, these do not, and read either way: 0.12 beside R_inf (%)
-            unmarked = [n for n in columns if not _is_radiance(n) and n not in marked]
-            raise InputError(  # a guess is wrong for some: a black card's 0.6 % read as 0.6
-                f"column '{marked[0]}' says %, column{'s' if len(unmarked) > 1 else ''} '"
-                + "', '".join(unmarked) + f"' {'do' if len(unmarked) > 1 else 'does'} not, "
-                f"and their readings (median {np.median(values):.3g}) could be fractions or "
-                "percent: give each column its unit (R_g (%)), or pass --percent if all are "
-                "percent", path)
-    out = {}
-    for name, (kind, _) in columns.items():
-        if kind == "white":
-            continue
-        values = data[:, index[name]]
-        if _is_radiance(name):
-            values = values / white * white_R
-            what, scale = ("R = E / E_white must be in [0, 1]" if white_R == 1.0 else
-                           f"R = E / E_white × {white_R:g} must be in [0, 1]"), 1.0
-        elif percent or name in marked:
-            what, scale = "reflectance in percent must be in [0, 100]", 100.0
-        else:
-            what, scale = "reflectance must be in [0, 1]", 1.0
-        values = values / scale
-        noise = (values < 0) & (values >= -NEGATIVE_NOISE)
-        if noise.any():  # a dark-corrected reading of a black card: noise about 0
-            notes.append(f"{path}: column '{name}': {int(noise.sum())} reading"
-                         f"{'s' if noise.sum() > 1 else ''} below 0 (down to "
-                         f"{values[noise].min() * scale:g}, within the "
-                         f"{NEGATIVE_NOISE * scale:g} of noise) read as 0")
-            values = np.where(noise, 0.0, values)
-        bad = np.flatnonzero((values < 0) | (values > 1))
-        if bad.size:
-            hint = ("" if percent or name in marked or _is_radiance(name)
-                    else " (percent data? use --percent)")
-            if values[bad[0]] < 0:  # percent would not explain a reading of -0.0012
-                hint = (f" (below the -{NEGATIVE_NOISE * scale:g} read as noise: "
-                        "reflectances cannot be negative)")
-            raise InputError(f"{what}, got {values[bad[0]] * scale:g}{hint}",
-                             path, numbers[bad[0]], name)
-        out[name if kind == "thin" else kind] = values
-    return out
