@@ -26,7 +26,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
-from jaxskin.formats import _is_measurement_table, decimal_comma_note, read_table
+from jaxskin.formats import decimal_comma_note, is_measurement_table, read_table
 from jaxskin.io import FitError, InputError, atomic_write
 from jaxskin.shading import lafortune
 
@@ -90,7 +90,7 @@ def read_samples(path) -> BRDFSamples:
     try:
         t = read_table(path, lambda cell: cell in (*ANGLES, *VECTORS), _EXPECTED)
     except InputError as e:
-        if Path(path).is_file() and _is_measurement_table(Path(path)):
+        if Path(path).is_file() and is_measurement_table(Path(path)):
             raise InputError("a table of spectra (a wavelength column), not BRDF samples: a "
                              "cosmetic's measurement goes to 'jaxskin calibrate', skin "
                              "spectra to 'jaxskin fit-skin'", path) from None

@@ -29,7 +29,7 @@ def _wide(path, names, wl, R, fmt="{:.4f}"):
 def test_nist_layout_is_read_as_the_subjects_means():
     names, wl, R = formats.read_spectra(NIST)
     assert names[:2] == ["subject_1", "subject_2"] and len(names) == 100
-    want_wl, want = formats._nist_table()  # the renderer's own reader of the same file
+    want_wl, want = formats._spectra.nist_table()  # the renderer's own reader of the same file
     np.testing.assert_array_equal(wl, want_wl)
     np.testing.assert_array_equal(R, want)
 

@@ -671,9 +671,9 @@ def test_a_row_repeated_exactly_is_read_once(tmp_path):
 def test_a_device_or_pipe_is_read_no_further_than_the_limit(monkeypatch):
     """`calibrate /dev/zero` grew to 24 GB and ignored Ctrl-C (a trial): a device or pipe
     reports no size, so the limit is on what is read."""
-    from jaxskin import formats
+    from jaxskin.formats import _text
 
-    monkeypatch.setattr(formats, "MAX_BYTES", 4096)
+    monkeypatch.setattr(_text, "MAX_BYTES", 4096)
     with pytest.raises(InputError, match=r"/dev/zero: larger than the 0 MiB a table may be "
                                          r"\(a device or a pipe\?\)"):
         read_measurement("/dev/zero")
