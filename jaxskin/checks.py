@@ -26,12 +26,12 @@ def check_scene(sc, count: int, overrides=()) -> list:
     materials and images (`maps.read_grey`, the reader the render uses). Returns the
     scene's input files. An error about a key that one of the `-D` `overrides` set names
     that item, not the scene file (which may not mention the key at all)."""
-    from .scene import _parse_override
+    from .scene import parse_override
 
     try:
         return _check_scene(sc, count)
     except InputError as e:
-        keys = [_parse_override(o)[0] for o in overrides]
+        keys = [parse_override(o)[0] for o in overrides]
         if "mesh.file" in keys and str(e.key).startswith("fields.edit"):  # a trial
             raise InputError(f"{e.message} (the scene's [[fields.edit]] were made for its own "
                              "mesh, not the one -D mesh.file gives: write a scene file with "
@@ -310,7 +310,7 @@ def unused_overrides(sc, overrides) -> list[str]:
     of a command, so a key one scene does not use may serve another."""
     import numpy as np
 
-    from .scene import _parse_override, load_scene
+    from .scene import load_scene, parse_override
 
     def same(a, b) -> bool:
         import jax
@@ -322,10 +322,10 @@ def unused_overrides(sc, overrides) -> list[str]:
 
     out = []
     for item in overrides:
-        key, _ = _parse_override(item)
+        key, _ = parse_override(item)
         if key == "name":  # names the outputs only
             continue
-        rest = [o for o in overrides if _parse_override(o)[0] != key]
+        rest = [o for o in overrides if parse_override(o)[0] != key]
         try:
             without = load_scene(sc.source, rest, flag="-D")
         except InputError:
@@ -345,12 +345,12 @@ def read_instead(sc, item: str, overrides=()) -> str | None:
     `skin.melanin=0.3` on the Blinn hand (a trial's first guess; the two sections are the
     two skin models). Found by trying the value under each such key, with the command's
     other `overrides` (`-D material.model=lafortune` reads neither)."""
-    from .scene import _parse_override, load_scene
+    from .scene import load_scene, parse_override
 
-    key, value = _parse_override(item)
+    key, value = parse_override(item)
     leaf = key.rsplit(".", 1)[-1]
     for other in sorted(k for k in sc.values if k != key and k.rsplit(".", 1)[-1] == leaf):
-        rest = [o for o in overrides if _parse_override(o)[0] not in (key, other)]
+        rest = [o for o in overrides if parse_override(o)[0] not in (key, other)]
         trial = f"{other}={value}"
         try:
             changed = load_scene(sc.source, [*rest, trial], flag="-D")

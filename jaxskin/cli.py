@@ -763,7 +763,7 @@ def _name_value(key: str, value: str) -> str:
     `-D k=0.1`, `k=1e-1` and `k=0.10` (one render) name one file (a trial); `512.0` and
     `512` both `512`; a list of numbers as its numbers joined by `_` (`0,60,0` and
     `[0, 60, 0]` alike; a review). Anything else as given."""
-    from .scene import _parse_override
+    from .scene import parse_override as _parse_override
 
     def short(x) -> str:
         text = repr(float(x) + 0.0)  # -0.0 + 0.0 is 0.0: `=-0` named the file `k--0`
@@ -810,7 +810,8 @@ def _render(args, run: _Run) -> int:
     import numpy as np
 
     from . import maps
-    from .scene import BUILTIN_SCENES, _parse_override, load_scene
+    from .scene import BUILTIN_SCENES, load_scene
+    from .scene import parse_override as _parse_override
 
     if args.format == "exr" and not maps.exr_available():
         raise InputError("--format exr needs the OpenEXR bindings: pip install 'jaxskin[exr]'")

@@ -34,7 +34,7 @@ from jaxskin.editor import state as state_module  # noqa: E402
 from jaxskin.editor.server import MAX_BODY, make_app  # noqa: E402
 from jaxskin.editor.state import EditorError, Session  # noqa: E402
 from jaxskin.maps import write_image  # noqa: E402
-from jaxskin.toml_writer import dumps  # noqa: E402
+from jaxskin.scene import dumps  # noqa: E402
 
 SCENE = """\
 # A small face for the editor's tests: one cosmetic layer, furrows, no SSS or shadows.

@@ -75,7 +75,8 @@ def keep_aspect(doc: dict, base: dict) -> None:
     width (the frame keeps its aspect; the arm at size 64 is 64x20, not a 64x320 strip).
     `EditorError` (key `camera.size`) when that height is over its maximum."""
     from ..io import InputError
-    from ..scene import SCHEMA, _kept_aspect
+    from ..scene import SCHEMA
+    from ..scene import kept_aspect as _kept_aspect
 
     camera = base.get("camera")
     camera = camera if isinstance(camera, dict) else {}

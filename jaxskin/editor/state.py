@@ -42,13 +42,13 @@ from ..scene import (
     LayerSpec,
     Scene,
     SceneConfig,
-    _toml_error,
     builtin_scenes,
     check_value,
+    dumps,
     parse_scene,
     toml_text,
 )
-from ..toml_writer import dumps
+from ..scene import toml_error as _toml_error
 from . import brush
 from .document import EditorError, keep_aspect, pair, put, relocate
 
@@ -719,7 +719,7 @@ class Session:
     def query(self) -> list[list[str]]:
         """The changes as `[key, value]` pairs with TOML values, the `-D` syntax (the page's
         URL holds them)."""
-        from ..toml_writer import value_text
+        from ..scene import value_text
 
         painted = [[PAINTED, ",".join(sorted(self.paint))]] if self.paint else []
         return [[k, value_text(v)] for k, v in self.changes.items()] + painted
