@@ -124,13 +124,13 @@ The package's private files:
 
 from __future__ import annotations
 
+from ..texture import EditSpec as EditSpec
+from ..texture import TextureConfig as TextureConfig
 from ._config import PARALLEL_FROM_SIZE_ON_CPU as PARALLEL_FROM_SIZE_ON_CPU
-from ._config import EditSpec as EditSpec
 from ._config import LayerSpec as LayerSpec
 from ._config import Scene as Scene
 from ._config import SceneConfig as SceneConfig
 from ._config import SpectralConfig as SpectralConfig
-from ._config import TextureConfig as TextureConfig
 from ._config import furrow_method as furrow_method
 from ._config import param_keys as param_keys
 from ._config import planar_side as planar_side

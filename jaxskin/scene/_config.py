@@ -11,6 +11,7 @@ import jax
 import jax.numpy as jnp
 
 from ..spectral import Grid
+from ..texture import EditSpec, TextureConfig
 from ._schema import (
     BIOPHYSICAL_KEYS,
     LAYER_SCHEMA,
@@ -20,17 +21,6 @@ from ._schema import (
     SKIN_MAPS_READ,
     SPECTRAL_MODELS,
 )
-
-
-@dataclasses.dataclass(frozen=True)
-class EditSpec:
-    """A field edit as written: at a point (nearest vertex) or a vertex index."""
-
-    at: tuple[float, float, float] | None
-    vertex: int | None
-    d1: tuple[float, float, float]
-    d2: tuple[float, float, float]
-    weight: float
 
 
 def planar_side(projection: str, rotate) -> str:
@@ -44,22 +34,6 @@ def planar_side(projection: str, rotate) -> str:
         return projection
     ax, ay = (math.radians(float(a)) for a in tuple(rotate)[:2])
     return "planar-back" if math.cos(ax) * math.cos(ay) < 0 else "planar"
-
-
-@dataclasses.dataclass(frozen=True)
-class TextureConfig:
-    """What the texture-space maps depend on (the furrows are cached per one of these)."""
-
-    mesh: str
-    projection: str
-    size: int
-    wrinkles: bool
-    k_scale: float
-    seed: int
-    edits: tuple[EditSpec, ...]
-    # The furrow program: "sequential" (wrinkles.height_field) or "parallel"
-    # (lockstep.height_field); the scene's "auto" is resolved by `furrow_method`.
-    method: str = "sequential"
 
 
 @dataclasses.dataclass(frozen=True)

@@ -8,7 +8,8 @@ from pathlib import Path
 
 from .. import cosmetics
 from ..io import InputError
-from ._config import EditSpec, LayerSpec
+from ..texture import EditSpec
+from ._config import LayerSpec
 from ._overrides import check_value, number, numbers, vector
 from ._schema import EDIT_KEYS, ELLIPSE_KEYS, LAYER_KEYS, LAYER_SCHEMA, POLYGON_KEYS
 
