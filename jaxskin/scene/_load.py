@@ -118,14 +118,43 @@ def parse_scene(doc: dict, path, overrides=(), allow=None, *, flag: str = "overr
     the editor confines a scene from the page to its folders so, and no error then tells
     whether a file outside them exists. `flag`: as in `load_scene`."""
     path = Path(path)
-    given = overrides
+    overrides = _override_items(overrides)
+    allow = allow or (lambda key, file: None)
+    doc, edits_raw, layers_raw = _split_tables(doc, path)
+    values = {k: spec.default for k, spec in SCHEMA.items()}
+    layers = _layers(layers_raw, path, values, material_overrides(overrides, flag), allow)
+    names = [layer.name for layer in layers]
+    flat = _flatten(doc, path)
+    for k, v in flat.items():
+        values[k] = check_value(k, v, path)
+    from_command_line = _apply_overrides(values, overrides, flag, path, names)
+    if "camera.size" in from_command_line and "camera.height" not in from_command_line:
+        values["camera.height"] = kept_aspect(values, flat.get("camera.size",
+                                                               SCHEMA["camera.size"].default),
+                                              from_command_line["camera.size"])
+    _check_models(values, layers, path, "skin.model" in flat, from_command_line)
+    if values["name"] is None:
+        values["name"] = path.stem
+    _resolve_files(values, path, from_command_line, allow)
+    edits = tuple(parse_edit(i, e, path) for i, e in enumerate(edits_raw))
+    return Scene(values["name"], str(path), values, edits, layers)
+
+
+def _override_items(given) -> list[str]:
+    """The `-D` overrides as a list of `"key=value"` strings (any iterable of them);
+    `TypeError` for anything else."""
     text = isinstance(given, (str, bytes, dict))
     overrides = [] if text else list(given)
     if (text and given) or not all(isinstance(item, str) for item in overrides):
         # a string was read character by character ("expected key=value, got 't'")
         raise TypeError(f"overrides: expected a list of 'key=value' strings, got "
                         f"{type(given).__name__} {given!r:.60}")
-    allow = allow or (lambda key, file: None)
+    return overrides
+
+
+def _split_tables(doc: dict, path: Path) -> tuple[dict, list, list]:
+    """`(a copy of doc without them, the [[fields.edit]] tables, the [[layer]] tables)`;
+    `InputError` when either is not an array of tables."""
     doc = copy.deepcopy(doc)
     edits_raw = doc.get("fields", {}).pop("edit", []) if isinstance(doc.get("fields"), dict) \
         else []
@@ -136,8 +165,12 @@ def parse_scene(doc: dict, path, overrides=(), allow=None, *, flag: str = "overr
     layers_raw = doc.pop("layer", [])
     if not isinstance(layers_raw, list):
         raise InputError("expected [[layer]] tables (an array of tables)", path, key="layer")
-    values = {k: spec.default for k, spec in SCHEMA.items()}
-    materials = material_overrides(overrides, flag)
+    return doc, edits_raw, layers_raw
+
+
+def _layers(layers_raw: list, path: Path, values: dict, materials: dict, allow) -> tuple:
+    """The `LayerSpec`s of the [[layer]] tables (`parse_layer`; their values go into
+    `values`); `InputError` when two share a name."""
     layers = tuple(parse_layer(i, e, path, values, materials, allow)
                    for i, e in enumerate(layers_raw))
     names = [layer.name for layer in layers]
@@ -145,10 +178,14 @@ def parse_scene(doc: dict, path, overrides=(), allow=None, *, flag: str = "overr
         if names.count(name) > 1:
             raise InputError(f"two layers are named {name!r}; names must differ", path,
                              key="layer.name")
-    flat = _flatten(doc, path)
-    for k, v in flat.items():
-        values[k] = check_value(k, v, path)
-    from_command_line = {}  # key → the override that set it last, as errors name it
+    return layers
+
+
+def _apply_overrides(values: dict, overrides: list, flag: str, path: Path, names) -> dict:
+    """The `-D` `overrides` checked and set in `values` (a layer's material aside: that is
+    `parse_layer`'s); `names`: the scene's layers. Returns `{key: the item that set it
+    last}`, as errors name it."""
+    from_command_line = {}
     for item in overrides:
         k, v = parse_override(item, flag)
         parts = k.split(".")
@@ -163,15 +200,19 @@ def parse_scene(doc: dict, path, overrides=(), allow=None, *, flag: str = "overr
                 continue  # a layer's material: taken by parse_layer
         values[k] = check_value(k, v, f"{flag} {item}", names)
         from_command_line[k] = f"{flag} {item}"
-    if "camera.size" in from_command_line and "camera.height" not in from_command_line:
-        values["camera.height"] = kept_aspect(values, flat.get("camera.size",
-                                                               SCHEMA["camera.size"].default),
-                                              from_command_line["camera.size"])
+    return from_command_line
+
+
+def _check_models(values: dict, layers: tuple, path: Path, skin_in_file: bool,
+                  from_command_line: dict) -> None:
+    """`InputError` for a material model that cannot hold with the rest: cosmetic layers
+    without a spectral model, or a biophysical material with `skin.model = "nist"` given
+    (in the file, `skin_in_file`, or with -D)."""
     if layers and values["material.model"] not in SPECTRAL_MODELS:
         raise InputError("cosmetic layers need material.model = \"spectral\" or "
                          "\"biophysical\" (the Huang et al. model); this scene's is "
                          f"{values['material.model']!r}", path, key="layer")
-    given_skin = from_command_line.get("skin.model", path if "skin.model" in flat else None)
+    given_skin = from_command_line.get("skin.model", path if skin_in_file else None)
     if (values["material.model"] == "biophysical" and values["skin.model"] == "nist"
             and given_skin is not None):
         # material.model = "biophysical" means a biophysical skin: an explicit nist skin
@@ -180,14 +221,17 @@ def parse_scene(doc: dict, path, overrides=(), allow=None, *, flag: str = "overr
                          "skin.model = \"nist\" cannot hold; for the measured skin use "
                          "material.model = \"spectral\"", given_skin, key="skin.model")
 
+
+def _resolve_files(values: dict, path: Path, from_command_line: dict, allow) -> None:
+    """The files `values` names (a mesh that is not a built-in one, a BRDF file, the skin
+    maps' images) made absolute in place, each passed to `allow` and checked to exist."""
+
     def base(key):  # a path in the file is relative to it; one given with -D, to the cwd
         return Path.cwd() if key in from_command_line else path.parent
 
     def source(key):  # where a value came from, for its error: the file or the -D item
         return from_command_line.get(key, path)
 
-    if values["name"] is None:
-        values["name"] = path.stem
     mesh = values["mesh.file"]
     if mesh not in BUILTIN_MESHES:
         if not Path(mesh).is_absolute():
@@ -220,8 +264,6 @@ def parse_scene(doc: dict, path, overrides=(), allow=None, *, flag: str = "overr
             raise InputError(f"{what}: {image_path} (expected a greyscale image file)",
                              source(image_key), key=image_key)
         values[image_key] = str(image_path)
-    edits = tuple(parse_edit(i, e, path) for i, e in enumerate(edits_raw))
-    return Scene(values["name"], str(path), values, edits, layers)
 
 
 def kept_aspect(values: dict, file_size: int, origin: str) -> int:

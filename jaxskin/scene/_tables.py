@@ -44,6 +44,25 @@ def parse_layer(i, e, path, values, materials=None, allow=lambda key, file: None
     """One [[layer]] table: its static spec; its parameters go into `values`. `materials`:
     `material_overrides`, which replace the table's material (a path taken from the
     working directory, as any path given with -D)."""
+    name = _layer_name(i, e, path)
+    where = f"layer.{name}"
+    for k, spec in LAYER_SCHEMA.items():
+        values[f"{where}.{k}"] = check_value(f"{where}.{k}", e.get(k, spec.default), path, (name,))
+    material, source, base = e.get("material"), path, path.parent
+    if name in (materials or {}):
+        (material, source), base = materials[name], Path.cwd()
+    material = _material_file(material, source, base, where, allow)
+    image = _layer_image(e.get("image"), path, where, allow)
+    ellipses = _ellipses(e.get("ellipse", []), path, where)
+    polygons = _polygons(e.get("polygon", []), path, where)
+    if image is not None and (ellipses or polygons):
+        raise InputError("give an image or regions (ellipse, polygon), not both", path,
+                         key=where)
+    return LayerSpec(name, material, image, tuple(ellipses), tuple(polygons))
+
+
+def _layer_name(i, e, path) -> str:
+    """The name of the `i`th [[layer]] table `e`, once the table and its keys are checked."""
     where = f"layer[{i}]"
     if not isinstance(e, dict):
         raise InputError("expected a table with name, material, thickness_mm, ...", path,
@@ -54,12 +73,13 @@ def parse_layer(i, e, path, values, materials=None, allow=lambda key, file: None
         got = "none (add name = \"...\")" if name is None else repr(name)
         raise InputError(f"expected a name (letters, digits, _), got {got}", path,
                          key=f"{where}.name")
-    where = f"layer.{name}"
-    for k, spec in LAYER_SCHEMA.items():
-        values[f"{where}.{k}"] = check_value(f"{where}.{k}", e.get(k, spec.default), path, (name,))
-    material, source, base = e.get("material"), path, path.parent
-    if name in (materials or {}):
-        (material, source), base = materials[name], Path.cwd()
+    return name
+
+
+def _material_file(material, source, base: Path, where: str, allow) -> str:
+    """A layer's `material` (a shipped one's name, or a JSON file taken from `base`) as the
+    absolute path of a readable material file that covers the render grid; errors name
+    `source` (the scene file or the -D item)."""
     if not isinstance(material, str) or not material:
         raise InputError("expected a material: a shipped one's name or a JSON file written "
                          "by jaxskin calibrate", source, key=f"{where}.material")
@@ -75,20 +95,29 @@ def parse_layer(i, e, path, values, materials=None, allow=lambda key, file: None
         raise InputError(f"no material file {file} ({hint}shipped materials: "
                          f"{', '.join(shipped)})", source, key=f"{where}.material")
     cosmetics.check_material(file)  # readable and covering the render grid, before any work
-    material = str(file)
-    image = e.get("image")
-    if image is not None:
-        if not isinstance(image, str):
-            raise InputError(f"expected a greyscale image file, got {image!r}", path,
-                             key=f"{where}.image")
-        allow(f"{where}.image", (path.parent / image).resolve())
-        if not (path.parent / image).is_file():
-            raise InputError(f"no such file {(path.parent / image).resolve()} (expected a "
-                             "greyscale image file, taken from the scene file's folder)", path,
-                             key=f"{where}.image")
-        image = str((path.parent / image).resolve())
-    ellipses, polygons = [], []
-    for j, r in enumerate(_tables(e.get("ellipse", []), path, f"{where}.ellipse")):
+    return str(file)
+
+
+def _layer_image(image, path, where: str, allow) -> str | None:
+    """A layer's greyscale `image` (taken from the scene file's folder) as an absolute path,
+    or None."""
+    if image is None:
+        return None
+    if not isinstance(image, str):
+        raise InputError(f"expected a greyscale image file, got {image!r}", path,
+                         key=f"{where}.image")
+    allow(f"{where}.image", (path.parent / image).resolve())
+    if not (path.parent / image).is_file():
+        raise InputError(f"no such file {(path.parent / image).resolve()} (expected a "
+                         "greyscale image file, taken from the scene file's folder)", path,
+                         key=f"{where}.image")
+    return str((path.parent / image).resolve())
+
+
+def _ellipses(tables, path, where: str) -> list:
+    """A layer's [[layer.ellipse]] `tables` as `(center, radii, angle, feather)` tuples."""
+    ellipses = []
+    for j, r in enumerate(_tables(tables, path, f"{where}.ellipse")):
         w = f"{where}.ellipse[{j}]"
         _known(r, ELLIPSE_KEYS, path, w)
         center = numbers(r.get("center"), 2, path, f"{w}.center")
@@ -99,7 +128,14 @@ def parse_layer(i, e, path, values, materials=None, allow=lambda key, file: None
                      (center[0] + reach, center[1] + reach)], path, w)
         ellipses.append((center, radii, number(r.get("angle", 0.0), path, f"{w}.angle"),
                          feather))
-    for j, r in enumerate(_tables(e.get("polygon", []), path, f"{where}.polygon")):
+    return ellipses
+
+
+def _polygons(tables, path, where: str) -> list:
+    """A layer's [[layer.polygon]] `tables` as `(points, vertices, feather)` tuples, one of
+    points (uv) or vertices (mesh indices) set."""
+    polygons = []
+    for j, r in enumerate(_tables(tables, path, f"{where}.polygon")):
         w = f"{where}.polygon[{j}]"
         _known(r, POLYGON_KEYS, path, w)
         if ("points" in r) == ("vertices" in r):
@@ -125,10 +161,7 @@ def parse_layer(i, e, path, values, materials=None, allow=lambda key, file: None
             vertices = tuple(vs)
         polygons.append((points, vertices,
                          number(r.get("feather", 0.0), path, f"{w}.feather", lo=0.0)))
-    if image is not None and (ellipses or polygons):
-        raise InputError("give an image or regions (ellipse, polygon), not both", path,
-                         key=where)
-    return LayerSpec(name, material, image, tuple(ellipses), tuple(polygons))
+    return polygons
 
 
 def _on_texture(box, path, where) -> None:
