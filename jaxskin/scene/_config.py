@@ -27,7 +27,7 @@ def planar_side(projection: str, rotate) -> str:
     """The texture's projection for a scene's `mesh.projection` and `camera.rotate`: a
     planar map whose camera sees the side facing −z (the hand turned round) gives that
     side the texels the two sides share ("planar-back"), so that the side in view is
-    shaded with its own normals (it was the +z side's: a flat, unlit silhouette; a trial).
+    shaded with its own normals (with the +z side's it would be a flat, unlit silhouette).
     The camera looks down −z at the mesh turned by `view.rotation(rotate)` (x, then y, then
     z): the mesh's direction toward it has z = cos(x) cos(y)."""
     if projection != "planar":
@@ -104,18 +104,16 @@ class SceneConfig:
 
 # The texture size from which "auto" picks the parallel furrow program on a CPU: where it
 # is as quick from a cold start (trace, compile, first run: what a one-off render pays) as
-# the sequential one. Measured on the hand, 2 cores (benchmarks/RESULTS.md, "Parallel furrow
-# program"), the furrow program alone, cold, sequential / parallel: 2.4 / 3.3–3.4 s at
-# 512², 2.6–3.0 / 3.6–3.9 s at 1024², 4.0–4.3 / 3.4–4.6 s at 2048², 10.4 / 8.1 s at 4096²;
-# warm the parallel one is 1.9–4.5x quicker (512² to 2048², three runs; on 2026-12-04, an
-# Intel VM, cold 1.5 / 2.2 s at 512², 2.4 / 2.3 s at 1536², 3.2 / 2.5 s at 2048²).
+# the sequential one; below it the sequential one is quicker cold, while warm the parallel
+# one is quicker at every size (the measurements: benchmarks/RESULTS.md, "Parallel furrow
+# program").
 PARALLEL_FROM_SIZE_ON_CPU = 2048
 
 
 def furrow_method(method: str, size: int = 512) -> str:
     """`wrinkles.method` resolved for a `size`² texture: "auto" is the parallel program on
-    a GPU or TPU (on an H200 8.4 ms at 512² and 12.2 ms at 2048², where the sequential one
-    took 0.72 s and 8.9 s, slower than on a CPU),
+    a GPU or TPU (there it is milliseconds where the sequential one takes about a second or
+    more, slower than on a CPU: benchmarks/RESULTS.md),
     and on a CPU the one that is quicker there from a cold start: the sequential one below
     `PARALLEL_FROM_SIZE_ON_CPU` (so the built-in scenes, all 512², keep the look their golden
     images pin), the parallel one from it."""
@@ -160,8 +158,8 @@ class Scene:
         # (its jit key) does not change with it, and `-D material.brdf=...` on a Blinn
         # scene is reported as changing nothing (`checks.unused_overrides`).
         brdf = v["material.brdf"] if v["material.model"] == "lafortune" else "skin"
-        # Likewise the field of view only where a perspective camera has one (-D camera.fov
-        # on an orthographic scene was the same image without a word, a trial).
+        # Likewise the field of view only where a perspective camera has one, so that
+        # -D camera.fov on an orthographic scene is reported as changing nothing.
         fov = (v["camera.fov"] if v["camera.projection"] == "perspective"
                else SCHEMA["camera.fov"].default)
         return SceneConfig(tex, v["material.model"], brdf, v["camera.projection"],
@@ -185,7 +183,7 @@ class Scene:
         model = self.values["material.model"]
         keys = param_keys(model, self.skin_model, [layer.name for layer in self.layers])
         # Concrete arrays even when first read inside a jit: there jnp.asarray of a list is
-        # a tracer, which this cache kept, and the next call failed (UnexpectedTracerError)
+        # a tracer, which this cache would keep for the next call (UnexpectedTracerError)
         with jax.ensure_compile_time_eval():
             out = {k: jnp.asarray(self.values[k], jnp.float32) for k in keys
                    if k != "material.lafortune"}

@@ -45,7 +45,7 @@ def load_scene(name_or_path, overrides=(), *, flag: str = "override") -> Scene:
     if path.is_dir():
         raise InputError("is a folder; expected a TOML scene file or a built-in scene "
                          f"({', '.join(BUILTIN_SCENES)})", path)
-    if not path.is_file():  # named as given: `./hand` was shown as `hand` (a trial)
+    if not path.is_file():  # named as given (`./hand`, not `hand`: the file looked for)
         hint = f"built-in scenes: {', '.join(BUILTIN_SCENES)}"
         if Path(key).name in BUILTIN_SCENES and key not in BUILTIN_SCENES:
             hint = f"the built-in scene is '{Path(key).name}', without the folder"
@@ -69,8 +69,8 @@ def load_scene(name_or_path, overrides=(), *, flag: str = "override") -> Scene:
 
 def _other_file(raw: bytes, path) -> str | None:
     """What a file given as a scene that is not TOML is, when it is one of the project's
-    other files (a material JSON, a measurement CSV): render once said only "not valid
-    TOML" of a material that calibrate wrote (a trial)."""
+    other files (a material JSON, a measurement CSV), so that the error says what the
+    file is and where it belongs rather than only "not valid TOML"."""
     head = raw[:4096].decode("utf-8-sig", "replace").lstrip()
     if path.suffix.lower() == ".json" or head.startswith("{"):
         return ("a JSON file, not a TOML scene file: a calibrated material (what calibrate "
@@ -88,7 +88,7 @@ def _other_file(raw: bytes, path) -> str | None:
 
 def toml_error(e, path) -> InputError:
     """tomllib's error as `file:line: not valid TOML: what (column C)`: the line in the
-    place every other error puts it (it said "… (at line 2, column 6)" at the end)."""
+    place every other error puts it (tomllib puts "… (at line 2, column 6)" at the end)."""
     message = str(e.args[0]) if e.args else str(e)
     m = re.search(r"\s*\(at line (\d+), column (\d+)\)$", message)
     if m is None:
@@ -216,7 +216,7 @@ def _check_models(values: dict, layers: tuple, path: Path, skin_in_file: bool,
     if (values["material.model"] == "biophysical" and values["skin.model"] == "nist"
             and given_skin is not None):
         # material.model = "biophysical" means a biophysical skin: an explicit nist skin
-        # beside it was silently ignored (a newcomer's trial)
+        # beside it would be ignored in silence
         raise InputError("material.model = \"biophysical\" renders the biophysical skin, so "
                          "skin.model = \"nist\" cannot hold; for the measured skin use "
                          "material.model = \"spectral\"", given_skin, key="skin.model")
@@ -237,7 +237,7 @@ def _resolve_files(values: dict, path: Path, from_command_line: dict, allow) -> 
         if not Path(mesh).is_absolute():
             values["mesh.file"] = str((base("mesh.file") / mesh).resolve())
         allow("mesh.file", Path(values["mesh.file"]).resolve())
-        if not Path(values["mesh.file"]).is_file():  # named with the file and key (a trial)
+        if not Path(values["mesh.file"]).is_file():  # named with the file and key
             raise InputError(f"expected a built-in mesh ({', '.join(BUILTIN_MESHES)}) or a mesh "
                              f"file; no file {values['mesh.file']}", source("mesh.file"),
                              key="mesh.file")

@@ -17,20 +17,22 @@ _POINT_ALONE = re.compile(r"(?:(?<=^)|(?<=[\s,\[+-]))(\.)(?=\d)|(?<=\d)(\.)(?![\
 
 
 def parse_override(item: str, flag: str = "-D"):
+    """`(key, value)` of a `"key=value"` item, the value read as TOML (a bare word as a
+    string); `InputError` naming `flag` without an `=`. Not checked against the schema."""
     if "=" not in item:
         raise InputError(f"expected {flag} key=value, got {item!r}")
     key, text = (s.strip() for s in item.split("=", 1))
     spec = SCHEMA.get(key)
     numeric = (spec.kind in (float, int, "vec2", "vec3") if spec is not None else
                key.startswith("layer.") and key.rsplit(".", 1)[-1] in LAYER_SCHEMA)
-    if numeric:  # .5 and 5. as 0.5 and 5.0 (TOML wants digits on both sides of the point:
-        text = _POINT_ALONE.sub(lambda m: "0." if m[1] else ".0", text)  # a trial's .5)
+    if numeric:  # .5 and 5. as 0.5 and 5.0 (TOML wants digits on both sides of the point)
+        text = _POINT_ALONE.sub(lambda m: "0." if m[1] else ".0", text)
     try:
         value = tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
         value = text  # a bare word: a string
         if spec is not None and spec.kind in ("vec2", "vec3"):  # numbers with commas, as
-            try:  # typed without brackets (camera.rotate=0,60,0 was a string; a trial); a
+            try:  # typed without brackets (camera.rotate=0,60,0, not a string); a
                 items = tomllib.loads(f"v = [{text}]")["v"]  # scalar's 0,5 stays '0,5'
             except tomllib.TOMLDecodeError:
                 items = []
@@ -66,7 +68,7 @@ def check_value(key: str, value, where, layers=()):
         if spec is None:
             raise InputError("a layer's value to set must be one of "
                              f"{', '.join([*LAYER_SCHEMA, 'material'])}", where, key=key)
-    if key in ("fields.edit", "layer"):  # "unknown key; did you mean 'fields.edit'?" before
+    if key in ("fields.edit", "layer"):  # known tables, not "unknown key; did you mean ..."
         table = "[[fields.edit]]" if key == "fields.edit" else "[[layer]]"
         raise InputError(f"{table} tables are written in a scene file; they cannot be set as "
                          "one value", where, key=key)
@@ -118,6 +120,8 @@ def finite_list(value, n: int, positive: bool = False) -> bool:
 
 
 def vector(value, key, path, limit=None, n=3):
+    """`value` as a tuple of `n` floats (a vector), with a magnitude of at most `limit`
+    if given; `InputError` naming `path` and `key` otherwise."""
     if not finite_list(value, n):
         raise InputError(f"expected {('two', 'three')[n - 2]} finite numbers "
                          f"({('[x, y]', '[x, y, z]')[n - 2]}), got {value!r}", path, key=key)
@@ -135,6 +139,7 @@ def comma_hint(value) -> str:
 
 
 def number(value, path, where, lo=None):
+    """`value` as a finite float (at least `lo` if given); `InputError` otherwise."""
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(
             value) or (lo is not None and value < lo):
         bound = f" >= {lo:g}" if lo is not None else ""
@@ -144,6 +149,8 @@ def number(value, path, where, lo=None):
 
 
 def numbers(value, n, path, where, positive=False):
+    """`value` as a tuple of `n` finite floats (each > 0 if `positive`); `InputError`
+    otherwise."""
     if not finite_list(value, n, positive):
         raise InputError(f"expected {n} finite{' positive' if positive else ''} numbers, got "
                          f"{value!r}", path, key=where)

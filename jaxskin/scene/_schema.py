@@ -12,6 +12,9 @@ from ..spectral import ILLUMINANTS, STEPS
 
 @dataclasses.dataclass(frozen=True)
 class Key:
+    """A scene key: its type (`kind`: a Python type, or "vec2"/"vec3"), default, range
+    (`lo`, `hi`) or `choices`, and whether it is differentiable."""
+
     kind: type
     default: Any
     lo: float | None = None

@@ -15,6 +15,7 @@ from ._schema import EDIT_KEYS, ELLIPSE_KEYS, LAYER_KEYS, LAYER_SCHEMA, POLYGON_
 
 
 def parse_edit(i, e, path) -> EditSpec:
+    """The `i`th [[fields.edit]] table `e`, checked, as an `EditSpec`."""
     where = f"fields.edit[{i}]"
     if not isinstance(e, dict):
         raise InputError("expected a table with at (or vertex), d1, d2, weight", path, key=where)
@@ -85,7 +86,7 @@ def _material_file(material, source, base: Path, where: str, allow) -> str:
                          "by jaxskin calibrate", source, key=f"{where}.material")
     file = cosmetics.material_path(material, base)
     allow(f"{where}.material", file.resolve())
-    if file.exists() and not file.is_file():  # /dev/zero said "no material file" (a trial)
+    if file.exists() and not file.is_file():  # /dev/zero: not "no material file"
         raise InputError(f"not a regular file: {file} (expected a material JSON written by "
                          "jaxskin calibrate)", source, key=f"{where}.material")
     if not file.is_file():
