@@ -933,8 +933,7 @@ def run_command(args, run) -> int:
     from jaxskin import cli, maps
     from jaxskin.checks import check_scene, reading
     from jaxskin.outputs import Outputs, check_name
-    from jaxskin.scene import load_scene
-    from jaxskin.scene_writer import scene_toml
+    from jaxskin.scene import load_scene, scene_toml
 
     outputs = Outputs(args.output)
     with reading(args.scene):

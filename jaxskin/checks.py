@@ -26,13 +26,13 @@ def check_scene(sc, count: int, overrides=()) -> list:
     materials and images (`maps.read_grey`, the reader the render uses). Returns the
     scene's input files. An error about a key that one of the `-D` `overrides` set names
     that item, not the scene file (which may not mention the key at all)."""
-    from .scene import _parse_override
+    from .scene import parse_override
 
     try:
         return _check_scene(sc, count)
     except InputError as e:
-        keys = [_parse_override(o)[0] for o in overrides]
-        if "mesh.file" in keys and str(e.key).startswith("fields.edit"):  # a trial
+        keys = [parse_override(o)[0] for o in overrides]
+        if "mesh.file" in keys and str(e.key).startswith("fields.edit"):
             raise InputError(f"{e.message} (the scene's [[fields.edit]] were made for its own "
                              "mesh, not the one -D mesh.file gives: write a scene file with "
                              "edits for that mesh, or none)", e.path, e.line, e.column,
@@ -92,7 +92,7 @@ def _check_scene(sc, count: int) -> list:
             inputs.append(image)
             _square(maps.read_grey(image, key=image_key), image, image_key)
         elif sc.values.get(image_key):  # set, but this model reads no such map (`idle_maps`)
-            inputs.append(sc.values[image_key])  # still never overwritten (a trial)
+            inputs.append(sc.values[image_key])  # still an input: never overwritten
     for layer in sp.layers if sp is not None else ():
         inputs.append(layer.material)
         with reading(layer.material):
@@ -158,7 +158,7 @@ _SAID_STRETCHED: set[str] = set()
 
 def _square(grey, path, key) -> None:
     """Warn (once a file) when a texture-space map is not square: it is stretched over the
-    square texture, its aspect ratio lost (a 300x200 map was, in silence; a trial)."""
+    square texture, its aspect ratio lost, which nothing else would say."""
     h, w = grey.shape
     if abs(w - h) > 0.01 * max(w, h) and str(path) not in _SAID_STRETCHED:
         import warnings
@@ -172,7 +172,7 @@ def _square(grey, path, key) -> None:
 def thick_layers(sc) -> list[str]:
     """Warnings for cosmetic layers of scene `sc` thicker than `THICK_LAYER_MM`: 10 meant as
     10 µm is accepted (the key allows up to 10 mm) and renders an opaque mask of the
-    product's colour (a trial)."""
+    product's colour."""
     out = []
     for layer in sc.layers:
         key = f"layer.{layer.name}.thickness_mm"
@@ -193,7 +193,7 @@ EDIT_FAR, EDIT_ALONG_NORMAL = 0.25, 0.2
 def _check_edits(sc, config) -> None:
     """Field edits that cannot mean what they say: `at` far from the mesh (it snapped to
     whatever vertex was nearest), a direction along the surface normal (the furrows took
-    an arbitrary direction); both were accepted in silence (a trial)."""
+    an arbitrary direction), which would otherwise be accepted in silence."""
     import numpy as np
 
     from . import texture
@@ -274,9 +274,9 @@ def hidden_side(sc) -> list[str]:
     - much of the side of a planar map that does not own its texels
       (`view.hidden_side_share`): a view from the side (the foot turned 70°), where the
       texels the two sides share go to the side the camera faces more, and the rest shows
-      them lit wrongly (the hand turned 180° was once all such: `scene.planar_side`);
-    - mostly the inside of an open mesh (the face from behind), which is drawn black: the
-      picture was black and the warning after it said the mesh was not in view (a trial)."""
+      them lit wrongly (a side the camera faces fully gets its own: `scene.planar_side`);
+    - mostly the inside of an open mesh (the face from behind), which is drawn black: a
+      black picture needs this reason, not a warning that the mesh is not in view."""
     from .view import hidden_side_share
 
     config = sc.config
@@ -310,7 +310,7 @@ def unused_overrides(sc, overrides) -> list[str]:
     of a command, so a key one scene does not use may serve another."""
     import numpy as np
 
-    from .scene import _parse_override, load_scene
+    from .scene import load_scene, parse_override
 
     def same(a, b) -> bool:
         import jax
@@ -322,10 +322,10 @@ def unused_overrides(sc, overrides) -> list[str]:
 
     out = []
     for item in overrides:
-        key, _ = _parse_override(item)
+        key, _ = parse_override(item)
         if key == "name":  # names the outputs only
             continue
-        rest = [o for o in overrides if _parse_override(o)[0] != key]
+        rest = [o for o in overrides if parse_override(o)[0] != key]
         try:
             without = load_scene(sc.source, rest, flag="-D")
         except InputError:
@@ -333,7 +333,7 @@ def unused_overrides(sc, overrides) -> list[str]:
         if without.values.get(key) == sc.values.get(key):
             continue  # the scene's own value: nothing asked to change
         if without.values.get(key) == "auto":  # the choice "auto" makes here: it is used
-            continue  # (wrinkles.method=sequential on a CPU was "not used", a trial)
+            continue  # (wrinkles.method=sequential on a CPU is not "not used")
         if without.config == sc.config and same(without.params, sc.params):
             out.append(item)
     return out
@@ -342,15 +342,15 @@ def unused_overrides(sc, overrides) -> list[str]:
 def read_instead(sc, item: str, overrides=()) -> str | None:
     """For a `-D` item that changes nothing in scene `sc` (`unused_overrides`), a key of the
     same last name that the scene does read, or `None`: `material.melanin` for
-    `skin.melanin=0.3` on the Blinn hand (a trial's first guess; the two sections are the
-    two skin models). Found by trying the value under each such key, with the command's
-    other `overrides` (`-D material.model=lafortune` reads neither)."""
-    from .scene import _parse_override, load_scene
+    `skin.melanin=0.3` on the Blinn hand (the two sections are the two skin models). Found
+    by trying the value under each such key, with the command's other `overrides`
+    (`-D material.model=lafortune` reads neither)."""
+    from .scene import load_scene, parse_override
 
-    key, value = _parse_override(item)
+    key, value = parse_override(item)
     leaf = key.rsplit(".", 1)[-1]
     for other in sorted(k for k in sc.values if k != key and k.rsplit(".", 1)[-1] == leaf):
-        rest = [o for o in overrides if _parse_override(o)[0] not in (key, other)]
+        rest = [o for o in overrides if parse_override(o)[0] not in (key, other)]
         trial = f"{other}={value}"
         try:
             changed = load_scene(sc.source, [*rest, trial], flag="-D")

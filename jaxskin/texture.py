@@ -21,9 +21,37 @@ from .io import InputError
 from .mesh import Mesh, load_mesh
 from .projection import TextureMap, project
 from .raster import interpolate
-from .scene import SceneConfig, TextureConfig
 
-__all__ = ["TextureSetup", "furrows", "mapped", "setup", "texture_maps"]
+__all__ = ["EditSpec", "TextureConfig", "TextureSetup", "furrows", "mapped", "setup",
+           "texture_maps"]
+
+
+@dataclasses.dataclass(frozen=True)
+class EditSpec:
+    """A field edit as written: at a point (nearest vertex) or a vertex index."""
+
+    at: tuple[float, float, float] | None
+    vertex: int | None
+    d1: tuple[float, float, float]
+    d2: tuple[float, float, float]
+    weight: float
+
+
+@dataclasses.dataclass(frozen=True)
+class TextureConfig:
+    """What the texture-space maps depend on (the furrows are cached per one of these); a
+    scene builds it from its `mesh`, `texture` and `wrinkles` keys (`SceneConfig.texture`)."""
+
+    mesh: str
+    projection: str
+    size: int
+    wrinkles: bool
+    k_scale: float
+    seed: int
+    edits: tuple[EditSpec, ...]
+    # The furrow program: "sequential" (wrinkles.height_field) or "parallel"
+    # (lockstep.height_field); the scene's "auto" is resolved by `scene.furrow_method`.
+    method: str = "sequential"
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -128,8 +156,9 @@ def furrows(config: TextureConfig):
             wrap=s.tmap.wrap_x)
 
 
-def texture_maps(config: SceneConfig, params: dict) -> dict:
-    """`height (H, W)` and `normals (H, W, 3)` for a scene; differentiable in `params`.
+def texture_maps(config, params: dict) -> dict:
+    """`height (H, W)` and `normals (H, W, 3)` for a scene's static `config` (a
+    `scene.SceneConfig`: its `texture` and `needs_furrows`); differentiable in `params`.
     A scene that does not show wrinkles (disabled, or the overview mode) runs no furrows."""
     tex = config.texture
     s = setup(tex)

@@ -55,7 +55,7 @@ def test_every_scene_key_is_described_in_the_generated_page():
 def test_a_new_scene_key_without_a_description_is_found(monkeypatch):
     from jaxskin import scene
 
-    monkeypatch.setitem(scene.SCHEMA, "wrinkles.made_up", scene._Key(float, 0.5, 0, 1))
+    monkeypatch.setitem(scene.SCHEMA, "wrinkles.made_up", scene.Key(float, 0.5, 0, 1))
     text, undescribed = reference.scene_page()
     assert undescribed == ["wrinkles.made_up"] and "| `wrinkles.made_up` |" in text
 

@@ -32,7 +32,7 @@ from jaxskin import (  # noqa: E402
 )
 from jaxskin.editor import MAX_BODY, EditorError, Session, _changes, make_app  # noqa: E402
 from jaxskin.maps import write_image  # noqa: E402
-from jaxskin.toml_writer import dumps  # noqa: E402
+from jaxskin.scene import dumps  # noqa: E402
 
 SCENE = """\
 # A small face for the editor's tests: one cosmetic layer, furrows, no SSS or shadows.

@@ -15,8 +15,7 @@ from conftest import check_grads_scaled
 from jaxskin import maps, render
 from jaxskin.cli import main
 from jaxskin.fitting import image as fi
-from jaxskin.scene import BUILTIN_SCENES, load_scene
-from jaxskin.scene_writer import scene_toml
+from jaxskin.scene import BUILTIN_SCENES, load_scene, scene_toml
 
 FACE = ["texture.size=24", "camera.size=32", "camera.supersample=1", "wrinkles.enabled=false",
         "light.shadows=false"]

@@ -530,15 +530,15 @@ def test_a_list_given_to_D_without_brackets_is_the_list():
     commas are the list; words with commas stay a string, a vector key's message shows the
     form."""
     from jaxskin.io import InputError
-    from jaxskin.scene import _parse_override, load_scene
+    from jaxskin.scene import load_scene, parse_override
 
-    assert _parse_override("camera.rotate=0,60,0") == ("camera.rotate", [0, 60, 0])
-    assert _parse_override("camera.center = -0.1, 0.25") == ("camera.center", [-0.1, 0.25])
-    assert _parse_override("name=a,b") == ("name", "a,b")
-    assert _parse_override("material.melanin=0,5") == ("material.melanin", "0,5")  # a scalar
+    assert parse_override("camera.rotate=0,60,0") == ("camera.rotate", [0, 60, 0])
+    assert parse_override("camera.center = -0.1, 0.25") == ("camera.center", [-0.1, 0.25])
+    assert parse_override("name=a,b") == ("name", "a,b")
+    assert parse_override("material.melanin=0,5") == ("material.melanin", "0,5")  # a scalar
     with pytest.raises(InputError, match=r"got '0,5' \(a decimal comma\? write 0\.5\)"):
         load_scene("hand", ["material.melanin=0,5"])
-    assert _parse_override("skin.melanin=0.3") == ("skin.melanin", 0.3)
+    assert parse_override("skin.melanin=0.3") == ("skin.melanin", 0.3)
     turned = load_scene("face", ["camera.rotate=0,60,0"]).values["camera.rotate"]
     assert list(turned) == [0, 60, 0]
     with pytest.raises(InputError, match=r"expected three finite numbers \(\[x, y, z\]\), got "
@@ -551,9 +551,9 @@ def test_a_list_given_to_D_without_brackets_is_the_list():
 def test_a_number_without_a_digit_before_or_after_the_point_is_a_number(text, value):
     """`-D material.melanin=.5` was "expected a finite number, got '.5'" (TOML wants digits
     on both sides of the point; a trial): such numbers are read as numbers."""
-    from jaxskin.scene import _parse_override
+    from jaxskin.scene import parse_override
 
-    assert _parse_override(f"material.melanin={text}") == ("material.melanin", value)
+    assert parse_override(f"material.melanin={text}") == ("material.melanin", value)
     if isinstance(value, float) and 0 <= value <= 1:
         assert load_scene("hand", [f"material.melanin={text}"]).values[
             "material.melanin"] == value
@@ -567,9 +567,9 @@ def test_a_number_without_a_digit_before_or_after_the_point_is_a_number(text, va
     ("layer.blush.material=.5.json", ".5.json"),
 ])
 def test_a_point_alone_is_completed_in_numbers_only(item, value):
-    from jaxskin.scene import _parse_override
+    from jaxskin.scene import parse_override
 
-    assert _parse_override(item)[1] == value
+    assert parse_override(item)[1] == value
 
 
 def test_a_scene_with_a_txt_ending_and_a_toml_error_gets_the_toml_error(tmp_path):

@@ -193,7 +193,7 @@ def scene_page() -> tuple[str, list[str]]:
     described = toml_descriptions(scene.__doc__)
     undescribed: list[str] = []
     model_of: dict[str, str] = {}  # a parameter only some material models use: which
-    for m, keys in scene._MODEL_PARAMS.items():
+    for m, keys in scene.MODEL_PARAMS.items():
         for k in sorted(keys):
             model_of[k] = f"{model_of[k]}, {m}" if k in model_of else m
     # the spectral models' skin is one of two (Scene.skin_model), each with its own keys

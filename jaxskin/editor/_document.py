@@ -75,7 +75,7 @@ def keep_aspect(doc: dict, base: dict) -> None:
     width (the frame keeps its aspect; the arm at size 64 is 64x20, not a 64x320 strip).
     `EditorError` (key `camera.size`) when that height is over its maximum."""
     from ..io import InputError
-    from ..scene import SCHEMA, _kept_aspect
+    from ..scene import SCHEMA, kept_aspect
 
     camera = base.get("camera")
     camera = camera if isinstance(camera, dict) else {}
@@ -84,7 +84,7 @@ def keep_aspect(doc: dict, base: dict) -> None:
         return  # a square frame stays square
     new = doc["camera"]
     try:
-        new["height"] = _kept_aspect({"camera.height": height, "camera.size": new["size"]},
+        new["height"] = kept_aspect({"camera.height": height, "camera.size": new["size"]},
                                      camera.get("size", SCHEMA["camera.size"].default),
                                      "camera.size")
     except InputError as e:

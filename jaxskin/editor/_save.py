@@ -11,10 +11,10 @@ from ..io import InputError, atomic_write
 from ..outputs import check_name
 from ..scene import (
     BUILTIN_SCENES,
+    dumps,
     parse_scene,
     toml_text,
 )
-from ..toml_writer import dumps
 from ._document import EditorError, relocate
 
 __all__ = ["Saving", "keep_comments"]

@@ -28,9 +28,9 @@ from ..scene import (
     LayerSpec,
     Scene,
     SceneConfig,
-    _toml_error,
     builtin_scenes,
     parse_scene,
+    toml_error,
     toml_text,
 )
 from ._changes import PATH_KEYS, Changes
@@ -89,7 +89,7 @@ class Session(Changes, Rendering, Painting, Saving):
         except OSError as e:
             raise EditorError(f"{path}: cannot read ({e.__class__.__name__})", 400) from None
         except tomllib.TOMLDecodeError as e:
-            raise EditorError(str(_toml_error(e, path)), 400) from None
+            raise EditorError(str(toml_error(e, path)), 400) from None
         except InputError as e:
             raise EditorError(str(e), 400, e.key) from None
         self._check(scene_obj)
@@ -244,7 +244,7 @@ class Session(Changes, Rendering, Painting, Saving):
     def query(self) -> list[list[str]]:
         """The changes as `[key, value]` pairs with TOML values, the `-D` syntax (the page's
         URL holds them)."""
-        from ..toml_writer import value_text
+        from ..scene import value_text
 
         painted = [[PAINTED, ",".join(sorted(self.paint))]] if self.paint else []
         return [[k, value_text(v)] for k, v in self.changes.items()] + painted
