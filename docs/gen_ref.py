@@ -30,7 +30,7 @@ for path, text in pages.items():
         f.write(text)
 for key in undescribed:
     log.warning(f"scene key '{key}' has no description: give it a comment in the TOML "
-                "example of jaxskin/scene.py's docstring")
+                "example of jaxskin/scene/__init__.py's docstring")
 for name in reference.missing_docstrings():
     log.warning(f"public name without a docstring: {name}")
 for section in mkdocs_gen_files.config.nav:

@@ -13,6 +13,7 @@ import sys
 
 
 def main(argv=None) -> int:
+    """The `jaxskin` script: note SIGINT and SIGTERM, import the command line, run it."""
     early: list[int] = []
     old = {sig: signal.signal(sig, lambda signum, frame: early.append(signum))
            for sig in (signal.SIGINT, signal.SIGTERM)}

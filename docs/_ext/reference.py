@@ -1,6 +1,6 @@
 """The reference pages, generated from the code: the API pages (one per public module of
 `jaxskin` and `jaxskin.fitting`), the scene format from `jaxskin.scene.SCHEMA` and
-`LAYER_SCHEMA` (descriptions from the commented TOML example in `jaxskin/scene.py`'s
+`LAYER_SCHEMA` (descriptions from the commented TOML example in `jaxskin/scene/__init__.py`'s
 docstring), the command line from `jaxskin.cli.parser()`. Each function returns Markdown
 and the problems it found (a public name without a docstring, a scene key without a
 description); `docs/gen_ref.py` writes the pages at build time and turns each problem into
@@ -53,9 +53,11 @@ def api_pages() -> tuple[dict[str, str], list]:
         module = importlib.import_module(name)
         is_package = hasattr(module, "__path__")
         path = f"reference/api/{name}.md"
-        options = "    options:\n      members: false\n" if is_package else ""
-        text = f"::: {name}\n{options}"
         subs = [m for m in modules() if m.rsplit(".", 1)[0] == name] if is_package else []
+        # A package of public modules is a page of links; a package of private files (its
+        # names re-exported, as `jaxskin.scene`) is documented like a module.
+        options = "    options:\n      members: false\n" if subs else ""
+        text = f"::: {name}\n{options}"
         if subs:
             text += "\n**Modules:**\n\n" + "".join(
                 f"- [`{m}`]({m}.md): {summary(importlib.import_module(m).__doc__)}\n"
@@ -84,7 +86,10 @@ def missing_docstrings(package: str = "jaxskin", search_paths=(ROOT,)) -> list[s
 
     def visit(obj):
         for member in obj.members.values():
-            if member.is_alias or member.name.startswith("_"):
+            if member.is_alias:
+                continue
+            private_file = member.is_module and not member.name.startswith("__")
+            if member.name.startswith("_") and not private_file:
                 continue
             if member.is_module:
                 if member.name != "__main__":
@@ -227,7 +232,7 @@ def scene_page() -> tuple[str, list[str]]:
         "",
         "This page is generated from `jaxskin.scene.SCHEMA` and `LAYER_SCHEMA` (`python "
         "docs/_ext/reference.py` rewrites it; the suite fails when it is stale); the "
-        "descriptions are the comments of the example in `jaxskin/scene.py`.",
+        "descriptions are the comments of the example in `jaxskin/scene/__init__.py`.",
         "",
         "## Keys",
         "",
@@ -270,7 +275,7 @@ def scene_page() -> tuple[str, list[str]]:
               "What a scene can name without a path (`jaxskin list` prints the same):", "",
               "```text", builtin_names().rstrip(), "```"]
     lines += ["", "## The examples this page reads", "",
-              "The commented TOML in `jaxskin/scene.py`'s docstring, as it stands:", ""]
+              "The commented TOML in `jaxskin/scene/__init__.py`'s docstring, as it stands:", ""]
     for block in re.findall(r"```toml\n(.*?)```", scene.__doc__, re.S):
         lines += ["```toml", block.rstrip(), "```", ""]
     return "\n".join(lines) + "\n", undescribed
