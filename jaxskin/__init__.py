@@ -1,17 +1,74 @@
 """jaxskin: differentiable rendering of human skin and cosmetics in JAX.
 
-Modules, one idea each:
+The module map, one line per module, by layer; a layer imports only the layers above it and
+the application (last) is imported by none (tests/test_architecture.py checks both, and
+that this map names every module).
 
-- `mesh`, `fields`, `projection`, `raster`: a body part, its direction fields (Bando 2001
-  §3.1), texture space (§3.2) and the one rasterizer (texture space and camera views).
-- `wrinkles`, `bump`, `texture`: the furrow height field (§3.3) and bump normals (§4.1).
-- `shading.blinn`, `shading.lafortune`: skin shading (§4.2).
-- `scene`, `view`, `shadow`, `render`: TOML scenes → `render(config, params)`, the pure
-  function; camera views, shadow maps from the light.
-- `km`, `spectral`: Kubelka–Munk layers and spectra → colour (Huang et al. 2013).
-- `precision`: every float32 product at full precision on every device (no TF32 on GPUs).
-- `maps`, `export`, `io`, `outputs`, `resources`, `cli`: PNG (8/16-bit), OpenEXR and GLB
-  output, input errors, output folders and names, memory estimates, the command line.
+Geometry (Bando 2001 §3.1–3.2):
+
+- `mesh`: body-part meshes, their normals and UVs, the built-in ones.
+- `fields`: direction fields edited on the mesh (inverse-distance weighting).
+- `projection`: texture space: planar, cylindrical or the mesh's own UVs.
+- `raster`: the one rasterizer: triangle ids and barycentrics, differentiable interpolation.
+- `view`: camera views: rasterize from a camera, sample the texture-space result.
+- `shadow`: shadow maps of a parallel light.
+- `texture`: a scene's texture-space stage (its own `TextureConfig`): fields, furrows, bumps.
+
+Furrows (Bando 2001 §3.3, §4.1):
+
+- `wrinkles`: the furrow height field, grown furrow by furrow.
+- `lockstep`: the same furrows grown in lockstep, the parallel program.
+- `furrow_stats`: what the two furrow programs must share, measured.
+- `bump`: bump-mapped normals (eq. 4.10).
+
+Optics (Bando 2001 §4.2; Huang et al. 2013):
+
+- `km`: Kubelka–Munk layers and their composition (`Slab`).
+- `spectral`: wavelength grids, illuminants, spectra → colour.
+- `skin`: measured skin reflectance with a melanin control.
+- `biophysical`: the two-layer biophysical skin (melanin, haemoglobin).
+- `cosmetics`: cosmetic layers: measured materials and thickness maps.
+- `sss`: subsurface scattering, the six-Gaussian skin profile.
+- `shading`: one model per module: `shading.blinn`, `shading.lafortune`, `shading.kelemen`
+  and `shading.layered` (KM layers over skin with SSS and per-layer specular).
+- `precision`: float32 products at full precision on every device.
+- `linear`: a linear map with a transpose written by hand.
+
+Pipeline:
+
+- `render`: `render(config, params)`, the pure function of a scene.
+- `batch`: a render's units of work: an image, its maps, a sweep's padded batch.
+- `checks`: what a scene passes before any render (memory, files, values).
+- `resources`: memory estimates against what the machine has.
+- `compile_cache`: JAX's persistent compilation cache for commands and workers.
+- `skin_grid`: the melanin × blood grid of small renders (the docs' picture).
+
+Files (read and written at the edge):
+
+- `scene`: TOML scenes → a hashable config and differentiable parameters; writing them.
+- `formats`: every table and document read or written: CSV, JSON, BRDF and material
+  files, spectra.
+- `maps`: images: renders as PNG or OpenEXR, height and normal maps, layer maps read.
+- `export`: the mesh and its textures as GLB.
+- `io`: `InputError`, atomic writes, the shipped data folder.
+- `outputs`: output folders and safe file names.
+- `data`: the shipped meshes, scenes, spectra, materials, measurements and BRDF samples.
+
+Fitting (`jaxskin.fitting`, optimistix; the repository's `fitting/`):
+
+- `fitting`: the fits' package.
+- `fitting.measurements`: the spectroradiometer measurement CSV.
+- `fitting.km`: S(λ), K(λ) of a cosmetic from its measurements.
+- `fitting.brdf`: Lafortune lobes from BRDF samples.
+- `fitting.skin`: the biophysical skin from reflectance spectra.
+- `fitting.image`: scene values and texture maps from a target image.
+- `fitting.report`: the calibration report (PNG).
+
+Application:
+
+- `cli`: the `jaxskin` command, one module per command.
+- `editor`: the browser editor's session and HTTP API (`jaxskin edit`).
+- `cluster`: a command's units of work on a Dask cluster (`--cluster`).
 
 Everything numeric follows the dtype of its inputs; rendering defaults to float32
 (`jaxskin.DEFAULT_DTYPE`), fitting (`fitting`) runs in float64.
