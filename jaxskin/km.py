@@ -18,7 +18,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-__all__ = ["Slab", "compose", "ks_from_r_inf", "layer", "over", "r_inf", "stack"]
+__all__ = ["Slab", "compose", "horner", "ks_from_r_inf", "layer", "layer_parts", "over",
+           "r_inf", "stack"]
 
 # Below this value of z² = (βX)² the layer uses power series in z² (no square root, so the
 # branch point at K = 0 has finite derivatives); above it, tanh/sech of z.
@@ -31,7 +32,10 @@ _COSH = [1.0 / _f for _f in (20922789888000.0, 87178291200.0, 479001600.0, 36288
                              720.0, 24.0, 2.0, 1.0)]
 
 
-def _horner(coefficients, q):
+def horner(coefficients, q):
+    """The polynomial with `coefficients` (highest power first) at `q`, by Horner's rule:
+    the series of `layer`'s small-z branch and of its hand-written derivative
+    (`shading.layered`). Elementwise over `q`; the result has `q`'s shape and dtype."""
     out = jnp.full_like(q, coefficients[0])
     for c in coefficients[1:]:
         out = out * q + c
@@ -69,13 +73,16 @@ def layer(
     **Returns:** `(R0, T)`, broadcast to a common shape.
     """
     S, K, X = _promote(S, K, X)
-    return _layer_parts(S, K, X)[:2]
+    return layer_parts(S, K, X)[:2]
 
 
-def _layer_parts(S, K, X):
+def layer_parts(S, K, X):
     """`layer`'s R0 and T with the intermediates a hand-written derivative reuses
-    (`shading.layered._cotangents`): `(R0, T, τ, sech z, 1/D, small, z² where small,
-    1/β)`, D = (S + K)τ + 1, `small` where the series branch is taken. S, K, X promoted."""
+    (`shading.layered`'s cotangents): `(R0, T, τ, sech z, 1/D, small, z² where small,
+    1/β)`, D = (S + K)τ + 1, `small` where the series branch is taken.
+
+    **Arguments:** `S`, `K`, `X` as for `layer`, but already arrays of one floating dtype
+    (`layer` promotes them first; this does not)."""
     # What depends on S and K only stays on their (small) shapes: in a render S, K are per
     # (layer, wavelength) and X per texel, so this is hoisted out of the per-texel work.
     q = K * (K + 2.0 * S)  # β²
@@ -90,8 +97,8 @@ def _layer_parts(S, K, X):
     small = z2 < _Q_SMALL
     # Series branch (double-`where`: the unused branch sees harmless values).
     qs = jnp.where(small, z2, 0.0)
-    inv_cosh = 1.0 / _horner(_COSH, qs)
-    tau_s = X * _horner(_SINHC, qs) * inv_cosh
+    inv_cosh = 1.0 / horner(_COSH, qs)
+    tau_s = X * horner(_SINHC, qs) * inv_cosh
     # Large-z branch: one exp; at z >= 0.5, 1 − e² has no cancellation.
     e = jnp.exp(-X / inv_beta)
     e2 = e * e

@@ -331,7 +331,7 @@ def _band(g, M):
 
 def _layer_SK(S, K, X, parts, aR, aT):
     """The cotangents of one KM layer's S and K `(n,)`, summed over texels, from the
-    cotangents `aR, aT (P, n)` of its R0 and T and the intermediates of `km._layer_parts`.
+    cotangents `aR, aT (P, n)` of its R0 and T and the intermediates of `km.layer_parts`.
     With q = β² = K(K + 2S), R0 = Sτ/D and T = sech z/D, D = (S + K)τ + 1, where τ and
     sech z depend on S and K through q only: the cotangent of q per texel and band is
     a_q = a_τ ∂τ/∂q + a_sech ∂sech/∂q with ∂τ/∂q = w/2, ∂sech z/∂q = −X τ sech z/2,
@@ -343,7 +343,7 @@ def _layer_SK(S, K, X, parts, aR, aT):
     R, T, tau, sech, inv_den, small, qs, inv_beta = parts
     SK = S + K
     sech2 = sech * sech
-    w = jnp.where(small, -(X * X * X) * km._horner(_F_SERIES, qs) * sech2,
+    w = jnp.where(small, -(X * X * X) * km.horner(_F_SERIES, qs) * sech2,
                   (X * sech2 - tau) * (inv_beta * inv_beta))
     aR_d, aT_d = aR * inv_den, aT * inv_den
     a_q = 0.5 * ((aR_d * (S - R * SK) - aT_d * T * SK) * w - aT_d * X * sech * tau)
@@ -393,7 +393,7 @@ def _cotangents(grid, blurred, X, E, h, h_l, S, K, skin_R, g):
         ga = gt = E * gs
     s = skin_R
     x = [X[i][:, None] for i in range(n_layers)]  # (P, 1) each
-    parts = [km._layer_parts(S[i], K[i], x[i]) for i in range(n_layers)]
+    parts = [km.layer_parts(S[i], K[i], x[i]) for i in range(n_layers)]
     R, T = [p[0] for p in parts], [p[1] for p in parts]
     # The stack from the bottom up (km.stack's order), every partial stack kept.
     accs = [(R[0], T[0], R[0])]
