@@ -88,10 +88,10 @@ def layer_parts(S, K, X):
     q = K * (K + 2.0 * S)  # β²
     inv_beta = jax.lax.rsqrt(jnp.where(q > 0, q, 1.0))  # safe: only read where z² >= 0.25
     SK = S + K
-    # X clamped where only the branch test and the series see it: X² overflowed float32 at
-    # X ~ 2e19 mm, and inf·0 in its derivative made the gradient NaN there (values held).
-    # Float64 clamps at 1e75 (X² ~ 1e150): at 1e15 it took the series at K = 1e-40,
-    # X = 1e20 (z ~ 1.4), T 1.0e-20 for mpmath's 7.3e-21 (a trial).
+    # X clamped where only the branch test and the series see it: X² overflows float32 at
+    # X ~ 2e19 mm, and inf·0 in its derivative would make the gradient NaN there (the
+    # values hold). Float64 clamps at 1e75 (X² ~ 1e150), not 1e15: at 1e15 the series would
+    # be taken at K = 1e-40, X = 1e20 (z ~ 1.4), T 1.0e-20 for mpmath's 7.3e-21.
     Xc = jnp.minimum(X, 1e15 if X.dtype.itemsize < 8 else 1e75)
     z2 = q * (Xc * Xc)
     small = z2 < _Q_SMALL
@@ -221,8 +221,8 @@ def _slab(x):
 
 def _promote(*xs):
     """Arrays of one floating dtype: the inputs' own (at least float32) if any is a floating
-    array; for Python numbers alone JAX's default float (float64 under `jax_enable_x64`:
-    a float64 check written with literals was quietly float32, a newcomer's trial)."""
+    array; for Python numbers alone JAX's default float (float64 under `jax_enable_x64`,
+    so that a float64 check written with literals is not quietly float32)."""
     arrays = [jnp.asarray(x) for x in xs]
     dtype = jnp.result_type(*arrays)
     if not jnp.issubdtype(dtype, jnp.floating):

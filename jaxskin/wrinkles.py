@@ -100,7 +100,7 @@ def height_field(mask, field1, field2, centroids, k_scale, key, radius: int, rec
     run = functools.partial(_pass, mask, centroids.astype(jnp.float32), k_scale,
                             radius=radius, records=max(records, 1), wrap=wrap)
     # Two passes one after the other, not vmapped: under vmap every window update becomes a
-    # scatter that copies the whole image (measured 10x slower).
+    # scatter that copies the whole image (an order of magnitude slower).
     (img1, rec1), (img2, rec2) = run(fields[0], keys[0]), run(fields[1], keys[1])
     rec = jax.tree.map(lambda a, b: jnp.stack([a, b]), rec1, rec2)
     return jnp.where(mask, jnp.minimum(img1, img2), 1.0), rec
