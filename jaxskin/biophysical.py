@@ -69,7 +69,7 @@ K2 = 0.5  # the internal diffuse reflectance of the surface (Saunderson's k2)
 
 PARAMS = ("melanin", "eumelanin", "haemoglobin", "oxygenation", "epidermis_mm", "scattering")
 # The literature's ranges: melanosome fraction 1.3–43 % (Jacques 1998), 0.005–0.5 in
-# issue 16 / BioSkin's "plausible"; blood fraction 0.001–0.1 (BioSkin: regular skin to
+# BioSkin's "plausible"; blood fraction 0.001–0.1 (BioSkin: regular skin to
 # 0.0225); saturation 0–1 (regular 0.6–0.8); epidermis 0.01–0.15 mm (forearm ≈ 0.06–0.1);
 # the scattering factor 0.5–6 (see the module docstring).
 RANGES = {"melanin": (0.005, 0.5), "eumelanin": (0.0, 1.0), "haemoglobin": (0.001, 0.1),

@@ -1,5 +1,5 @@
 """The character of a furrow pattern, measured: what the sequential and the lockstep furrow
-programs (`wrinkles`, `lockstep`) must share (issue 19) though they differ texel by texel.
+programs (`wrinkles`, `lockstep`) must share though they differ texel by texel.
 
 NumPy functions of a program's outputs (the height field before noise and its
 `FurrowRecord` as `wrinkles.to_numpy_record` gives it), for tests and benchmarks:

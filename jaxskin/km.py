@@ -18,7 +18,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-__all__ = ["Slab", "compose", "ks_from_r_inf", "layer", "over", "r_inf", "stack"]
+__all__ = ["Slab", "compose", "horner", "ks_from_r_inf", "layer", "layer_parts", "over",
+           "r_inf", "stack"]
 
 # Below this value of z² = (βX)² the layer uses power series in z² (no square root, so the
 # branch point at K = 0 has finite derivatives); above it, tanh/sech of z.
@@ -31,7 +32,10 @@ _COSH = [1.0 / _f for _f in (20922789888000.0, 87178291200.0, 479001600.0, 36288
                              720.0, 24.0, 2.0, 1.0)]
 
 
-def _horner(coefficients, q):
+def horner(coefficients, q):
+    """The polynomial with `coefficients` (highest power first) at `q`, by Horner's rule:
+    the series of `layer`'s small-z branch and of its hand-written derivative
+    (`shading.layered`). Elementwise over `q`; the result has `q`'s shape and dtype."""
     out = jnp.full_like(q, coefficients[0])
     for c in coefficients[1:]:
         out = out * q + c
@@ -69,29 +73,32 @@ def layer(
     **Returns:** `(R0, T)`, broadcast to a common shape.
     """
     S, K, X = _promote(S, K, X)
-    return _layer_parts(S, K, X)[:2]
+    return layer_parts(S, K, X)[:2]
 
 
-def _layer_parts(S, K, X):
+def layer_parts(S, K, X):
     """`layer`'s R0 and T with the intermediates a hand-written derivative reuses
-    (`shading.layered._cotangents`): `(R0, T, τ, sech z, 1/D, small, z² where small,
-    1/β)`, D = (S + K)τ + 1, `small` where the series branch is taken. S, K, X promoted."""
+    (`shading.layered`'s cotangents): `(R0, T, τ, sech z, 1/D, small, z² where small,
+    1/β)`, D = (S + K)τ + 1, `small` where the series branch is taken.
+
+    **Arguments:** `S`, `K`, `X` as for `layer`, but already arrays of one floating dtype
+    (`layer` promotes them first; this does not)."""
     # What depends on S and K only stays on their (small) shapes: in a render S, K are per
     # (layer, wavelength) and X per texel, so this is hoisted out of the per-texel work.
     q = K * (K + 2.0 * S)  # β²
     inv_beta = jax.lax.rsqrt(jnp.where(q > 0, q, 1.0))  # safe: only read where z² >= 0.25
     SK = S + K
-    # X clamped where only the branch test and the series see it: X² overflowed float32 at
-    # X ~ 2e19 mm, and inf·0 in its derivative made the gradient NaN there (values held).
-    # Float64 clamps at 1e75 (X² ~ 1e150): at 1e15 it took the series at K = 1e-40,
-    # X = 1e20 (z ~ 1.4), T 1.0e-20 for mpmath's 7.3e-21 (a trial).
+    # X clamped where only the branch test and the series see it: X² overflows float32 at
+    # X ~ 2e19 mm, and inf·0 in its derivative would make the gradient NaN there (the
+    # values hold). Float64 clamps at 1e75 (X² ~ 1e150), not 1e15: at 1e15 the series would
+    # be taken at K = 1e-40, X = 1e20 (z ~ 1.4), T 1.0e-20 for mpmath's 7.3e-21.
     Xc = jnp.minimum(X, 1e15 if X.dtype.itemsize < 8 else 1e75)
     z2 = q * (Xc * Xc)
     small = z2 < _Q_SMALL
     # Series branch (double-`where`: the unused branch sees harmless values).
     qs = jnp.where(small, z2, 0.0)
-    inv_cosh = 1.0 / _horner(_COSH, qs)
-    tau_s = X * _horner(_SINHC, qs) * inv_cosh
+    inv_cosh = 1.0 / horner(_COSH, qs)
+    tau_s = X * horner(_SINHC, qs) * inv_cosh
     # Large-z branch: one exp; at z >= 0.5, 1 − e² has no cancellation.
     e = jnp.exp(-X / inv_beta)
     e2 = e * e
@@ -214,8 +221,8 @@ def _slab(x):
 
 def _promote(*xs):
     """Arrays of one floating dtype: the inputs' own (at least float32) if any is a floating
-    array; for Python numbers alone JAX's default float (float64 under `jax_enable_x64`:
-    a float64 check written with literals was quietly float32, a newcomer's trial)."""
+    array; for Python numbers alone JAX's default float (float64 under `jax_enable_x64`,
+    so that a float64 check written with literals is not quietly float32)."""
     arrays = [jnp.asarray(x) for x in xs]
     dtype = jnp.result_type(*arrays)
     if not jnp.issubdtype(dtype, jnp.floating):

@@ -54,7 +54,7 @@ def image_bytes(image, bits: int = 8) -> bytes:
 def _srgb(png: bytes) -> bytes:
     """`png` with an sRGB chunk (rendering intent 0, perceptual) and the gAMA chunk PNG 1.2
     pairs with it (1/2.2, for decoders without sRGB) right after IHDR: a render's values
-    are sRGB-encoded, and untagged a colour-managed viewer had to guess (a trial). Maps
+    are sRGB-encoded, and untagged a colour-managed viewer would have to guess. Maps
     that hold data (heights, normals, thickness) stay untagged."""
     at = 8 + 25  # the signature, then IHDR: length, type, 13 bytes, CRC
     if png[12:16] != b"IHDR":
@@ -96,7 +96,7 @@ def png16_colour(data: bytes) -> np.ndarray | None:
     """The samples `(H, W, 3 or 4)` uint16 of a 16-bit RGB or RGBA PNG (`data`: the file's
     bytes), or None for any other file: Pillow, under imageio, reads these as 8 bits (the
     low byte dropped), so they are decoded by pypng (pure Python: about 3 s for 1024² of
-    Paeth-filtered rows; a NumPy decoder written here took 14 s)."""
+    Paeth-filtered rows, yet quicker than a NumPy decoder of the filters, about 14 s)."""
     if data[:8] != b"\x89PNG\r\n\x1a\n" or data[12:16] != b"IHDR" or len(data) < 29:
         return None
     depth, colour = data[24], data[25]
@@ -178,7 +178,7 @@ def read_image(path, what: str = "image", key=None):
     except Exception as e:  # noqa: BLE001  (imageio raises many kinds; all mean unreadable)
         why = (e.strerror if isinstance(e, OSError) and e.strerror else
                f"larger than the {_max_pixels()} pixels an image may be"
-               if type(e).__name__ == "DecompressionBombError" else  # a trial's 30000²
+               if type(e).__name__ == "DecompressionBombError" else  # e.g. 30000²
                "not a file format imageio decodes, or a truncated or damaged one")
         raise InputError(f"cannot read as {_a(what)}: {why}", path, key=key) from None
     if img.dtype.kind not in "uifb" or img.size == 0 or not (
@@ -207,7 +207,7 @@ def read_grey(path, what: str = "greyscale image", key=None) -> np.ndarray:
     rgb, _ = read_image(path, what, key)
     if np.all(rgb[..., 1:] == rgb[..., :1]):
         grey = rgb[..., 0]  # grey as read, not (g + g + g) / 3 rounded
-    else:  # said, not done in silence (a trial: a pure red map gave a third of the value)
+    else:  # said, not done in silence (a pure red map gives a third of its value)
         grey = rgb.mean(axis=-1)
         if str(path) not in _SAID_COLOUR:  # once a file: the checks and the render read it
             _SAID_COLOUR.add(str(path))
@@ -254,8 +254,8 @@ def plot_flip(side: int, rotate=(0.0, 0.0, 0.0)) -> np.ndarray:
     """The field plot's axes: +z's side as the mesh is (x right, y up); the −z side
     ("planar-back") turned half round the axis the camera's turn `rotate` (degrees, as
     `camera.rotate`) turned it about, so that the plot shows it as the render does:
-    x mirrored for a turn about y (the hand turned round), y for a turn about x (it was x
-    for both, the plot upside down against the render; a review)."""
+    x mirrored for a turn about y (the hand turned round), y for a turn about x (mirroring
+    x there too would show the plot upside down against the render)."""
     if side > 0:
         return np.ones(3)
     from .view import rotation

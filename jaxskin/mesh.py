@@ -16,7 +16,7 @@ import numpy as np
 
 from .io import InputError, data_dir
 
-__all__ = ["BUILTIN", "Mesh", "load_mesh", "signed_volume"]
+__all__ = ["BUILTIN", "Mesh", "load_mesh", "signed_volume", "vertex_normals"]
 
 BUILTIN = {
     "hand": "hand_lowres.obj",
@@ -91,7 +91,7 @@ def load_mesh(name_or_path) -> Mesh:
                          "normals into the body, which would render flat and dark); "
                          "reversed for the render")
         faces = faces[:, ::-1].copy()
-    normals = _vertex_normals(vertices, faces)
+    normals = vertex_normals(vertices, faces)
     uv = None
     visual_uv = getattr(getattr(loaded, "visual", None), "uv", None)
     if visual_uv is not None and len(visual_uv) == len(vertices):
@@ -135,8 +135,16 @@ def _warn_once(path, message: str) -> None:
         warnings.warn(message, stacklevel=3)
 
 
-def _vertex_normals(vertices, faces):
-    """Area-weighted vertex normals; a vertex on no face gets +z."""
+def vertex_normals(vertices, faces):
+    """Area-weighted vertex normals; a vertex on no face gets +z.
+
+    **Arguments:**
+
+    - `vertices (V, 3)` float: the vertex positions.
+    - `faces (F, 3)` int: the triangles (their winding picks the normals' side).
+
+    **Returns:** `(V, 3)` unit normals, each the normalised sum of its faces' cross
+    products (so weighted by their areas)."""
     a, b, c = (vertices[faces[:, i]] for i in range(3))
     n = np.cross(b - a, c - a)
     out = np.zeros_like(vertices)

@@ -32,7 +32,7 @@ _UNSAFE = re.compile(r"[^A-Za-z0-9._+=-]+")
 
 
 # Bidirectional controls reorder how a name is shown (U+202E made "x\u202eyz.png" read
-# "xgnp.zy"), so they disguise a file name (a trial); the invisible zero-width space, word
+# "xgnp.zy"), so they can disguise a file name; the invisible zero-width space, word
 # joiner and byte-order mark make two names that look alike.
 _HIDDEN = frozenset("\u061c\u200e\u200f\u202a\u202b\u202c\u202d\u202e\u2066\u2067\u2068"
                     "\u2069\u200b\u2060\ufeff")
@@ -84,7 +84,7 @@ def slug(text: str) -> str:
 
 
 # The endings of the files the commands write or read: an -o folder still to be made with
-# one of them was meant as a file (`calibrate -o fit.json` made a folder 'fit.json').
+# one of them is meant as a file (`calibrate -o fit.json` would make a folder 'fit.json').
 FILE_SUFFIXES = {".json", ".png", ".exr", ".glb", ".csv", ".toml", ".npz", ".jpg", ".jpeg"}
 
 
@@ -111,7 +111,7 @@ def check_folder(path, option: str = "-o", named_files: bool = True) -> Path:
         raise InputError(f"{option}: cannot use this folder ({e.strerror or e.__class__.__name__})",
                          path) from None
     if (named_files and not slash and not os.path.lexists(path)
-            and path.suffix.lower() in FILE_SUFFIXES):  # made a folder 'fit.json'
+            and path.suffix.lower() in FILE_SUFFIXES):  # would make a folder 'fit.json'
         raise InputError(f"{option}: expected the folder to write into, got a file name "
                          f"({path.name!r}; the outputs are named after the inputs or scenes): "
                          f"give a folder, or '{path.name}/' to make a folder of that name",
@@ -127,7 +127,7 @@ def check_folder(path, option: str = "-o", named_files: bool = True) -> Path:
     if not probe.is_dir():
         raise InputError(f"{option}: cannot create the folder: {probe} is a file", path)
     new = path.relative_to(probe) if probe != path else Path()
-    if control(str(new)):  # a newline made a folder
+    if control(str(new)):  # a newline would make a folder
         raise InputError(f"{option}: a folder to create must not contain control characters "
                          f"(a newline?); got {str(path)!r}")
     try:

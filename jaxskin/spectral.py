@@ -156,7 +156,7 @@ def resample(values: ArrayLike, wavelengths: ArrayLike, grid: Grid) -> np.ndarra
         raise ValueError(f"resample: {wl.shape} wavelengths for values of shape "
                          f"{values.shape}: one wavelength per entry of the last axis")
     if len(wl) > 1 and np.all(np.diff(wl) < 0):  # long wavelengths first: np.interp wants
-        wl, values = wl[::-1], values[..., ::-1]  # increasing ones (it was silently wrong)
+        wl, values = wl[::-1], values[..., ::-1]  # increasing ones (silently wrong otherwise)
     if not np.all(np.isfinite(wl)) or np.any(np.diff(wl) <= 0):
         raise ValueError("resample: wavelengths must be finite and strictly increasing (or "
                          "all decreasing)")

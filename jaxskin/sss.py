@@ -96,8 +96,8 @@ def profile_kernels(texel_mm: float, shape: tuple[int, int]) -> np.ndarray:
     out = np.zeros((3, 2 * ry + 1, 2 * rx + 1))
     for v, w in zip(VARIANCES_MM2, WEIGHTS_RGB, strict=True):
         if math.sqrt(v) > 50 * texel_mm:  # Σ_|k|≤r exp(−(k t)²/2v) in closed form (Poisson
-            # summation, ~1e-16 relative at σ > 50 t): the 4σ window is not made (it had
-            # 1e7 entries for 1e-6 mm texels)
+            # summation, ~1e-16 relative at σ > 50 t): the 4σ window is not made (it would
+            # have 1e7 entries for 1e-6 mm texels)
             total = (math.sqrt(2 * math.pi * v) / texel_mm
                      * math.erf((r + 0.5) * texel_mm / math.sqrt(2 * v))) ** 2
         else:
@@ -129,9 +129,9 @@ def blur(irradiance, texel_mm: float, mask=None, method: str = "fft", cut: float
     - `mask`: `(H, W)` texels on the mesh (default: all). Texels off it neither give nor
       take light; the result is renormalised by the blurred mask, so edges do not darken.
     - `method`: `"fft"` (default): the whole sampled 2-D profile by FFT convolution, exact;
-      `"separable"`: each Gaussian as row and column passes cut at `cut` σ. Measured on 2
-      CPU cores at 512², 0.2 mm texels (benchmarks/bench_sss.py): the FFT is exact and
-      several times faster than the separable passes at any cut worth using.
+      `"separable"`: each Gaussian as row and column passes cut at `cut` σ. On a CPU the
+      FFT is exact and several times faster than the separable passes at any cut worth
+      using (benchmarks/bench_sss.py).
 
     - `norm`: `mask_norm(mask, texel_mm)`, computed once for a fixed mask (FFT only;
       default: computed here). A renderer passes it to save three FFTs a frame.
@@ -160,7 +160,7 @@ def blur(irradiance, texel_mm: float, mask=None, method: str = "fft", cut: float
         den = mask_norm(m, texel_mm, kernels) if norm is None else jnp.asarray(norm, E.dtype)
         # Texels the mask reaches, relative to the kernel's mass within the image: with
         # texels far below the profile's mm (a mesh 1e6 times too small) that mass is
-        # ~1e-8 and an absolute 1e-6 made the image black (a trial)
+        # ~1e-8, and an absolute 1e-6 would make the image black
         ok = den > 1e-6 * jnp.sum(kernels, axis=(1, 2))[:, None, None]
         out = jnp.moveaxis(jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0), 0, -1)
         return out * m[..., None]

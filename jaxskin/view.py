@@ -269,8 +269,8 @@ def downsample(image, k: int):
 def transpose_table(tex, mask, pad, shape, wrap_x: bool, width: int = 16) -> dict:
     """The transpose of `sample_padded` (a gather of the bilinear samples) as a table, so
     that reverse mode reads instead of scattering: XLA's scatter-add of every sample's four
-    corners into the texture took 0.5 s at 1280×720, supersample 2. Each row lists up to
-    `width` (4 × sample + corner, weight) pairs that land on one texel (`"view_rows"`,
+    corners into the texture is slow (half a second at 1280×720, supersample 2). Each row
+    lists up to `width` (4 × sample + corner, weight) pairs that land on one texel (`"view_rows"`,
     `"view_weights"`, `(R, width)`; empty slots weigh 0) and the texel (`"view_dest"`,
     `(R,)`, sorted); a texel read by more samples gets more rows. The weights are stored in
     float32; a float64 gradient recomputes them from the coordinates (exact). Made once per
@@ -452,7 +452,7 @@ def _sample_rules(wrap_x, shape):
             wx = jnp.where(corner % 2 == 1, f[..., 0], 1 - f[..., 0])
             wy = jnp.where(corner // 2 == 1, f[..., 1], 1 - f[..., 1])
             w = jnp.where(weights != 0, wx * wy, 0.0)
-        # One gather per channel: measured 2.5× faster than gathering (R, width, C) rows.
+        # One gather per channel: 2.5× faster than gathering (R, width, C) rows.
         read = jnp.stack([jnp.sum(ct[..., c].reshape(-1)[sample] * w, axis=1) for c in range(C)],
                          axis=-1)
         out = jnp.zeros((shape[0] * shape[1], C), ct.dtype).at[dest].add(

@@ -11,7 +11,7 @@ import pytest
 from jax.test_util import check_grads
 
 from jaxskin import bump
-from jaxskin.mesh import Mesh, _vertex_normals
+from jaxskin.mesh import Mesh, vertex_normals
 from jaxskin.projection import project
 from jaxskin.texture import surface_frame
 
@@ -37,10 +37,10 @@ def cylinder(uv: bool) -> Mesh:
     c, d = idx[1:][:, j0], idx[1:][:, j1]
     faces = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
                             np.stack([b, d, c], -1).reshape(-1, 3)])
-    normals = _vertex_normals(v, faces)
+    normals = vertex_normals(v, faces)
     if np.sum(normals[:, [0, 2]] * v[:, [0, 2]]) < 0:  # outward
         faces = faces[:, ::-1]
-        normals = _vertex_normals(v, faces)
+        normals = vertex_normals(v, faces)
     texcoords = None
     if uv:
         texcoords = np.stack([T.ravel() / (2 * math.pi), (Y.ravel() + HALF) / (2 * math.pi)], 1)

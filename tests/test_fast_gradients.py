@@ -258,7 +258,7 @@ def test_the_pixel_table_is_sampling_then_averaging(x64, scene):
 
 def test_layer_S_K_cotangents_equal_autodiff_of_km_layer(x64):
     """`layered._layer_SK` (the S and K cotangents of one KM layer through q = K(K + 2S),
-    from `km._layer_parts`, no second evaluation of the layer) against `jax.vjp` of
+    from `km.layer_parts`, no second evaluation of the layer) against `jax.vjp` of
     `km.layer`, float64, per band summed over texels, at thicknesses on both sides of the
     series/exp switch (z² = 0.25) and the stiff points: X = 0, 1e-7, 10 mm, S = 0, K = 0,
     K = 1e-9."""
@@ -276,7 +276,7 @@ def test_layer_S_K_cotangents_equal_autodiff_of_km_layer(x64):
     aR, aT = (jnp.asarray(rng.normal(size=(X.shape[0], n))) for _ in range(2))
     _, vjp = jax.vjp(lambda s, k: km.layer(s, k, X), S, K)
     dS, dK = vjp((aR, aT))
-    parts = km._layer_parts(S, K, X)
+    parts = km.layer_parts(S, K, X)
     for got, want in zip(layered._layer_SK(S, K, X, parts, aR, aT), (dS, dK), strict=True):
         assert bool(jnp.all(jnp.isfinite(got)))
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-11 * float(jnp.abs(want).max()))

@@ -8,7 +8,7 @@ import pytest
 from conftest import check_grads_scaled
 
 from jaxskin import render, shadow
-from jaxskin.mesh import Mesh, _vertex_normals
+from jaxskin.mesh import Mesh, vertex_normals
 from jaxskin.projection import project
 from jaxskin.scene import load_scene
 
@@ -30,7 +30,7 @@ def _mesh(parts):
         fs.append(f + offset)
         offset += len(v)
     v, f = np.concatenate(vs), np.concatenate(fs)
-    return Mesh("test", v, f, _vertex_normals(v, f), None)
+    return Mesh("test", v, f, vertex_normals(v, f), None)
 
 
 # A floor [-1, 1]² at z = 0 and a square occluder [-0.2, 0.2]² floating at z = 0.3; the
@@ -97,7 +97,7 @@ def test_a_convex_body_does_not_shadow_itself():
 
     s = trimesh.creation.icosphere(subdivisions=4)
     v, f = np.asarray(s.vertices), np.asarray(s.faces)
-    n = _vertex_normals(v, f)
+    n = vertex_normals(v, f)
     direction = np.array([0.3, -0.5, 0.8])
     L = direction / np.linalg.norm(direction)
     smap = shadow.shadow_map(v, f, direction, 256)

@@ -18,7 +18,7 @@ spectrum, where the same ratio in sRGB is not (saturated spectra give negative o
 sRGB channels). Without blur the factor is exact. With blur, the light reaching a texel
 comes partly from its neighbours (bare skin beside a lipstick's edge), and unequal X, Y, Z
 factors can take that light out of the gamut: at a strongly absorbing layer's edge, t ≈ 0
-for X and Z but not Y left red below 0 and green above (a trial found −0.05 red). There
+for X and Z but not Y leaves red below 0 and green above. There
 the result is moved toward the blurred light dimmed by t_Y alone, just far enough that no
 channel is below 0, or below the texel's own light where a saturated stack makes that
 negative (`_in_gamut`); nowhere else is it changed. Huang et al. blur "the
@@ -124,8 +124,8 @@ def _in_gamut(x, y, floor):
     negative: a saturated spectrum's colour, which the factor gives exactly where the light
     is uniform): x + λ (y − x) with the least λ in [0, 1]. Where no channel is below its
     floor — wherever the light is uniform, and every pixel of the built-in scenes — x
-    itself (a floor of 0 alone moved the uniform light of saturated stacks too, and a
-    per-texel Gauss–Newton fit of three maps stalled at 25× its noise)."""
+    itself (a floor of 0 alone would move the uniform light of saturated stacks too, and a
+    per-texel Gauss–Newton fit of the maps stalls on that)."""
     bad = (x < floor) & (y > floor)
     lam = jnp.where(bad, (floor - x) / jnp.where(bad, y - x, 1.0), 0.0)  # y − x > 0 there
     return x + jnp.max(lam, axis=-1, keepdims=True) * (y - x)
@@ -164,10 +164,9 @@ def _joint(grid, blurred, *args):
 
 # Texels per step of the derivative's loops. Not 1024: with 41 bands a (1024, 41) float32
 # array is 41 × 4 KiB, so every intermediate of a chunk starts at the same offset in a
-# page; measured on the 2-core AVX2 machine (the transpose alone, the makeup face's
-# 170,324 texels, one process), 1024 took 1.3–1.6× as long as 500–3000 (likely cache-set
-# aliasing among the ~30 arrays a fusion reads). Inside the whole render's gradient the
-# difference was within the load's noise.
+# page, and the transpose alone is slower at 1024 than at 500–3000 on a CPU (likely
+# cache-set aliasing among the ~30 arrays a fusion reads; benchmarks/RESULTS.md). Inside
+# the whole render's gradient the difference is within the noise.
 CHUNK = 1000
 # Chunks per step of the transpose's loop, computed side by side (`_cotangents_chunked`).
 STREAMS = 2
@@ -200,7 +199,7 @@ def _cpu_form(name: str) -> bool:
     - `"skip"`: a layer absent from a whole chunk skips its S and K sums (`lax.cond`);
     - `"sums"`: sums over bands and texels as products with ones (`_rowsum`, `_colsum`).
 
-    Measured on an H200 (benchmarks/RESULTS.md, issue 19)."""
+    The figures for both kinds of device: benchmarks/RESULTS.md."""
     return jax.default_backend() == "cpu"
 
 
@@ -216,25 +215,17 @@ def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
     checkpointed. Reverse mode: that tangent's transpose written by hand (`_cotangents`,
     through `linear.linear_call`): the colours' cotangent goes to band space through the
     transposed colour matrices, then one elementwise pass per chunk recomputes the layers
-    and the stack and runs the chain rule back through them. Measured on the 4-layer makeup
-    face at 1280×720 (benchmarks/bench_gradients.py, the loaded 2-core machine, one
-    process): the gradient of the whole render with respect to the thickness maps 1.97× the
-    forward pass, with respect to the 21 scalars 3.06×, where JAX's transpose of the chunked
-    JVP (the rule before) took 6.32× and 6.51× (after main's faster SSS blur, on a quieter
-    machine: 2.25× and 3.15×; the render without the spectral pass is at 2× on its own, this
-    pass at about 2.3×: the primal's three products and the transpose's one pass, 1.3–1.6×
-    their cost). Later, with the S and K cotangents through q (`_layer_SK`), on a 2-core
-    AVX2 machine: scalars 2.8–3.1×, maps 2.3–2.4× (benchmarks/RESULTS.md, issue 19). Then
-    with two chunks a step side by side (`STREAMS`), the stack's adjoints divided and the S
-    and K sums as products (2-core AVX-512, ABBA): maps 1.91–2.05×, scalars 2.28–2.53×.
-    Since 2026-12-04 a layer absent from a whole chunk skips its S and K sums (quiet,
-    separate processes: scalars 2.80–2.85× → 2.58–2.62×; maps unchanged). On a GPU
-    (`_cpu_form`): the colours in one program and the loops in wide chunks; on an H200 the
-    forward 1.0–1.1 ms, the gradients 2.1–2.2 ms (maps) and 3.1–3.2 ms (scalars), where the
-    CPU's forms took 1.8 ms, 2.95 ms and 4.2 ms (and 8.3 ms for the scalars with the CPU's
-    chunks). Earlier: plain reverse mode through this forward (the `switch` inside a `map`
-    keeps every branch's residuals) 162× and 21 GB; reverse mode over checkpointed chunks of
-    `_joint` 5.8–14×.
+    and the stack and runs the chain rule back through them: the S and K cotangents
+    through q (`_layer_SK`), two chunks a step side by side (`STREAMS`), the stack's
+    adjoints divided, the S and K sums as products, and a layer absent from a whole chunk
+    skipping its S and K sums. The gradient of the makeup face's render with respect to the
+    thickness maps or the scalars then costs about two to three forward passes; JAX's own
+    transpose of the chunked JVP costs more, reverse mode over checkpointed chunks of
+    `_joint` several times more, and plain reverse mode through this forward (the `switch`
+    inside a `map` keeps every branch's residuals) two orders of magnitude more and tens of
+    GB. On a GPU (`_cpu_form`): the colours in one program and the loops in wide chunks,
+    quicker there than the CPU's forms. The figures: benchmarks/RESULTS.md
+    (benchmarks/bench_gradients.py).
     """
     if not blurred:
         return _joint(grid, False, X, E, h, h_l, S, K, skin_R)
@@ -316,9 +307,9 @@ def _rules(grid, blurred):
 def _separately(fns):
     """`[f() for f in fns]` (arrays of one shape), each computed as its own XLA program:
     the branches of a `switch` inside a `map`. Computed together, XLA:CPU materialises the
-    work the outputs share as many unfused arrays (measured: three spectral products
-    took 7.5× one); apart, each fuses into one loop and the shared work is just redone
-    (3 products: 2.7× one)."""
+    work the outputs share as many unfused arrays (three spectral products together cost
+    nearly three times what they cost apart); apart, each fuses into one loop and the shared
+    work is just redone."""
     return jax.lax.map(lambda k: jax.lax.switch(k, fns), jnp.arange(len(fns)))
 
 
@@ -331,19 +322,19 @@ def _band(g, M):
 
 def _layer_SK(S, K, X, parts, aR, aT):
     """The cotangents of one KM layer's S and K `(n,)`, summed over texels, from the
-    cotangents `aR, aT (P, n)` of its R0 and T and the intermediates of `km._layer_parts`.
+    cotangents `aR, aT (P, n)` of its R0 and T and the intermediates of `km.layer_parts`.
     With q = β² = K(K + 2S), R0 = Sτ/D and T = sech z/D, D = (S + K)τ + 1, where τ and
     sech z depend on S and K through q only: the cotangent of q per texel and band is
     a_q = a_τ ∂τ/∂q + a_sech ∂sech/∂q with ∂τ/∂q = w/2, ∂sech z/∂q = −X τ sech z/2,
     w = (X sech² z − τ)/β² (= −X³ F(z²) sech² z for small z, F(y) = Σ_k≥1 4^k y^(k−1)/(2k+1)!,
     a series with no branch point at K = 0), and ∂q/∂S = 2K, ∂q/∂K = 2(K + S) are per band:
     so S and K are each one sum over texels of a short expression of the layer's own
-    intermediates (the rule before evaluated the layer again for its partials, with exp and
+    intermediates (rather than evaluating the layer again for its partials, with exp and
     three divisions, in each of the two sums)."""
     R, T, tau, sech, inv_den, small, qs, inv_beta = parts
     SK = S + K
     sech2 = sech * sech
-    w = jnp.where(small, -(X * X * X) * km._horner(_F_SERIES, qs) * sech2,
+    w = jnp.where(small, -(X * X * X) * km.horner(_F_SERIES, qs) * sech2,
                   (X * sech2 - tau) * (inv_beta * inv_beta))
     aR_d, aT_d = aR * inv_den, aT * inv_den
     a_q = 0.5 * ((aR_d * (S - R * SK) - aT_d * T * SK) * w - aT_d * X * sech * tau)
@@ -361,7 +352,7 @@ _F_SERIES = [4.0 ** k / float(np.prod(np.arange(1, 2 * k + 2, dtype=np.float64))
 def _rowsum(a):
     """`a (P, n)` summed over bands, `(P, 1)`, as a product with ones: XLA:CPU fuses a
     reduction along the short band axis into the elementwise work and runs that loop
-    unvectorised (measured: the backward pass 1.6-1.8× slower than with the product)."""
+    unvectorised (the backward pass is markedly slower than with the product)."""
     if not _cpu_form("sums"):
         return jnp.sum(a, axis=-1, keepdims=True)
     return matmul(a, jnp.ones((a.shape[-1], 1), a.dtype))
@@ -393,7 +384,7 @@ def _cotangents(grid, blurred, X, E, h, h_l, S, K, skin_R, g):
         ga = gt = E * gs
     s = skin_R
     x = [X[i][:, None] for i in range(n_layers)]  # (P, 1) each
-    parts = [km._layer_parts(S[i], K[i], x[i]) for i in range(n_layers)]
+    parts = [km.layer_parts(S[i], K[i], x[i]) for i in range(n_layers)]
     R, T = [p[0] for p in parts], [p[1] for p in parts]
     # The stack from the bottom up (km.stack's order), every partial stack kept.
     accs = [(R[0], T[0], R[0])]
@@ -423,7 +414,7 @@ def _cotangents(grid, blurred, X, E, h, h_l, S, K, skin_R, g):
         T2 = T[i] * T[i]
         # Divided by den, den², not multiplied by their inverses: XLA:CPU then keeps each
         # level's adjoints in memory (a division with several users is not recomputed),
-        # where products were recomputed inside every later consumer, the chain from the
+        # where products would be recomputed inside every later consumer, the chain from the
         # top once per layer's ∂/∂X, ∂/∂S and ∂/∂K.
         aR_l[i] = (a_R * (den2 + T2 * cR * cR) + a_T * T[i] * cT * cR + a_Rb * cT * cT) / den2
         aT_l[i] = (2.0 * a_R * T[i] * cR + a_T * cT) / den
@@ -452,9 +443,8 @@ def _cotangents(grid, blurred, X, E, h, h_l, S, K, skin_R, g):
                  + h_l[i] * sum_D * (1.0 - cover) / COVER_MM)[:, 0]
         # A layer absent from every texel of the chunk (X = 0: τ = 0, so every term is
         # exactly 0) adds nothing to its S and K: the sums are skipped there. On the makeup
-        # face 1.6 layers of 4 are present in a chunk on average; the render's gradient with
-        # respect to its scalars 2.80-2.85× → 2.58-2.62× its forward (separate processes,
-        # alternated; benchmarks/RESULTS.md, issue 19).
+        # face 1.6 layers of 4 are present in a chunk on average, so the render's gradient
+        # with respect to its scalars is quicker for it (benchmarks/RESULTS.md).
         layer_args = (S[i], K[i], x[i], parts[i], aR_l[i], aT_l[i])
         dS[i], dK[i] = jax.lax.cond(
             jnp.any(x[i] != 0), _layer_SK,
@@ -477,8 +467,8 @@ def _cotangents_chunked(grid, blurred, X, E, h, h_l, S, K, skin_R, g, chunk=None
     programs with no data between them, which XLA:CPU's executor runs on two threads at
     once. With one chunk a step, about half of the pass's ~45 fusions (the exps, the
     divisions: cheap per byte) are too small for XLA to split across threads, and one
-    core waited on the other: on 2 cores the pass took 1.4× the three spectral products
-    where on one core it took 1.0× (benchmarks/RESULTS.md, issue 19)."""
+    core waited on the other: on 2 cores the pass took longer, relative to the three
+    spectral products, than on one (benchmarks/RESULTS.md)."""
     P = X.shape[1]
     chunk = chunk or _chunking(P)[0]
     streams = streams or _chunking(P)[1]
