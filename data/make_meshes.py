@@ -9,7 +9,7 @@ box (each box holds one limb and nothing else), and turn it to suit the paper's 
 - foot: the right foot below the ankle (y < 0.10 m, x > 0), turned so that its top faces
   the viewer (+z) and the toes point up (+y): planar projection, like Bando's fig. 6.2.
   The cut at the ankle is capped (`cap_holes`: a low dome over each boundary loop), so that
-  the open leg is not seen as a dark cavity (issue 14);
+  the open leg is not seen as a dark cavity;
 - arm: the right arm from below the shoulder to the wrist (0.30 m < x < 0.70 m), turned so
   that its axis is the y axis through the origin: cylindrical projection, like fig. 6.3.
   Its two ends are cut square across the axis (`square_ends`), so that the side view shows

@@ -95,7 +95,7 @@ def read_samples(path) -> BRDFSamples:
                              "cosmetic's measurement goes to 'jaxskin calibrate', skin "
                              "spectra to 'jaxskin fit-skin'", path) from None
         misspelt = _misspelt_header(Path(path)) if "no header row" in str(e) else None
-        if misspelt is not None:  # was "no header row" for a header with a typo (a trial)
+        if misspelt is not None:  # a header with a typo: named, not "no header row"
             line, cell = misspelt
             raise InputError(f"unknown column{_nearest(cell)}; expected {_EXPECTED}", path,
                              line, cell) from None

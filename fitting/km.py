@@ -104,9 +104,9 @@ def identifiable(m: Measurement, noise: float = DEFAULT_NOISE) -> np.ndarray:
 
 # Identifiable bands count in runs of at least this many (`_runs`): noise
 # alone lifts a band over 3σ now and then (0.3 % of readings), and such a lone band, its S
-# fitted to noise, anchored the interpolation of log S across its neighbours (a noisy 1 nm
-# lipstick: S 1.7 /mm at 426 nm where the truth is 140, a magenta blush; a newcomer's
-# trial). Real spectra change smoothly: an identifiable stretch spans many bands.
+# fitted to noise, would anchor the interpolation of log S across its neighbours (a noisy
+# 1 nm lipstick gave S 1.7 /mm at 426 nm where the truth is 140: a magenta blush). Real
+# spectra change smoothly: an identifiable stretch spans many bands.
 MIN_RUN = 3
 
 

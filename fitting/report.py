@@ -34,7 +34,7 @@ def as_rendered(wl, r: KMFit, extrapolate: str, x) -> tuple[np.ndarray, np.ndarr
 
 def far_extrapolation(m, result, how, grid) -> list[str]:
     """Where `--extrapolate linear` carries S or K more than tenfold beyond the data (a
-    500-600 nm file took K from 2.4 to 0.003 per mm at 780 nm, without a word; a trial)."""
+    500-600 nm file can take K from 2.4 to 0.003 per mm at 780 nm: said, not silent)."""
     wl = m.wavelength_nm
     if how != "linear":
         return []

@@ -276,8 +276,8 @@ def write_csv(result: SkinFit, path) -> None:
 def _cell(text: str) -> str:
     """A name as a CSV cell: quoted where it holds a comma, a quote or a line break (inner
     quotes doubled), and led by `'` where it starts like a spreadsheet formula (`=`, `+`,
-    `-`, `@`, a tab or a return: a spectrum named `=cmd|...` would have run as one; a
-    trial), as OWASP advises for CSV files."""
+    `-`, `@`, a tab or a return: a spectrum named `=cmd|...` would run as one in a
+    spreadsheet), as OWASP advises for CSV files."""
     if text[:1] in ("=", "+", "-", "@", "\t", "\r"):
         text = "'" + text
     if any(ch in text for ch in ',"\n\r'):

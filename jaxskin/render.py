@@ -103,8 +103,8 @@ def _prepare(config: SceneConfig) -> Prepared:
                      config.rotate, config.image_height, config.zoom, config.center)
     # view_mask: the samples that see the mesh (the alpha); view_shaded: of those, the ones
     # that see a triangle's front (colour is sampled there; the inside of an open mesh,
-    # seen through its opening, is black: it was shaded as the outside, lit from the wrong
-    # side, a trial)
+    # seen through its opening, is black: shaded as the outside, it would be lit from the
+    # wrong side)
     arrays = {"normals": s.normals, "mask": s.mask, "tex": jnp.asarray(view.tex),
               "view_mask": jnp.asarray(view.mask), "view_shaded": jnp.asarray(view.shaded),
               "pad": jnp.asarray(pad_index(s.tmap.raster.mask, s.tmap.wrap_x), jnp.int32)}
@@ -232,7 +232,7 @@ def _strong(params: dict) -> dict:
     weakly typed value, a second program for `_render` (0.7-0.8 s on the 32² hand) where a
     new array value reuses the first, and a list failed inside (`light.direction`). One
     dtype: a single float64 value among float32 ones made the cosmetics model's branches
-    disagree (a TypeError from `lax.switch`, a newcomer's trial)."""
+    disagree (a TypeError from `lax.switch`)."""
     def plain(v):
         return type(v) in (list, tuple) or (isinstance(v, (int, float))
                                             and not isinstance(v, bool))
@@ -288,14 +288,14 @@ def _check_ranges(params: dict, specs: dict) -> None:
     """Concrete scalars and `light.direction` in `params` checked against their scene keys'
     ranges (`specs`: key → its scene key, `_known_keys`), as `load_scene` checks them: out
     of range the models give unphysical numbers without an error (a negative thickness:
-    pixels of −2e19; a zero light direction: NaN), a newcomer's trial. Traced values
+    pixels of −2e19; a zero light direction: NaN). Traced values
     (inside jit, grad, vmap) cannot be checked here."""
     for key, value in params.items():
         spec = specs.get(key)
         if spec is None or isinstance(value, jax.core.Tracer):
             continue
         v = np.asarray(value)
-        if v.dtype == np.bool_:  # True rendered as 1.0 (a trial): a slip, not a number
+        if v.dtype == np.bool_:  # True would render as 1.0: a slip, not a number
             raise ValueError(f"params[{key!r}]: expected a number, got {value!r}")
         if not np.issubdtype(v.dtype, np.floating):
             v = v.astype(np.float64)
@@ -303,8 +303,8 @@ def _check_ranges(params: dict, specs: dict) -> None:
             if not (np.all(np.isfinite(v)) and np.any(v != 0)):
                 raise ValueError(f"params[{key!r}]: expected a finite, non-zero 3-vector, got "
                                  f"{v.tolist()}")
-        # the ends rounded as the value is: float32(0.1) is above the float64 0.1, and a
-        # scene at a range end failed here (a newcomer's trial); NaN fails too
+        # the ends rounded as the value is: float32(0.1) is above the float64 0.1, so a
+        # scene at a range end would fail here otherwise; NaN fails too
         elif not (v.dtype.type(spec.lo) <= v <= v.dtype.type(spec.hi)):
             raise ValueError(f"params[{key!r}]: must be in [{spec.lo:g}, {spec.hi:g}] (the "
                              f"scene key's range), got {float(v):.6g}")
