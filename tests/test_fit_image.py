@@ -186,7 +186,7 @@ def test_a_map_param_equals_the_scene_map_it_replaces(tmp_path):
 def test_total_variation_by_hand_and_gradient(x64):
     """The prior on a 2×3 map, all texels on the mesh: 7 pairs (4 across, 3 down)."""
     m = jnp.asarray([[0.0, 1.0, 1.0], [0.0, 0.0, 3.0]])
-    pairs = jnp.asarray(np.stack(fi._pairs(np.ones((2, 3), bool))))
+    pairs = jnp.asarray(np.stack(fi._loss.texel_pairs(np.ones((2, 3), bool))))
     eps = 1e-3
     d = np.array([1.0, 0.0, 0.0, 3.0, 0.0, 1.0, 2.0])  # across (rows), then down
     expected = np.mean(np.sqrt(d ** 2 + eps ** 2) - eps)
@@ -199,11 +199,11 @@ def test_transforms_invert_and_respect_the_bounds(x64):
     layer = fi.FitKey("layer.blush.map", "map", 0.0, 10.0, "layer.blush.thickness_mm",
                       "sigmoid")
     for fk, unit, values in ((blinn, 1.0, [0.01, 0.5, 0.99]), (layer, 0.02, [1e-4, 1.0, 40])):
-        z = fi._to_z(fk, np.asarray(values), unit)
-        np.testing.assert_allclose(fi._from_z(fk, jnp.asarray(z), unit), values, rtol=1e-10)
+        z = fi._keys.to_z(fk, np.asarray(values), unit)
+        np.testing.assert_allclose(fi._keys.from_z(fk, jnp.asarray(z), unit), values, rtol=1e-10)
         hi = fk.hi / unit if fk.kind == "map" else fk.hi
-        assert float(fi._from_z(fk, jnp.asarray(60.0), unit)) <= hi
-        assert float(fi._from_z(fk, jnp.asarray(-60.0), unit)) >= 0.0
+        assert float(fi._keys.from_z(fk, jnp.asarray(60.0), unit)) <= hi
+        assert float(fi._keys.from_z(fk, jnp.asarray(-60.0), unit)) >= 0.0
 
 
 def test_degenerate_pairs_warn():
@@ -410,7 +410,7 @@ def _blocks_and_exact(overrides, gain):
     J = np.asarray(jax.jit(jax.vmap(along))(jnp.asarray(chosen)))  # (40, 2, H, W, 3)
     exact = np.einsum("tlhwc,tmhwc->tlm", J, J)
     c0 = render.texture_colour(sc.config, p, a)
-    _, slope = fi._display_slope(sc.config, p, a, c0)
+    _, slope = fi._texel.display_slope(sc.config, p, a, c0)
     B, _ = fi.texel_blocks(sc.config, p, a, names, [p[n] for n in names], slope ** 2,
                            fi.blur_gain(sc.config, a) if gain else None)
     return np.asarray(B)[chosen], exact
