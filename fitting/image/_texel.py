@@ -221,7 +221,7 @@ def pcg(matvec, b, precondition, rtol: float, steps: int):
 
 
 def gauss_newton(config, keys, units, unpack, residual, loss, z0, args, smooth, steps,
-                  progress):
+                 progress):
     """Levenberg–Marquardt with a block-diagonal Gauss–Newton matrix (`MAP_SOLVER_NOTE`):
     per texel the L × L block of the maps (`texel_blocks`), the TV prior's curvature on
     its diagonal, one dense block for the scalars (forward-mode Jacobian through the whole
@@ -237,9 +237,34 @@ def gauss_newton(config, keys, units, unpack, residual, loss, z0, args, smooth, 
     gain = blur_gain(config, args["arrays"])
     n_pairs = int(args["pairs"].shape[1])
     args = {**args, "view": tuple(jnp.asarray(v) for v in view_matrix(config))}
+    linearise = _linearise(config, maps, units, others, unpack, residual, gain)
+    propose = _propose(maps, units, others, unpack, loss, smooth, n_pairs)
+    z, lam = z0, 1e-2
+    clock = time.perf_counter()
+    # The start's loss and reverse pass: `propose` with a zero gradient (a zero step), so
+    # that `back` has the structure of every try's and `linearise` compiles once.
+    n_others = _flat_others(z, others)[0].size if others else 0
+    _, f, _, back = propose(z, jax.tree.map(jnp.zeros_like, z),
+                            jnp.zeros((z[names[0]].size, len(names), len(names)), jnp.float32),
+                            jnp.zeros((n_others, n_others), jnp.float32), jnp.float32(lam),
+                            args)
+    f, g, B, S = linearise(z, f, back, args)
+    return _damped_tries(linearise, propose, z, lam, f, g, B, S, args, steps, progress, clock)
 
-    def flat_others(z):
-        return jax.flatten_util.ravel_pytree({k: z[k] for k in others})
+
+def _flat_others(z, others):
+    """The scalars' and vectors' coordinates `others` of `z` as one flat vector, and its
+    unflattening."""
+    return jax.flatten_util.ravel_pytree({k: z[k] for k in others})
+
+
+def _linearise(config, maps, units, others, unpack, residual, gain):
+    """The jitted `linearise(z, f, back, args) -> (f, g, B, S)`: at `z`, whose loss `f` and
+    reverse pass `back` the accepted try left, the gradient `g`, the maps' per-texel blocks
+    `B (Ht·Wt, L, L)` of the data term's Gauss–Newton matrix (`texel_blocks`' parts, with the
+    sigmoid's tangents) and the scalars' dense block `S` (forward-mode Jacobian of the
+    residual through the whole render)."""
+    names = [fk.key for fk in maps]
 
     @jax.jit
     def linearise(z, f, back, args):
@@ -254,7 +279,7 @@ def gauss_newton(config, keys, units, unpack, residual, loss, z0, args, smooth, 
         d = (slope * args["sqrt_w"]) ** 2
         B = 2.0 * _blocks(dc, tangents, view_diagonal(config, d, args["view"]))
         if others:
-            x0, unflat = flat_others(z)
+            x0, unflat = _flat_others(z, others)
 
             def r_of(x):
                 return residual({**z, **unflat(x)}, args)[0].reshape(-1)
@@ -265,46 +290,32 @@ def gauss_newton(config, keys, units, unpack, residual, loss, z0, args, smooth, 
             S = jnp.zeros((0, 0), jnp.float32)
         return f, g, B, S
 
-    def prior_of_maps(ms, args):  # the prior as a function of the maps' values m
-        return smooth * sum(total_variation(m, args["pairs"]) for m in ms)
+    return linearise
+
+
+def _propose(maps, units, others, unpack, loss, smooth, n_pairs):
+    """The jitted `propose(z, g, B, S, lam, args) -> (new, f_new, pred, back)`: the damped
+    step from `z` (gradient `g`, blocks `B` and `S` from `linearise`, damping `lam`), the
+    try `new`, its loss `f_new`, the decrease the model predicts `pred`, and the try's
+    reverse pass `back` (a pytree)."""
+    names = [fk.key for fk in maps]
 
     @jax.jit
     def propose(z, g, B, S, lam, args):
-        L = len(names)
         p = unpack(z)
         ms = [p[k] for k in names]
         shape = ms[0].shape
         t = jnp.stack([(m * (1.0 - m / (fk.hi / units[fk.key]))).reshape(-1)
                        for m, fk in zip(ms, maps, strict=True)], axis=-1)  # dm/dz (T, L)
         gm = jnp.stack([g[k].reshape(-1) for k in names], axis=-1)  # (T, L)
-        # In units of the largest curvature (float32: the raw blocks are ~1e-7 at 256²).
-        scale = jnp.maximum(jnp.max(jnp.diagonal(B, axis1=1, axis2=2)), 1e-30)
-        Bs, gs_m = B / scale, gm / scale
-        dB = jnp.diagonal(Bs, axis1=1, axis2=2)
-        Bd = Bs + (lam * dB + 1e-6)[..., None] * jnp.eye(L, dtype=B.dtype)
-
-        def hvp_prior(v):  # Jᵀ H_TV J v, J = dm/dz: the prior's Gauss–Newton part, exact
-            tv = [(t[:, i] * v[:, i]).reshape(shape) for i in range(L)]
-            _, h = jax.jvp(lambda m: jax.grad(prior_of_maps)(m, args), (ms,), (tv,))
-            return jnp.stack([hi.reshape(-1) for hi in h], axis=-1) * t
-
-        def matvec(v):  # (the data term's blocks, damped, + the prior's Hessian) v
-            return jnp.einsum("tlm,tm->tl", Bd, v) + hvp_prior(v) / scale
-
-        inv = jnp.linalg.inv(Bd + jax.vmap(jnp.diag)(B_prior_diag(t, ms, args) / scale))
-        x = pcg(matvec, -gs_m, lambda v: jnp.einsum("tlm,tm->tl", inv, v), CG_RTOL, CG_STEPS)
-        step = jnp.clip(x, -STEP_MAX, STEP_MAX)
-        pred = -(jnp.sum(gm * step) + 0.5 * (jnp.einsum("tl,tlm,tm->", step, B, step)
-                                             + jnp.sum(step * hvp_prior(step))))
+        step, pred = _map_step(ms, t, gm, B, lam, args, smooth, n_pairs)
         new = dict(z)
         for i, k in enumerate(names):
             new[k] = z[k] + step[:, i].reshape(shape)
         if others:
-            x0, unflat = flat_others(z)
-            gs, _ = flat_others(g)
-            dS = jnp.diag(S)
-            Sd = S + jnp.diag(lam * dS + 1e-6 * jnp.max(dS) + 1e-30)
-            ds = -jnp.linalg.solve(Sd, gs)
+            x0, unflat = _flat_others(z, others)
+            gs, _ = _flat_others(g, others)
+            ds = _scalar_step(S, gs, lam)
             pred = pred - (gs @ ds + 0.5 * ds @ S @ ds)
             new.update(unflat(x0 + ds))
         # The loss at the try, with its reverse pass kept (`back`, a pytree): if the try is
@@ -312,27 +323,71 @@ def gauss_newton(config, keys, units, unpack, residual, loss, z0, args, smooth, 
         f_new, back = jax.vjp(lambda z: loss(z, args)[0], new)
         return new, f_new, pred, back
 
-    def B_prior_diag(t, ms, args):  # the diagonal of the prior's Gauss–Newton matrix
-        a, b = args["pairs"]
-        out = []
-        for i, m in enumerate(ms):
-            flat = m.reshape(-1)
-            dd = flat[a] - flat[b]
-            c = PRIOR_EPS ** 2 / (dd * dd + PRIOR_EPS ** 2) ** 1.5 * smooth / n_pairs
-            h = jnp.zeros_like(flat).at[a].add(c).at[b].add(c)
-            out.append(h * t[:, i] ** 2)
-        return jnp.stack(out, axis=-1)
+    return propose
 
-    z, lam = z0, 1e-2
-    clock = time.perf_counter()
-    # The start's loss and reverse pass: `propose` with a zero gradient (a zero step), so
-    # that `back` has the structure of every try's and `linearise` compiles once.
-    n_others = flat_others(z)[0].size if others else 0
-    _, f, _, back = propose(z, jax.tree.map(jnp.zeros_like, z),
-                            jnp.zeros((z[names[0]].size, len(names), len(names)), jnp.float32),
-                            jnp.zeros((n_others, n_others), jnp.float32), jnp.float32(lam),
-                            args)
-    f, g, B, S = linearise(z, f, back, args)
+
+def _map_step(ms, t, gm, B, lam, args, smooth, n_pairs):
+    """The maps' damped step `(T, L)` in their coordinates z and the decrease its model
+    predicts: the data term's blocks `B` damped by `lam` plus the TV prior's exact
+    Gauss–Newton matrix, solved by CG (`pcg`) preconditioned by the inverse blocks with the
+    prior's diagonal; each coordinate's change clipped to `STEP_MAX`. `ms`: the maps'
+    values, `t (T, L)` their dm/dz, `gm (T, L)` the gradient."""
+    L = len(ms)
+    shape = ms[0].shape
+
+    def prior_of_maps(ms, args):  # the prior as a function of the maps' values m
+        return smooth * sum(total_variation(m, args["pairs"]) for m in ms)
+
+    # In units of the largest curvature (float32: the raw blocks are ~1e-7 at 256²).
+    scale = jnp.maximum(jnp.max(jnp.diagonal(B, axis1=1, axis2=2)), 1e-30)
+    Bs, gs_m = B / scale, gm / scale
+    dB = jnp.diagonal(Bs, axis1=1, axis2=2)
+    Bd = Bs + (lam * dB + 1e-6)[..., None] * jnp.eye(L, dtype=B.dtype)
+
+    def hvp_prior(v):  # Jᵀ H_TV J v, J = dm/dz: the prior's Gauss–Newton part, exact
+        tv = [(t[:, i] * v[:, i]).reshape(shape) for i in range(L)]
+        _, h = jax.jvp(lambda m: jax.grad(prior_of_maps)(m, args), (ms,), (tv,))
+        return jnp.stack([hi.reshape(-1) for hi in h], axis=-1) * t
+
+    def matvec(v):  # (the data term's blocks, damped, + the prior's Hessian) v
+        return jnp.einsum("tlm,tm->tl", Bd, v) + hvp_prior(v) / scale
+
+    prior_diag = _prior_diagonal(t, ms, args["pairs"], smooth, n_pairs)
+    inv = jnp.linalg.inv(Bd + jax.vmap(jnp.diag)(prior_diag / scale))
+    x = pcg(matvec, -gs_m, lambda v: jnp.einsum("tlm,tm->tl", inv, v), CG_RTOL, CG_STEPS)
+    step = jnp.clip(x, -STEP_MAX, STEP_MAX)
+    pred = -(jnp.sum(gm * step) + 0.5 * (jnp.einsum("tl,tlm,tm->", step, B, step)
+                                         + jnp.sum(step * hvp_prior(step))))
+    return step, pred
+
+
+def _prior_diagonal(t, ms, pairs, smooth, n_pairs):
+    """The diagonal `(T, L)` of the TV prior's Gauss–Newton matrix in the coordinates z
+    (`t`: dm/dz), for the preconditioner."""
+    a, b = pairs
+    out = []
+    for i, m in enumerate(ms):
+        flat = m.reshape(-1)
+        dd = flat[a] - flat[b]
+        c = PRIOR_EPS ** 2 / (dd * dd + PRIOR_EPS ** 2) ** 1.5 * smooth / n_pairs
+        h = jnp.zeros_like(flat).at[a].add(c).at[b].add(c)
+        out.append(h * t[:, i] ** 2)
+    return jnp.stack(out, axis=-1)
+
+
+def _scalar_step(S, gs, lam):
+    """The scalars' damped Levenberg–Marquardt step: `S` (their dense block) with `lam`
+    times its diagonal added, solved for the gradient `gs`."""
+    dS = jnp.diag(S)
+    Sd = S + jnp.diag(lam * dS + 1e-6 * jnp.max(dS) + 1e-30)
+    return -jnp.linalg.solve(Sd, gs)
+
+
+def _damped_tries(linearise, propose, z, lam, f, g, B, S, args, steps, progress, clock):
+    """The tries from `z` (loss `f`, linearised as `g, B, S`, damping `lam`): a try whose
+    loss falls, as its model predicted, is accepted and relinearised (Nielsen's update of
+    `lam`); one that does not is rejected and retried with more damping. Returns z, the
+    loss history (per try) and the number of tries."""
     nu, history = 2.0, []
     while len(history) < steps:
         if _DEBUG:
