@@ -104,8 +104,8 @@ def fit_keys(scene: Scene, text: str, where: str = "--fit") -> tuple[FitKey, ...
             layers = [layer.name for layer in scene.layers]
             layer = key.split(".")[1] if key.startswith("layer.") and key.count(".") >= 2 \
                 else None
-            if layer is not None and layer not in layers:  # said "not used by this scene's
-                # material model" (a trial)
+            # A layer the scene lacks: say so, rather than "not used by the material model".
+            if layer is not None and layer not in layers:
                 near = difflib.get_close_matches(key, fittable, n=1, cutoff=0.5)
                 why = (f"names no layer of this scene (its layers: {', '.join(layers) or 'none'})"
                        + (f"; did you mean '{near[0]}'?" if near else ""))
@@ -179,8 +179,8 @@ def start_scale(z) -> float:
     coordinate moves the value as much at the start as a change of z does mid-range. A
     start at a range's end (f held at 1e-3: `skin.melanin = 0`, a thickness of 0) has
     the sigmoid's slope near 0 there, and Levenberg–Marquardt's damping, the same for
-    every coordinate, took steps so small that it stopped at once: melanin 0 → 0.003 for
-    a truth of 0.3, a blush thickness 0 → 0.01 mm for 0.04 (a trial)."""
+    every coordinate, takes steps so small there that it stops at once, near the start
+    (melanin 0.003 for a truth of 0.3)."""
     f = 1.0 / (1.0 + math.exp(-float(z)))
     return 4.0 * f * (1.0 - f)
 

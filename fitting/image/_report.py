@@ -35,8 +35,9 @@ def write_report(result: ImageFit, target, w, maps: dict, path, title: str = "")
     ax = axes[0, 3]
     ax.semilogy(np.arange(1, len(result.history) + 1), result.history)
     finite = [v for v in result.history if np.isfinite(v) and v > 0]
-    if finite and max(finite) < 10 * min(finite):  # at least a decade shown: a flat loss
-        ax.set_ylim(min(finite) / 4, max(finite) * 4)  # had every tick "4.52176×10⁻⁴" (a trial)
+    # At least a decade shown: over less, every tick of a flat loss reads "4.52176×10⁻⁴".
+    if finite and max(finite) < 10 * min(finite):
+        ax.set_ylim(min(finite) / 4, max(finite) * 4)
     ax.set_xlabel("step")
     ax.set_ylabel("loss")
     ax.set_title("loss")
@@ -48,7 +49,7 @@ def write_report(result: ImageFit, target, w, maps: dict, path, title: str = "")
         a = axes[1 + i // ncol, i % ncol]
         im = a.imshow(np.where(tmask, values, np.nan), cmap="viridis")
         # Key and unit on two lines: on one, "skin.melanin_fraction_map (skin.melanin_fraction)"
-        # was wider than its panel and cut off at the figure's left edge.
+        # is wider than its panel and cut off at the figure's left edge.
         titles.append((a, a.set_title(f"{key}\n({unit})")))
         a.set_axis_off()
         fig.colorbar(im, ax=a, shrink=0.8)

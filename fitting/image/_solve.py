@@ -164,8 +164,8 @@ def fit(config, params: dict, target, w, keys: tuple[FitKey, ...], steps: int = 
     else:
         if name == "lm":
             # |Δz| < 1e-4 of z (2.5e-5 of the range) and the loss changing by < 1e-4 of itself;
-            # an absolute 1e-4 on the loss (a sum of squares of ~1e-3 on a face) once ended
-            # a fit after its first, small step, far from the answer (skin.subject 44)
+            # the absolute tolerance tiny: the loss is a sum of squares of ~1e-3 on a face, and
+            # an absolute 1e-4 ends a fit after its first, small step, far from the answer
             s = optx.LevenbergMarquardt(rtol=1e-4, atol=1e-8)
             fn = residual
         else:

@@ -37,8 +37,8 @@ MAP_SOLVER_NOTE = (
 STEP_MAX = 1.0  # the Gauss–Newton step's largest change of a coordinate (e ≈ 2.7× a texel)
 GN_RTOL = 1e-5  # stop when the Gauss–Newton model predicts less than this share of the loss
 # The inner conjugate-gradient solve of each Gauss–Newton step: an inexact Newton step, to
-# 0.1 of the right-hand side (at 512² on the makeup face: 1-2 iterations and the same
-# predicted decrease to 0.3 %, where 1e-3 ran the 100 iterations, 1.9 s a step).
+# 0.1 of the right-hand side (1-2 iterations for the predicted decrease of a tight solve, to
+# 0.3 %, where 1e-3 runs all 100; benchmarks/RESULTS.md, 'fit-image').
 CG_RTOL = 0.1
 CG_STEPS = 100  # … and its most iterations (each one texture-space prior HVP: cheap)
 _DEBUG = bool(__import__("os").environ.get("JAXSKIN_FIT_DEBUG"))
@@ -103,9 +103,9 @@ def texel_jacobian(config, params: dict, arrays, names, gain=None):
     (the SSS blur aside, below), so the Jacobian is diagonal over texels and one reverse-mode
     pass per colour channel (cotangent: that channel at every texel) gives every texel's
     derivatives for all L maps at once: 3 VJPs whatever L, sharing one forward pass. (Forward
-    mode, one JVP per map along the whole map, gives the same numbers; measured at 512² on
-    the makeup face: a JVP of the cosmetics colour costs ~4× the forward pass, a VJP ~2×, so
-    three JVPs 10-13 s and the three VJPs 1.8 s.) The SSS blur spreads the part of a texel's
+    mode, one JVP per map along the whole map, gives the same numbers at a higher cost: a
+    JVP of the cosmetics colour costs ~4× the forward pass, a VJP ~2×; benchmarks/RESULTS.md,
+    'fit-image'.) The SSS blur spreads the part of a texel's
     response that enters the skin over its neighbours: its derivative is taken as `gain` ×
     identity (`blur_gain`, its own-texel root sum of squares); None: the blur's own
     transpose, which sums the shares the texel receives from its neighbours (right for a
@@ -191,8 +191,9 @@ def display_slope(config, params, arrays, c0):
 def pcg(matvec, b, precondition, rtol: float, steps: int):
     """Preconditioned conjugate gradients for `matvec(x) = b` (symmetric positive
     semidefinite), from 0, until ‖r‖ ≤ rtol ‖b‖ or `steps` iterations; a direction of zero
-    curvature ends it (the iterate so far is kept). (`lineax.CG` with this preconditioner
-    returned NaN at 256² in float32 where this does not; measured on the makeup face.)"""
+    curvature ends it (the iterate so far is kept). (Not `lineax.CG`: with this
+    preconditioner it returns NaN in float32 at 256² on the makeup face, where this does
+    not.)"""
     def dot(u, v):
         return jnp.sum(u * v)
 
