@@ -185,7 +185,7 @@ def test_a_map_param_equals_the_scene_map_it_replaces(tmp_path):
 def test_total_variation_by_hand_and_gradient(x64):
     """The prior on a 2×3 map, all texels on the mesh: 7 pairs (4 across, 3 down)."""
     m = jnp.asarray([[0.0, 1.0, 1.0], [0.0, 0.0, 3.0]])
-    pairs = jnp.asarray(np.stack(fi._pairs(np.ones((2, 3), bool))))
+    pairs = jnp.asarray(np.stack(fi._loss.texel_pairs(np.ones((2, 3), bool))))
     eps = 1e-3
     d = np.array([1.0, 0.0, 0.0, 3.0, 0.0, 1.0, 2.0])  # across (rows), then down
     expected = np.mean(np.sqrt(d ** 2 + eps ** 2) - eps)
@@ -198,11 +198,11 @@ def test_transforms_invert_and_respect_the_bounds(x64):
     layer = fi.FitKey("layer.blush.map", "map", 0.0, 10.0, "layer.blush.thickness_mm",
                       "sigmoid")
     for fk, unit, values in ((blinn, 1.0, [0.01, 0.5, 0.99]), (layer, 0.02, [1e-4, 1.0, 40])):
-        z = fi._to_z(fk, np.asarray(values), unit)
-        np.testing.assert_allclose(fi._from_z(fk, jnp.asarray(z), unit), values, rtol=1e-10)
+        z = fi._keys.to_z(fk, np.asarray(values), unit)
+        np.testing.assert_allclose(fi._keys.from_z(fk, jnp.asarray(z), unit), values, rtol=1e-10)
         hi = fk.hi / unit if fk.kind == "map" else fk.hi
-        assert float(fi._from_z(fk, jnp.asarray(60.0), unit)) <= hi
-        assert float(fi._from_z(fk, jnp.asarray(-60.0), unit)) >= 0.0
+        assert float(fi._keys.from_z(fk, jnp.asarray(60.0), unit)) <= hi
+        assert float(fi._keys.from_z(fk, jnp.asarray(-60.0), unit)) >= 0.0
 
 
 def test_degenerate_pairs_warn():
@@ -409,7 +409,7 @@ def _blocks_and_exact(overrides, gain):
     J = np.asarray(jax.jit(jax.vmap(along))(jnp.asarray(chosen)))  # (40, 2, H, W, 3)
     exact = np.einsum("tlhwc,tmhwc->tlm", J, J)
     c0 = render.texture_colour(sc.config, p, a)
-    _, slope = fi._display_slope(sc.config, p, a, c0)
+    _, slope = fi._texel.display_slope(sc.config, p, a, c0)
     B, _ = fi.texel_blocks(sc.config, p, a, names, [p[n] for n in names], slope ** 2,
                            fi.blur_gain(sc.config, a) if gain else None)
     return np.asarray(B)[chosen], exact
@@ -632,21 +632,25 @@ def test_fit_image_warns_when_it_ends_far_above_the_noise(tmp_path, capsys):
     maps.write_image(np.clip(image + rng.normal(0.0, 0.005, image.shape), 0, 1),
                      tmp_path / "t.png")
     for key, warned in (("light.ambient", True), ("material.melanin", False)):
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            code = main(["fit-image", "hand", str(tmp_path / "t.png"), "--fit", key,
-                         "-D", "camera.size=32", "-D", "texture.size=32",
-                         "-o", str(tmp_path / key), "--steps", "10"])
+        code = main(["fit-image", "hand", str(tmp_path / "t.png"), "--fit", key,
+                     "-D", "camera.size=32", "-D", "texture.size=32",
+                     "-o", str(tmp_path / key), "--steps", "10"])
         out, err = capsys.readouterr()
         assert code == 0, err
         assert "the target's noise estimate" in out
-        said = [str(w.message) for w in caught if "noise estimate" in str(w.message)]
+        said = warned_lines(err, "noise estimate")
         assert len(said) == (1 if warned else 0), (key, said)
         if warned:
             assert said[0].startswith("the fit ends at RMS 0.17"), said
 
 
-def test_fit_image_writes_a_unit_light_direction_and_warns_of_a_grey_target(tmp_path):
+def warned_lines(err: str, words: str) -> list[str]:
+    """The command's warning lines on stderr that hold `words`, without their prefix."""
+    return [line.removeprefix("jaxskin: warning: ") for line in err.splitlines()
+            if line.startswith("jaxskin: warning: ") and words in line]
+
+
+def test_fit_image_writes_a_unit_light_direction_and_warns_of_a_grey_target(tmp_path, capsys):
     """The fitted `light.direction` (free while fitting) is written as a unit vector, the
     printed value too; a greyscale target (R = G = B) gets one warning naming the file, a
     colour one none."""
@@ -657,13 +661,11 @@ def test_fit_image_writes_a_unit_light_direction_and_warns_of_a_grey_target(tmp_
     maps.write_image(np.repeat(image.mean(-1, keepdims=True), 3, -1), tmp_path / "grey.png")
     for target, grey in (("colour.png", False), ("grey.png", True)):
         out = tmp_path / target.removesuffix(".png")
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            code = main(["fit-image", "hand", str(tmp_path / target), "--fit",
-                         "light.direction", *[a for o in ov for a in ("-D", o)],
-                         "-o", str(out), "--steps", "8"])
+        code = main(["fit-image", "hand", str(tmp_path / target), "--fit",
+                     "light.direction", *[a for o in ov for a in ("-D", o)],
+                     "-o", str(out), "--steps", "8"])
         assert code == 0
-        said = [str(w.message) for w in caught if "greyscale" in str(w.message)]
+        said = warned_lines(capsys.readouterr().err, "greyscale")
         assert len(said) == grey and all(str(tmp_path / target) in s for s in said), said
         d = np.asarray(load_scene(out / "hand.toml").values["light.direction"])
         assert abs(np.linalg.norm(d) - 1.0) < 1e-6, d
@@ -674,15 +676,14 @@ def test_a_flat_colour_target_ends_with_a_warning_not_a_crash(tmp_path, capsys):
     (ZeroDivisionError, exit 1, after the files were written). Now: exit 0, the warning
     measured against half an 8-bit step, saying why."""
     iio.imwrite(tmp_path / "flat.png", np.full((32, 32, 3), (200, 150, 120), np.uint8))
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        code = main(["fit-image", "hand", str(tmp_path / "flat.png"), "--fit",
-                     "material.melanin", "-D", "camera.size=32", "-D", "texture.size=32",
-                     "-o", str(tmp_path / "out"), "--steps", "3"])
-    assert code == 0, capsys.readouterr().err
-    said = [str(w.message) for w in caught if "fit ends at RMS" in str(w.message)]
+    code = main(["fit-image", "hand", str(tmp_path / "flat.png"), "--fit",
+                 "material.melanin", "-D", "camera.size=32", "-D", "texture.size=32",
+                 "-o", str(tmp_path / "out"), "--steps", "3"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    said = warned_lines(err, "fit ends at RMS")
     assert len(said) == 1 and "half an 8-bit step (0.002; " in said[0], said
-    assert "the target's noise estimate 0" in capsys.readouterr().out
+    assert "the target's noise estimate 0" in out
 
 
 def test_a_jpeg_target_is_warned_about(tmp_path, capsys):
@@ -696,13 +697,12 @@ def test_a_jpeg_target_is_warned_about(tmp_path, capsys):
     maps.write_image(np.clip(image, 0, 1), tmp_path / "t.png")
     Image.open(tmp_path / "t.png").convert("RGB").save(tmp_path / "t.jpg", quality=95)
     for name, words in (("t.jpg", "a JPEG (lossy, chroma subsampled 4:2:0)"), ("t.png", None)):
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            code = main(["fit-image", "hand", str(tmp_path / name), "--fit", "material.melanin",
-                         "-D", "camera.size=32", "-D", "texture.size=32",
-                         "-o", str(tmp_path / name.replace(".", "_")), "--steps", "2"])
-        assert code == 0, capsys.readouterr().err
-        said = [str(w.message) for w in caught if "JPEG" in str(w.message)]
+        code = main(["fit-image", "hand", str(tmp_path / name), "--fit", "material.melanin",
+                     "-D", "camera.size=32", "-D", "texture.size=32",
+                     "-o", str(tmp_path / name.replace(".", "_")), "--steps", "2"])
+        err = capsys.readouterr().err
+        assert code == 0, err
+        said = warned_lines(err, "JPEG")
         assert len(said) == (0 if words is None else 1), said
         if words:
             assert said[0].startswith(f"{tmp_path / name}: {words}: ") and said[0].endswith(
