@@ -69,51 +69,18 @@ def add_parser(sub) -> None:
 def run(args, record: Run) -> int:
     """Fit S(λ), K(λ) of each measurement file; write its material JSON and report."""
     from jaxskin.fitting import km as fit_km
-    from jaxskin.fitting.measurements import read_measurement
 
     noise = fit_km.DEFAULT_NOISE if args.noise is None else args.noise
     outputs = Outputs(args.output, args.files)
-    # Check everything first: a bad file anywhere means nothing is written.
-    measurements, paths = [], []
-    for f in args.files:
-        m = read_measurement(f, thickness_mm=args.thickness, percent=args.percent,
-                             ignore=args.ignore, white_reflectance=args.white_reflectance)
-        check_name(m.name, f, key="name")
-        json_path = outputs.plan(f"{m.name}.json", f)
-        png_path = None if args.no_report else outputs.plan(f"{m.name}.png", f)
-        if not fit_km.identifiable(m, noise).any():
-            fit_km.fit(m, noise=noise)  # raises the InputError that explains why
-        measurements.append(m)
-        paths.append((json_path, png_path))
+    measurements, paths = _read_all(args, outputs, noise)
     record.outputs.append(outputs)
 
     from jaxskin.fitting.report import far_extrapolation, write_report
-    from jaxskin.formats import wavelength_gaps, write_json
+    from jaxskin.formats import write_json
     from jaxskin.spectral import Grid
 
     grid = Grid().wavelengths
-    for m in measurements:
-        for line in m.notes:
-            note(line)
-        wl = m.wavelength_nm
-        if args.extrapolate is None and (wl[0] > grid[0] or wl[-1] < grid[-1]):
-            warn(f"{m.path}: covers {wl[0]:g}-{wl[-1]:g} nm, not the "
-                 f"renderer's {grid[0]:g}-{grid[-1]:g} nm: the material will be refused at "
-                 "render time; pass --extrapolate hold|linear to allow it")
-        share = (min(wl[-1], grid[-1]) - max(wl[0], grid[0])) / (grid[-1] - grid[0])
-        if args.extrapolate is not None and share < 0.5:
-            part = f"{share:.0%} of" if share > 0 else "none of"
-            warn(f"{m.path}: covers {wl[0]:g}-{wl[-1]:g} nm, {part} the "
-                 f"renderer's {grid[0]:g}-{grid[-1]:g} nm: --extrapolate {args.extrapolate} "
-                 "makes up the rest")
-        for line in wavelength_gaps(wl):
-            warn(f"{m.path}: {line}")
-        for line in fit_km.suspect_labels(m, noise):
-            warn(line)
-    if args.thickness is not None and not any({"R", "E"} & set(m.columns)
-                                              for m in measurements):
-        warn(f"--thickness {args.thickness:g} was ignored: no file has a bare "
-             "R (or E) column; each gives its thicknesses in its column names (R_<X>mm)")
+    _warn_about_the_readings(args, measurements, grid, noise)
 
     rows, mismatched = [], []
     fit = functools.partial(fit_km.fit, smooth=args.smooth, noise=noise)
@@ -156,3 +123,52 @@ def run(args, record: Run) -> int:
     print_written(outputs)
     return 0
 
+
+def _read_all(args, outputs: Outputs, noise: float) -> tuple[list, list]:
+    """Every file read and checked, and its outputs planned, before anything is fitted: a
+    bad file anywhere means nothing is written. `(measurements, [(json, png or None)])`."""
+    from jaxskin.fitting import km as fit_km
+    from jaxskin.fitting.measurements import read_measurement
+
+    measurements, paths = [], []
+    for f in args.files:
+        m = read_measurement(f, thickness_mm=args.thickness, percent=args.percent,
+                             ignore=args.ignore, white_reflectance=args.white_reflectance)
+        check_name(m.name, f, key="name")
+        json_path = outputs.plan(f"{m.name}.json", f)
+        png_path = None if args.no_report else outputs.plan(f"{m.name}.png", f)
+        if not fit_km.identifiable(m, noise).any():
+            fit_km.fit(m, noise=noise)  # raises the InputError that explains why
+        measurements.append(m)
+        paths.append((json_path, png_path))
+    return measurements, paths
+
+
+def _warn_about_the_readings(args, measurements, grid, noise: float) -> None:
+    """Each file's notes, and warnings: wavelengths the renderer's grid needs but the file
+    does not cover, gaps, suspect column labels, a `--thickness` no column uses."""
+    from jaxskin.fitting import km as fit_km
+    from jaxskin.formats import wavelength_gaps
+
+    for m in measurements:
+        for line in m.notes:
+            note(line)
+        wl = m.wavelength_nm
+        if args.extrapolate is None and (wl[0] > grid[0] or wl[-1] < grid[-1]):
+            warn(f"{m.path}: covers {wl[0]:g}-{wl[-1]:g} nm, not the "
+                 f"renderer's {grid[0]:g}-{grid[-1]:g} nm: the material will be refused at "
+                 "render time; pass --extrapolate hold|linear to allow it")
+        share = (min(wl[-1], grid[-1]) - max(wl[0], grid[0])) / (grid[-1] - grid[0])
+        if args.extrapolate is not None and share < 0.5:
+            part = f"{share:.0%} of" if share > 0 else "none of"
+            warn(f"{m.path}: covers {wl[0]:g}-{wl[-1]:g} nm, {part} the "
+                 f"renderer's {grid[0]:g}-{grid[-1]:g} nm: --extrapolate {args.extrapolate} "
+                 "makes up the rest")
+        for line in wavelength_gaps(wl):
+            warn(f"{m.path}: {line}")
+        for line in fit_km.suspect_labels(m, noise):
+            warn(line)
+    if args.thickness is not None and not any({"R", "E"} & set(m.columns)
+                                              for m in measurements):
+        warn(f"--thickness {args.thickness:g} was ignored: no file has a bare "
+             "R (or E) column; each gives its thicknesses in its column names (R_<X>mm)")

@@ -93,27 +93,45 @@ def add_parser(sub) -> None:
 def run(args, record: Run) -> int:
     """Check every scene, override, sweep and output name; then render, here or on the
     cluster, and write each unit's files as its result comes back."""
-    import jax
-    import numpy as np
-
     from .. import maps
-    from ..scene import BUILTIN_SCENES, load_scene, parse_override
 
     if args.format == "exr" and not maps.exr_available():
         raise InputError("--format exr needs the OpenEXR bindings: pip install 'jaxskin[exr]'")
-    output = "linear_rgba" if args.format == "exr" else "rgba" if args.alpha else "display"
-    ext = "exr" if args.format == "exr" else "png"
     if len(args.sweep) > 1:
         raise InputError(f"one --sweep at a time for now (got {len(args.sweep)})")
     outputs = Outputs(args.output)
     # Everything checked before any output: every scene, its inputs, the sweep, memory,
-    # the output names (distinct, safe, not an input).
-    scenes = []
+    # the output names (distinct, safe, not an input); then the warnings.
+    scenes = _load_scenes(args)
+    # A sweep over a parameter some of the scenes have: the others are rendered once, with
+    # a warning, as -D does, rather than stopping the batch. None has it: the error.
+    swept = [bool(args.sweep) and sweeps(sc, args.sweep[0]) for sc in scenes]
+    unswept = [bool(args.sweep) and not here and any(swept) for here in swept]
+    plans = _plan(args, scenes, unswept, outputs)
+    _warn_unused(args, scenes, unswept)
+    record.outputs.append(outputs)
+    rows = _render_and_write(args, record, outputs, plans)
+    print(f"{'scene':<16} {'image':>9} {'files':>6} {'time s':>7}")
+    for name, size, n, dt in rows:
+        print(f"{name:<16} {size:>9} {n:>6} {dt:>7.2f}")
+    print_written(outputs)
+    return 0
+
+
+def _ext(args) -> str:
+    return "exr" if args.format == "exr" else "png"
+
+
+def _load_scenes(args) -> list:
+    """Every scene of the command with the `-D` values (one `-D name` for one scene only)."""
+    from ..scene import BUILTIN_SCENES, load_scene
+
     named = [item for item in args.overrides if item.partition("=")[0].strip() == "name"]
     if named and len(args.scenes) > 1:  # every scene's outputs would take the one name
         raise InputError(f"gives all {len(args.scenes)} scenes of the command one name: render "
                          "one scene per command with -D name, or set name in each scene file",
                          f"-D {named[-1]}")
+    scenes = []
     for name in args.scenes:
         with reading(name):
             scenes.append(load_scene(name, args.overrides, flag="-D"))
@@ -121,11 +139,16 @@ def run(args, record: Run) -> int:
             warn(f"'{name}' is the built-in scene; the file {name} here is "
                  f"not read (give ./{name} for it)")
     warn_repeated(args.overrides)
-    # A sweep over a parameter some of the scenes have: the others are rendered once, with
-    # a warning, as -D does, rather than stopping the batch. None has it: the error.
-    swept = [bool(args.sweep) and sweeps(sc, args.sweep[0]) for sc in scenes]
-    unswept = [bool(args.sweep) and not here and any(swept) for here in swept]
-    plans = []
+    return scenes
+
+
+def _plan(args, scenes, unswept, outputs: Outputs) -> list[tuple]:
+    """Each scene's sweep checked, its inputs checked (memory included) and recorded, its
+    base name made, then every output path planned: `(scene, sweep, {kind: path(s)})`."""
+    from ..scene import parse_override
+
+    ext = _ext(args)
+    named = []
     for sc, skip in zip(scenes, unswept, strict=True):
         sweep = [] if skip else [parse_sweep(text, sc) for text in args.sweep]
         for (key, _), text in zip(sweep, args.sweep[:len(sweep)], strict=True):
@@ -139,9 +162,9 @@ def run(args, record: Run) -> int:
         adds = [f".{ext}", ".glb" if args.glb else "", "_normal.png" if args.maps else "",
                 *sweep_suffixes(sweep, ext)]
         room = max(len(a.encode("utf-8")) for a in adds)  # the longest the outputs add
-        plans.append((sc, sweep, base_name(sc, args.overrides, room)))
-    files = []
-    for sc, sweep, base in plans:
+        named.append((sc, sweep, base_name(sc, args.overrides, room)))
+    plans = []
+    for sc, sweep, base in named:
         planned = {}
         if sweep:
             planned["sweep"] = [outputs.plan(base + suffix, sc.source)
@@ -153,9 +176,17 @@ def run(args, record: Run) -> int:
         if args.maps:
             for kind in ("height", "normal", "field"):
                 planned[kind] = outputs.plan(f"{base}_{kind}.png", sc.source)
-        files.append(planned)
-    for sc, skip in zip(scenes, unswept, strict=True):  # after every check: warnings, not
-        idle = idle_map_keys(sc)  # errors (-D serves every scene)
+        plans.append((sc, sweep, planned))
+    return plans
+
+
+def _warn_unused(args, scenes, unswept) -> None:
+    """After every check, warnings rather than errors (`-D` serves every scene): a `-D` or
+    `--sweep` a scene does not use, and what its picture will not show."""
+    from ..scene import parse_override
+
+    for sc, skip in zip(scenes, unswept, strict=True):
+        idle = idle_map_keys(sc)
         for item in unused_overrides(sc, args.overrides):
             if parse_override(item)[0] not in idle:  # an idle map's own line says more
                 warn(f"-D {item} changes nothing in scene {sc.name!r} "
@@ -169,17 +200,22 @@ def run(args, record: Run) -> int:
                  "unswept")
         for line in picture_warnings(sc):
             warn(line)
-    record.outputs.append(outputs)
-    # The units of work: a scene's sweep in batches of batch.SWEEP_BATCH values (one
-    # compiled program per configuration), or the scene's one image; run here or on the
-    # --cluster, the results come back in order and are written here.
-    units, targets = [], []  # targets: (scene index, the unit's output paths)
-    for i, ((sc, sweep, _), planned) in enumerate(zip(plans, files, strict=True)):
+
+
+def _units(args, plans) -> tuple[list, list]:
+    """The units of work: a scene's sweep in batches of `batch.SWEEP_BATCH` values (one
+    compiled program per configuration), or the scene's one image, and its maps; with
+    `(scene index, the unit's output paths or None for maps)` for each."""
+    import jax
+    import numpy as np
+
+    output = "linear_rgba" if args.format == "exr" else "rgba" if args.alpha else "display"
+    units, targets = [], []
+    for i, (sc, sweep, planned) in enumerate(plans):
         params = jax.tree.map(np.asarray, sc.params)
         if sweep:
             (key, values), = sweep
-            batches = batch.sweep_batches(values)
-            for k, chunk in enumerate(batches):
+            for k, chunk in enumerate(batch.sweep_batches(values)):
                 units.append(("images", sc.config, params, key, chunk, output))
                 targets.append((i, planned["sweep"][k * len(chunk):(k + 1) * len(chunk)]))
         else:
@@ -188,28 +224,30 @@ def run(args, record: Run) -> int:
         if args.maps or args.glb:
             units.append(("maps", sc.config, params, args.glb))
             targets.append((i, None))
+    return units, targets
+
+
+def _render_and_write(args, record: Run, outputs: Outputs, plans) -> list[tuple]:
+    """Run the units here or on the `--cluster`; their results come back in order and are
+    written here. Returns a row per scene: `(name, size, files written, seconds)`."""
+
+    units, targets = _units(args, plans)
     seconds, n0 = [0.0] * len(plans), [0] * len(plans)
     rows, empty = [], set()
     with cluster.pool(args.cluster) as pool:
         record.stage = f"rendering {plans[0][0].name}"
         results = pool.map(batch.render_unit, units, desc="render", unit="task")
         for k, ((i, paths), (result, dt)) in enumerate(zip(targets, results, strict=True)):
-            sc, sweep, _ = plans[i]
+            sc, sweep, planned = plans[i]
             t0 = time.perf_counter()
             if k == 0 or targets[k - 1][0] != i:
                 n0[i] = len(outputs.written)
             if paths is None:
-                _write_maps(sc, files[i], outputs, result)
+                _write_maps(sc, planned, outputs, result)
             else:
-                for image, path in zip(result if sweep else [result], paths, strict=False):
-                    bad = int(np.size(image) - np.count_nonzero(np.isfinite(image)))
-                    if bad:  # a NaN is a black pixel in a PNG: never written as a picture
-                        raise FitError(f"the render has {bad} non-finite values (NaN or "
-                                       "infinity: a value outside what float32 holds?); "
-                                       f"{path.name} not written", sc.source)
-                    maps.write_render(image, path, args.format)
-                    outputs.done(path)
-                    if not np.any(image) and i not in empty:  # once per scene
+                for path in _write_images(args, sc, result if sweep else [result], paths,
+                                          outputs):
+                    if i not in empty:  # a black picture, said once per scene
                         empty.add(i)
                         warn(f"{path.name}: {empty_picture(sc)}")
             seconds[i] += dt + time.perf_counter() - t0
@@ -221,11 +259,26 @@ def run(args, record: Run) -> int:
                 following = plans[targets[k + 1][0]][0].name
                 record.stage = (f"making the maps of {following}"
                                 if targets[k + 1][1] is None else f"rendering {following}")
-    print(f"{'scene':<16} {'image':>9} {'files':>6} {'time s':>7}")
-    for name, size, n, dt in rows:
-        print(f"{name:<16} {size:>9} {n:>6} {dt:>7.2f}")
-    print_written(outputs)
-    return 0
+    return rows
+
+
+def _write_images(args, sc, images, paths, outputs: Outputs):
+    """Write each image to its path, one after the other, yielding the path of each
+    all-black one as soon as it is written. A non-finite value is an error (`FitError`),
+    its file not written: a NaN is a black pixel in a PNG, never written as a picture."""
+    import numpy as np
+
+    from .. import maps
+
+    for image, path in zip(images, paths, strict=False):
+        bad = int(np.size(image) - np.count_nonzero(np.isfinite(image)))
+        if bad:
+            raise FitError(f"the render has {bad} non-finite values (NaN or infinity: a value "
+                           f"outside what float32 holds?); {path.name} not written", sc.source)
+        maps.write_render(image, path, args.format)
+        outputs.done(path)
+        if not np.any(image):
+            yield path
 
 
 def _write_maps(sc, planned: dict, outputs: Outputs, result: dict) -> None:
