@@ -185,3 +185,21 @@ def test_samples_from_a_european_spreadsheet_read_as_the_shipped_ones(tmp_path):
     assert samples.notes == (f"{tmp_path / 'bad.csv'}: numbers with a decimal comma "
                              f"({first}) read with a point ({first.replace(',', '.')})",)
     assert plain.notes == ()
+
+
+def test_the_command_notes_the_decimal_commas_and_fits(tmp_path, capsys):
+    """The command prints the reader's note (one line) and fits such a file: the note's
+    line once raised a TypeError inside the command (exit 1, nothing written)."""
+    from jaxskin.cli import main
+
+    lines = SAMPLES.read_text().splitlines()
+    euro = [lines[0]] + [line.replace(",", ";").replace(".", ",") for line in lines[1:400]]
+    path = write(tmp_path, "\n".join(euro) + "\n")
+    out = tmp_path / "out" / "x.json"
+    assert main(["fit-brdf", str(path), "-o", str(out), "--lobes", "1", "--starts", "1",
+                 "--no-report"]) == 0
+    err = capsys.readouterr().err
+    assert [line for line in err.splitlines() if line.startswith("jaxskin: note: ")] == [
+        f"jaxskin: note: {path}: numbers with a decimal comma ({euro[2].split(';')[0]}) read "
+        f"with a point ({euro[2].split(';')[0].replace(',', '.')})"]
+    assert out.is_file()

@@ -10,7 +10,7 @@ from ..io import InputError
 from ..outputs import Outputs
 from ._options import no_report, number, seed
 from ._process import Run
-from ._terminal import warn
+from ._terminal import note, warn
 
 __all__ = ["add_parser", "run"]
 
@@ -59,8 +59,8 @@ def run(args, record: Run) -> int:
                                                       "the report")
     samples = brdf.read_samples(args.file)
     brdf.check_samples(samples, args.lobes)
-    for note in samples.notes:
-        note(note)
+    for line in samples.notes:
+        note(line)
     from .. import resources
 
     resources.check_memory(resources.fit_brdf_bytes(len(samples.f), args.lobes, args.starts),
