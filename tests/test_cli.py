@@ -650,3 +650,12 @@ def test_a_terminal_that_cannot_show_a_name_gets_its_escapes(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert b"o/\\u65e5\\u672c\\u8a9e.png" in proc.stdout, proc.stdout
     assert (tmp_path / "o" / "日本語.png").is_file()
+
+
+def test_a_library_warning_is_one_escaped_line_like_the_commands_own():
+    """The library warns with `warnings.warn`; while a command runs it is shown as the
+    command's own warnings are: one line, its control characters escaped."""
+    from jaxskin.cli._terminal import warning_line
+
+    assert warning_line("map\x1b[2J.png:  stretched\nover", UserWarning, "x.py", 1) == (
+        "jaxskin: warning: map\\x1b[2J.png: stretched over\n")

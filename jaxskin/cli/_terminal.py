@@ -9,16 +9,21 @@ import sys
 
 from ..outputs import control
 
-__all__ = ["escaped_streams", "note", "pipe_safe_stdout", "say", "warn", "warning_line"]
+__all__ = ["escaped", "escaped_streams", "note", "pipe_safe_stdout", "say", "warn",
+           "warning_line"]
+
+
+def escaped(text: str) -> str:
+    """Each control character of `text` as its escape (`\\x1b`, `\\u202e`), so that a
+    message (a file name with a terminal's escape in it, say) cannot drive the terminal."""
+    return "".join(ascii(c)[1:-1] if control(c) else c for c in text)
 
 
 def say(line: str) -> None:
     """One line on stderr, whatever the message holds: newlines become spaces, and any other
-    control character its escape, so that a message (a file name with a terminal's escape
-    in it, say) cannot drive the terminal."""
+    control character its escape (`escaped`)."""
     line = " ".join(line.split()) if len(line.splitlines()) > 1 else line
-    print("".join(ascii(c)[1:-1] if control(c) else c for c in line), file=sys.stderr,
-          flush=True)
+    print(escaped(line), file=sys.stderr, flush=True)
 
 
 def warn(text: str) -> None:
@@ -33,8 +38,9 @@ def note(text: str) -> None:
 
 def warning_line(message, category, filename, lineno, line=None) -> str:
     """A Python warning as one line, `jaxskin: warning: …` (not Python's two with the
-    source): `warnings.formatwarning` while a command runs, for the library's warnings."""
-    return f"jaxskin: warning: {' '.join(str(message).split())}\n"
+    source), its control characters escaped as `warn` escapes them:
+    `warnings.formatwarning` while a command runs, for the library's warnings."""
+    return f"jaxskin: warning: {escaped(' '.join(str(message).split()))}\n"
 
 
 class PipeSafe:
