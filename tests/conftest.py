@@ -24,7 +24,7 @@ import pytest
 # removes it at exit; its workers inherit the variable.
 if "JAXSKIN_TEST_CACHE" not in os.environ:
     # A run killed (`timeout`'s SIGTERM) runs no atexit: its folder, named by its process,
-    # is removed by the next run once that process is gone (30 MB each were left; a trial).
+    # is removed by the next run once that process is gone (each holds some 30 MB).
     for stale in Path(tempfile.gettempdir()).glob("jaxskin-test-cache-*-*"):
         pid = stale.name.split("-")[3]
         try:

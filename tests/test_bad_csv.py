@@ -82,7 +82,7 @@ CASES = [
     ("E columns without E_white", RADIANCE.replace(",E_white", "").replace(",4\n", "\n")
      .replace(",6\n", "\n"), 1, "E_0.1mm", "E_white"),
     ("E_white zero", RADIANCE.replace(",4\n", ",0\n"), 2, "E_white", "> 0"),
-    # an E column relabelled R_inf: its radiance fitted as a reflectance, "perfectly" (a trial)
+    # an E column relabelled R_inf: its radiance would fit as a reflectance, "perfectly"
     ("R among E columns", RADIANCE.replace("E_inf", "R_inf"), 1, "R_inf",
      "a reflectance among radiance columns"),
     ("radiance 1e308", RADIANCE.replace("1.5,", "1e308,"), 3, "E_0.1mm", "radiance"),
@@ -135,8 +135,8 @@ def test_a_windows_1252_export_reads(tmp_path):
 
 @pytest.mark.parametrize("encoding", ["utf-16", "utf-16-le", "utf-16-be", "utf-8-sig"])
 def test_a_unicode_export_with_a_byte_order_mark_reads(tmp_path, encoding):
-    """Windows instrument software saves "Unicode" text: UTF-16 with a byte-order mark (a
-    newcomer's trial: refused as a binary file). Read by the mark, as UTF-8 with one is."""
+    """Windows instrument software saves "Unicode" text: UTF-16 with a byte-order mark, not
+    a binary file. Read by the mark, as UTF-8 with one is."""
     from jaxskin.fitting.measurements import read_measurement
 
     path = tmp_path / "u.csv"

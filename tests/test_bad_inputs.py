@@ -158,7 +158,7 @@ def output_is_input(tmp):
 CASES = {
     # --- TOML scenes
     "toml-syntax": lambda t: scene(t, "name = \n"),
-    # `./hand` was named `hand` in the message, beside "built-in scenes: hand, ..." (a trial)
+    # `./hand` is a path: the message must not name it `hand` beside "built-in scenes: hand"
     "scene-dot-slash-builtin": lambda t: ["render", "./hand", "-o", str(t / "out"), *SMALL],
     # the hand's own field edits on another mesh: the edit's message, and what to do
     "D-mesh-with-the-scenes-edits": lambda t: hand(t, "-D", f"mesh.file={_big_box(t)}"),
@@ -191,28 +191,28 @@ CASES = {
     "name-nul": lambda t: scene(t, 'name = "a\\u0000b"\n'),
     "name-leading-dot": lambda t: scene(t, 'name = ".hidden"\n'),
     "name-empty": lambda t: scene(t, 'name = ""\n'),
-    # a blank name wrote " _texture.size-64_camera.size-32.png" (a newcomer's trial)
+    # a blank name would write " _texture.size-64_camera.size-32.png"
     "name-blank": lambda t: scene(t, 'name = " "\n'),
     "name-trailing-space": lambda t: scene(t, 'name = "hand "\n'),
-    # a right-to-left override disguised the file's name, a line separator broke the
-    # listing, U+009B (a terminal's escape) passed and was echoed raw (a trial)
+    # a right-to-left override disguises the file's name, a line separator breaks the
+    # listing, U+009B (a terminal's escape) would be echoed raw
     "name-bidi-override": lambda t: scene(t, 'name = "x\\u202eyz"\n'),
     "name-line-separator": lambda t: scene(t, 'name = "x\\u2028y"\n'),
     "name-c1-escape": lambda t: ["render", "hand", "-o", str(t / "o"), "-D",
                                  "name=a\u009b31mRED"],
-    # made a folder whose name held a newline (a newcomer's trial)
-    # an edit pointing out of the planar projection's plane gave deep furrows in an
-    # arbitrary direction; a point 173 units away snapped to a vertex (a trial)
+    # an edit pointing out of the planar projection's plane gives deep furrows in an
+    # arbitrary direction; a point 173 units away must not snap to a vertex
     "edit-across-the-plane": lambda t: scene(t, '[mesh]\nfile = "hand"\n[[fields.edit]]\n'
                                             'at = [0, 0.3, 0.15]\nd1 = [0, 0, 1.5]\n'
                                             'd2 = [1, 0, 0]\n'),
     "edit-far-away": lambda t: scene(t, '[mesh]\nfile = "hand"\n[[fields.edit]]\n'
                                     'at = [100, 100, 100]\nd1 = [1, 0, 0]\nd2 = [0, 1, 0]\n'),
+    # an -o with a newline would make a folder whose name holds one
     "out-newline": lambda t: ["render", "hand", "-o", str(t / "new\nline"), *SMALL],
     "out-a-file-name": lambda t: ["calibrate", str(ROOT / "data" / "measurements" /
                                                    "blush_rose.csv"), "-o", str(t / "fit.json")],
-    # a link to nowhere, a link loop, a folder where the image goes: exit 1 after the
-    # render (a trial)
+    # a link to nowhere, a link loop, a folder where the image goes: refused before the
+    # render, not exit 1 after it
     "out-dangling-link": lambda t: ["render", "hand", "-o", _link(t / "dl", t / "nowhere"),
                                     *SMALL],
     "out-link-loop": lambda t: ["render", "hand", "-o", _link(t / "loop", t / "loop"), *SMALL],
@@ -287,19 +287,19 @@ CASES = {
     "material-negative": lambda t: material(t, {**good_material(), "K_per_mm": [
         -1.0] * len(good_material()["K_per_mm"])}),
     "material-nested": lambda t: material(t, "[" * 100000 + "]" * 100000),
-    # a hand edit: a renamed key said "expected a list", a bad entry named no index, a zero
-    # no band (a trial)
+    # a hand edit: a renamed key is named as such (not "expected a list"), a bad entry by
+    # its index, a zero by its band
     "material-key-misspelt": lambda t: material(t, {
         ("S_per_mn" if k == "S_per_mm" else k): v for k, v in good_material().items()}),
     "material-entry-text": lambda t: material(t, {**good_material(), "S_per_mm": [
         1.0, "12,5", *good_material()["S_per_mm"][2:]]}),
     "material-K-zero": lambda t: material(t, {**good_material(), "K_per_mm": [
         1.0, 1.0, 0.0, *good_material()["K_per_mm"][3:]]}),
-    # S of 1e300 passed (finite, > 0) and rendered a NaN, all-black image, exit 0 (a trial)
+    # S of 1e300 is finite and > 0, yet renders a NaN, all-black image, exit 0: refused
     "material-S-huge": lambda t: material(t, {**good_material(), "S_per_mm": [
         1e300] * len(good_material()["S_per_mm"])}),
-    # a fit-brdf output as a layer's material said 'wavelength_nm: expected a list', and a
-    # "model" that is not Kubelka-Munk was not read at all (a trial)
+    # a fit-brdf output as a layer's material is named as one (not 'wavelength_nm: expected
+    # a list'), and a "model" that is not Kubelka-Munk is read, not ignored
     "material-is-a-lafortune-brdf": lambda t: material(t, {
         "model": "lafortune", "diffuse": [0.43, 0.30, 0.33],
         "lobes": [{"Cxy": [-1.0, -1.0, -1.0], "Cz": [0.86, 0.70, 0.57], "n": [64, 64, 44]}]}),
@@ -352,7 +352,7 @@ CASES = {
         "fit-brdf", write(t, "samples.json", (ROOT / "data" / "brdf" / "skin_samples.csv")
                           .read_text()), "-o", str(t / "samples.json")],
     "fit-brdf-given-a-cosmetic": lambda t: ["fit-brdf", measurement(t), "-o", str(t / "f.json")],
-    # a typo in the first column said "no header row" (a trial)
+    # a typo in the first column names the column, not "no header row"
     "fit-brdf-header-typo": lambda t: ["fit-brdf", write(t, "typo.csv", (
         ROOT / "data" / "brdf" / "skin_samples.csv").read_text().replace(
         "theta_in_deg", "theta_in", 1)), "-o", str(t / "f.json")],
@@ -487,7 +487,7 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
     ("out-a-file-name", "-o: expected the folder to write into, got a file name ('fit.json'"),
     ("material-dev-zero", "key 'layer.blush.material': not a regular file: /dev/zero"),
     ("melanin-image-dev-null", "key 'skin.melanin_image': not a regular file: /dev/null"),  # not "expected
-    # a greyscale image file, got ..." (a trial)
+    # a greyscale image file, got ..."
     ("sweep-static-key", "static setting (each value compiles its own program): render each "
                          "value with -D texture.size=VALUE"),
     ("material-wavelength-um", "key 'wavelength_nm': wavelengths 0.38-0.78 must lie in "
@@ -514,7 +514,7 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
                                      "jaxskin fit-brdf; it goes in material.brdf)"),
     ("material-model-unknown", "key 'model': expected \"kubelka-munk\" (or no model key), "
                                "got 'gaussian'"),
-    # said "nope.obj: no such mesh file", naming neither the scene nor the key (a trial)
+    # names the scene and the key, not just "nope.obj: no such mesh file"
     ("mesh-missing", "s.toml: key 'mesh.file': expected a built-in mesh (hand, "),
     ("cli-noise-zero", "argument --noise: expected a finite number > 0"),
     ("name-blank", "' ' starts or ends with a space"),
@@ -536,9 +536,9 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
                               ".size-32.png' goes; move it or choose another -o"),
 ])
 def test_what_the_line_says(case, words, tmp_path, capsys, monkeypatch):
-    """The line names the mistake: '[fields.edit]' said "expected a table with at…" of what
-    is a table; a folder said "no such scene file"; a missing BRDF file given with -D was
-    blamed on the scene file (a newcomer's trial)."""
+    """The line names the mistake: not "expected a table with at…" of a '[fields.edit]'
+    that is a table; not "no such scene file" of a folder; a missing BRDF file given with
+    -D is not blamed on the scene file."""
     monkeypatch.chdir(tmp_path)
     code, err, _ = run(CASES[case](tmp_path), tmp_path, capsys, False)
     assert code == 2 and words in err, err

@@ -96,8 +96,8 @@ def test_gpu_check_script_parses_and_rejects_unknown_arguments():
 
 
 def test_benchmark_help_writes_nothing_and_typos_are_refused(tmp_path, capsys):
-    """`bench_wrinkles.py --help` ran the whole benchmark and rewrote RESULTS.md (a trial):
-    now every option is parsed first; a misspelt one is an error, not a full-size run."""
+    """`bench_wrinkles.py --help` must not run the whole benchmark and rewrite RESULTS.md:
+    every option is parsed first; a misspelt one is an error, not a full-size run."""
     import bench_forms
     import common
     import pytest

@@ -161,8 +161,8 @@ def test_a_channel_stuck_far_above_the_others_is_warned_about(fitted):
 
 
 def test_values_in_other_units_are_warned_about(fitted):
-    """The samples × 255 (8-bit values) fitted to a diffuse albedo of ~100 with no word, and
-    rendered a white hand (a trial): a diffuse albedo above 1 is warned about."""
+    """The samples × 255 (8-bit values) fit to a diffuse albedo of ~100 and render a white
+    hand: a diffuse albedo above 1 is warned about."""
     samples, _ = fitted
     scaled = dataclasses.replace(samples, f=samples.f * 255)
     said = brdf.fit_warnings(brdf.fit(scaled, lobes=1, starts=1))
@@ -172,8 +172,8 @@ def test_values_in_other_units_are_warned_about(fitted):
 
 def test_samples_from_a_european_spreadsheet_read_as_the_shipped_ones(tmp_path):
     """The shipped samples saved by Excel in Europe (';' between cells, decimal commas):
-    `55,701` in the first column was refused as a thousands separator of a wavelength (a
-    review); they read as the same numbers."""
+    `55,701` in the first column is not a thousands separator of a wavelength; they read
+    as the same numbers."""
     lines = SAMPLES.read_text().splitlines()
     euro = [lines[0]] + [line.replace(",", ";").replace(".", ",") for line in lines[1:]]
     samples = brdf.read_samples(write(tmp_path, "\n".join(euro) + "\n"))

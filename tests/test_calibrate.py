@@ -130,11 +130,11 @@ def test_opaque_bands_are_flagged_filled_from_neighbours_and_keep_r_inf():
 
 def test_lone_bands_over_the_noise_do_not_anchor_s():
     """Noise lifts a band of an opaque stretch over 3σ now and then; such a lone band, its
-    S fitted to noise, anchored the interpolation of log S across the stretch (a noisy
-    1 nm lipstick: S 1.7 /mm at 426 nm for a true 140, a magenta blush; a newcomer's
-    trial). Identifiable bands now count in runs of MIN_RUN: none below 590 nm here, and
-    S there within a factor 2 of the truth (1.4-1.6: the first identifiable band's S, held,
-    is itself noisy), where seed 1's lone band at 485 nm put it out by 128x."""
+    S fitted to noise, must not anchor the interpolation of log S across the stretch (a
+    noisy 1 nm lipstick: S 1.7 /mm at 426 nm for a true 140, a magenta blush). Identifiable
+    bands count in runs of MIN_RUN: none below 590 nm here, and S there within a factor 2
+    of the truth (1.4-1.6: the first identifiable band's S, held, is itself noisy), where
+    seed 1's lone band at 485 nm would put it out by 128x."""
     S, K = make_measurements.true_spectra("lipstick_red")
     opaque = WL < 590
     lone = 0
@@ -161,8 +161,8 @@ def test_nothing_identifiable_is_a_clear_error():
 
 @pytest.mark.parametrize("swap", ["thin layers", "R_inf and the thickest", "R_g and R_inf"])
 def test_swapped_labels_are_suspected(swap):
-    """Readings in an order the model cannot produce (a newcomer's trial: the fit ran and
-    said nothing) give one line naming the column; noisy data labelled right gives none."""
+    """Readings in an order the model cannot produce (else the fit runs and says nothing)
+    give one line naming the column; noisy data labelled right gives none."""
     S, K = make_measurements.true_spectra("foundation_beige")
     m = synthetic(S, K, FOUNDATION_MM, BLACK, noise=0.002, seed=4)
     assert fkm.suspect_labels(m, 0.002) == []
@@ -348,8 +348,8 @@ def _without_name(tmp_path, filename, source="foundation_beige"):
 
 
 def test_cli_a_file_name_with_spaces_and_brackets(tmp_path, capsys):
-    """`Lipstick Red (batch 5).csv` (a newcomer's trial: refused, then a crash with exit 1):
-    the material is named lipstick_red_batch_5, and one note line says so."""
+    """`Lipstick Red (batch 5).csv` is neither refused nor a crash with exit 1: the
+    material is named lipstick_red_batch_5, and one note line says so."""
     src = _without_name(tmp_path, "Lipstick Red (batch 5).csv", "lipstick_red")
     out = tmp_path / "out"
     assert main(["calibrate", str(src), "-o", str(out), "--no-report"]) == 0
@@ -641,9 +641,9 @@ def test_no_report_warns_of_an_earlier_runs_report_beside_the_new_fit(tmp_path, 
 
 
 def test_extrapolating_most_of_the_grid_is_warned_about(tmp_path, capsys):
-    """A 500-600 nm measurement with --extrapolate linear was stretched over 380-780 nm
-    without a word, K falling from 9.9 to 0.003 per mm at 780 nm (a trial): the share made
-    up and each tenfold run-away are warned about; hold warns of the share only."""
+    """A 500-600 nm measurement with --extrapolate linear is stretched over 380-780 nm,
+    K falling from 9.9 to 0.003 per mm at 780 nm: the share made up and each tenfold
+    run-away are warned about; hold warns of the share only."""
     lines = (ROOT / "data" / "measurements" / "foundation_beige.csv").read_text().splitlines()
     kept = [x for x in lines if not x[:1].isdigit() or 500 <= float(x.split(",")[0]) <= 600]
     src = tmp_path / "mid.csv"
@@ -663,7 +663,7 @@ def test_extrapolating_most_of_the_grid_is_warned_about(tmp_path, capsys):
 
 def test_far_extrapolation_is_measured_from_the_nearest_datum():
     """Data wholly above 780 nm: the 780 nm end is compared with the first datum (800 nm),
-    not the last (a review: '1200 nm to 780 nm, 240x' for a 1.8x extension)."""
+    not the last (which would say '1200 nm to 780 nm, 240x' for a 1.8x extension)."""
     from jaxskin.fitting.report import far_extrapolation
 
     wl = np.array([800.0, 900.0, 1000.0])
@@ -682,8 +682,8 @@ def test_far_extrapolation_is_measured_from_the_nearest_datum():
 
 
 def test_a_fit_past_what_the_renderer_reads_is_not_written():
-    """S and K above `formats.MAX_SK_PER_MM` are refused by the renderer (float32 made such
-    a render NaN: a trial), so a fit that lands there (films of 1e-11 mm read as mm: S and K
+    """S and K above `formats.MAX_SK_PER_MM` are refused by the renderer (float32 makes
+    such a render NaN), so a fit that lands there (films of 1e-11 mm read as mm: S and K
     5e9 and 2e9 per mm, recovered exactly) is a FitError naming the band, not a material
     the renderer would then refuse."""
     from jaxskin.io import FitError

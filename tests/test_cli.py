@@ -92,10 +92,10 @@ def test_list_names_every_builtin(capsys):
 
 
 def test_a_closed_standard_output_does_not_stop_the_work(tmp_path):
-    """`jaxskin calibrate A B -o DIR | head -2`: the reader goes away, the next print raised
-    BrokenPipeError and calibrate ended with exit 1 "failed unexpectedly while writing"
-    (a newcomer's trial, 2 runs of 3). Here the reader is gone before the first line: exit
-    0, both materials written, nothing on stderr."""
+    """`jaxskin calibrate A B -o DIR | head -2`: the reader goes away, and the next print's
+    BrokenPipeError must not end calibrate with exit 1 "failed unexpectedly while writing".
+    Here the reader is gone before the first line: exit 0, both materials written, nothing
+    on stderr."""
     import json
 
     data = Path(__file__).resolve().parents[1] / "data" / "measurements"
@@ -147,7 +147,7 @@ def test_a_signal_mid_run_stops_cleanly(tmp_path, sig, code):
 def test_a_signal_inside_the_garbage_collector_is_not_lost(tmp_path, monkeypatch, capsys, sig,
                                                           code):
     """A signal that lands while the collector runs JAX's callback (where Python would print
-    the exception as 'Exception ignored' and carry on, exit 0: a CI failure of 2026-11-30)
+    the exception as 'Exception ignored' and carry on, exit 0)
     is held and raised at the command's next stage: exit 130 / 143 and one line."""
     import gc
     import signal
@@ -182,8 +182,8 @@ def test_a_signal_inside_the_garbage_collector_is_not_lost(tmp_path, monkeypatch
 
 @pytest.mark.parametrize("sig, code", [("SIGINT", 130), ("SIGTERM", 143)])
 def test_the_editor_stopped_by_a_signal_exits_as_documented(tmp_path, sig, code):
-    """`jaxskin edit` ended with 0 on Ctrl-C (aiohttp's run_app returns quietly on the
-    KeyboardInterrupt), where every command documents 130 (a trial)."""
+    """`jaxskin edit` must not end with 0 on Ctrl-C (aiohttp's run_app returns quietly on
+    the KeyboardInterrupt): every command documents 130."""
     import signal
 
     pytest.importorskip("aiohttp")
@@ -201,8 +201,8 @@ def test_the_editor_stopped_by_a_signal_exits_as_documented(tmp_path, sig, code)
 
 def test_a_signal_inside_an_import_is_not_lost(tmp_path, monkeypatch, capsys):
     """trimesh wraps its optional imports in `except BaseException`: a SIGINT raised inside
-    one was dropped and the render ran on to exit 0 (a trial). A signal that lands inside
-    an import is held and raised at the next stage."""
+    one would be dropped and the render run on to exit 0. A signal that lands inside an
+    import is held and raised at the next stage."""
     import importlib
     import signal
 
@@ -229,9 +229,9 @@ def test_a_signal_inside_an_import_is_not_lost(tmp_path, monkeypatch, capsys):
 
 @pytest.mark.parametrize("sig, code", [("SIGINT", 130), ("SIGTERM", 143)])
 def test_a_signal_while_the_command_line_loads_ends_it(tmp_path, sig, code):
-    """A signal in the first second (JAX importing) went Python's way: a traceback, an
-    ImportError, a crash, or nothing at all, the command running to exit 0 (a trial). The
-    entry point notes it, and the command ends before any work: one line, 130 / 143."""
+    """A signal in the first second (JAX importing) left to Python gives a traceback, an
+    ImportError, a crash, or nothing at all, the command running to exit 0. The entry
+    point notes it, and the command ends before any work: one line, 130 / 143."""
 
     script = ("import os, signal, sys\n"
               "from jaxskin import _console\n"
@@ -252,8 +252,8 @@ def test_a_signal_while_the_command_line_loads_ends_it(tmp_path, sig, code):
     assert proc.stderr == (f"jaxskin: {word} ({sig}) while checking the inputs; no file was "
                            "written\n"), proc.stderr
     assert not (tmp_path / "out").exists()
-    # after the command, Python's own handlers again (the noting ones swallowed a signal
-    # for the rest of the process: a review)
+    # after the command, Python's own handlers again (the noting ones would swallow a
+    # signal for the rest of the process)
     after = subprocess.run(
         [sys.executable, "-c", "import signal\nfrom jaxskin import _console\n"
          "_console.main(['list'])\n"
@@ -406,8 +406,8 @@ def test_a_key_given_twice_with_D_is_warned_about(capsys):
 
 
 def test_one_number_spelt_two_ways_names_one_file(capsys):
-    """`-D material.melanin=1e-1` and `=0.1` render the same image, and were two files (a
-    trial): a number is named in its shortest exact form; other values as given."""
+    """`-D material.melanin=1e-1` and `=0.1` render the same image, so must not be two
+    files: a number is named in its shortest exact form; other values as given."""
     from types import SimpleNamespace
 
     from jaxskin.cli._names import base_name, warn_repeated
@@ -425,13 +425,13 @@ def test_one_number_spelt_two_ways_names_one_file(capsys):
     assert base_name(sc, many) == base_name(sc, [f"key{i}=5e-1" for i in range(40)])
     assert base_name(sc, many) != base_name(sc, [f"key{i}=0.6" for i in range(40)])
     warn_repeated(["material.melanin=0.1", "material.melanin=1e-1"])
-    # a list with or without brackets (a review): one name, no "given twice"
+    # a list with or without brackets: one name, no "given twice"
     assert base_name(sc, ["camera.rotate=0,60,0"]) == base_name(
         sc, ["camera.rotate=[0, 60.0, 0]"]) == "hand_camera.rotate-0_60_0"
     warn_repeated(["camera.rotate=0,60,0", "camera.rotate=[0, 60, 0]"])
     assert capsys.readouterr().err == ""
-    # a file's ending as _ending: not `..._skin.melanin_image-mel.png.png` (a trial), and
-    # still apart from mel.exr, and a preset `skin` from a file skin.json (a review)
+    # a file's ending as _ending: not `..._skin.melanin_image-mel.png.png`, and still
+    # apart from mel.exr, and a preset `skin` from a file skin.json
     assert base_name(sc, ["skin.melanin_image=maps/mel.png"]) == \
         "hand_skin.melanin_image-maps_mel_png"
     assert base_name(sc, ["skin.melanin_image=mel.exr"]) == "hand_skin.melanin_image-mel_exr"
@@ -453,16 +453,16 @@ def test_the_last_line_after_a_stop_names_only_the_last_files():
                     + "; no partial file is left"), line
     run.outputs[0].written = run.outputs[0].written[:9]
     assert run.finished().count(".png") == 9 and "more" not in run.finished()
-    # the editor saving one name twice listed its files twice (a trial): each once, where
-    # it was last written
+    # the editor saving one name twice lists its files once each, where each was last
+    # written
     run.outputs[0].written = [Path("/o/a.toml"), Path("/o/b.png"), Path("/o/a.toml")]
     assert run.finished() == ("2 file(s) complete in /o: b.png, a.toml; no partial file is "
                               "left")
 
 
 def test_a_render_that_sees_no_mesh_is_warned_about(tmp_path, capsys):
-    """Zoomed into an empty corner of the frame, render wrote an all-black image and said
-    nothing (a newcomer's trial); the framed hand gets no warning."""
+    """Zoomed into an empty corner of the frame, render writes an all-black image: it is
+    warned about; the framed hand gets no warning."""
     import imageio.v3 as iio
 
     aside = ["-D", "camera.zoom=64", "-D", "camera.center=[0.5, 0.5]"]
@@ -478,8 +478,8 @@ def test_a_render_that_sees_no_mesh_is_warned_about(tmp_path, capsys):
 
 
 def test_a_view_of_the_meshs_inside_is_warned_about(tmp_path, capsys):
-    """The face from behind (an open mesh: the inside, drawn black) was warned of as "not
-    in view" after the render (a trial): it is now warned of before, by what it is, and the
+    """The face from behind (an open mesh: the inside, drawn black) is not "not in view"
+    after the render: it is warned of before, by what it is, and the
     black picture named as the inside; the face from the front gets neither warning."""
     import imageio.v3 as iio
 
@@ -499,8 +499,8 @@ def test_a_view_of_the_meshs_inside_is_warned_about(tmp_path, capsys):
 
 
 def test_a_file_named_like_a_builtin_scene_is_named_in_a_warning(tmp_path, monkeypatch, capsys):
-    """`jaxskin render hand` with a file `hand` in the folder rendered the built-in hand and
-    said nothing of the file (a trial): a warning names it and how to render it."""
+    """`jaxskin render hand` with a file `hand` in the folder renders the built-in hand: a
+    warning names the file and how to render it."""
     (tmp_path / "hand").write_text('name = "mine"\n')
     monkeypatch.chdir(tmp_path)
     assert main(["render", "hand", "-o", "o", "-D", "camera.size=32", "-D",
@@ -512,10 +512,10 @@ def test_a_file_named_like_a_builtin_scene_is_named_in_a_warning(tmp_path, monke
 
 
 def test_the_editor_loop_holds_every_signal_for_its_poll():
-    """A SIGTERM raised inside `asyncio.new_event_loop` left a loop without its self-pipe,
-    whose finaliser printed an AttributeError after the editor's last line (CI, 9 runs in 30
-    of a stress loop); a third Ctrl-C raised inside aiohttp's shutdown (a review). While the
-    loop runs every signal is held for its poll, and the command's end raises the last."""
+    """A SIGTERM raised inside `asyncio.new_event_loop` leaves a loop without its
+    self-pipe, whose finaliser prints an AttributeError after the editor's last line; a
+    third Ctrl-C could land inside aiohttp's shutdown. While the loop runs every signal is
+    held for its poll, and the command's end raises the last."""
     import os
     import signal
 
@@ -536,8 +536,8 @@ def test_the_editor_loop_holds_every_signal_for_its_poll():
 
 
 def test_a_signal_while_listing_ends_it(monkeypatch, capsys):
-    """`jaxskin list` loads JAX and the spectral tables (1-4 s); a SIGTERM then was noted
-    and dropped, the list printed on to exit 0 (a review). It ends the command as it does
+    """`jaxskin list` loads JAX and the spectral tables (1-4 s); a SIGTERM then must not be
+    noted and dropped, the list printing on to exit 0. It ends the command as it does
     every other: one line, 143."""
     import signal
 
@@ -581,8 +581,8 @@ def test_exit_now_says_the_line_and_ends_without_waiting_for_threads():
 
 
 def test_a_signal_inside_lists_imports_prints_no_line_of_it():
-    """A SIGTERM while `list` imported its modules was held (it came inside an import) and
-    raised only after the whole list was printed (a review): the stage is set after them."""
+    """A SIGTERM while `list` imports its modules is held (it comes inside an import) and
+    must not wait until the whole list is printed: the stage is set after the imports."""
     script = ("import importlib.abc, os, signal, sys\n"
               "class Finder(importlib.abc.MetaPathFinder):\n"
               "    def find_spec(self, name, path, target=None):\n"
@@ -600,8 +600,8 @@ def test_a_signal_inside_lists_imports_prints_no_line_of_it():
 
 
 def test_a_sweeps_names_tell_its_values_apart():
-    """Sweep values were named to six significant digits: `0.1:0.1000002:3` named three
-    files `..._material.melanin-0.1` (a trial); the digits grow until the names differ."""
+    """Six significant digits would name `0.1:0.1000002:3`'s three files all
+    `..._material.melanin-0.1`; the digits grow until the names differ."""
     import numpy as np
 
     from jaxskin.cli._names import sweep_suffixes
@@ -617,9 +617,9 @@ def test_a_sweeps_names_tell_its_values_apart():
 
 
 def test_a_render_with_non_finite_values_is_not_written(tmp_path, capsys, monkeypatch):
-    """A NaN render (a material past float32's range, before the files' S and K were
-    bounded) was written as an all-black PNG with exit 0 (a trial): it is an error now,
-    exit 1, and its file is not written."""
+    """A NaN render (a material past float32's range, were the files' S and K not
+    bounded) must not be written as an all-black PNG with exit 0: it is an error, exit 1,
+    and its file is not written."""
     import numpy as np
 
     from jaxskin import batch
@@ -636,8 +636,8 @@ def test_a_render_with_non_finite_values_is_not_written(tmp_path, capsys, monkey
 
 
 def test_a_terminal_that_cannot_show_a_name_gets_its_escapes(tmp_path):
-    """With an ASCII terminal (PYTHONIOENCODING=ascii) a scene named 日本語 was written, then
-    the listing raised UnicodeEncodeError: exit 1 (a trial). The name is shown escaped."""
+    """With an ASCII terminal (PYTHONIOENCODING=ascii) a scene named 日本語 is written, and
+    the listing must not then raise UnicodeEncodeError (exit 1): the name is shown escaped."""
     import subprocess
     import sys
 

@@ -83,8 +83,8 @@ def test_a_worker_killed_mid_run_has_its_task_retried_and_the_run_completes(
     render_unit = batch.render_unit
 
     def dies_once(unit):  # a closure: pickled by value, run on the worker
-        # O_EXCL: exactly one task dies. A check-then-create let the first tasks of both
-        # workers, started together, both find no marker and both die (CI saw 2 == 1).
+        # O_EXCL: exactly one task dies. A check-then-create would let the first tasks of
+        # both workers, started together, both find no marker and both die (2 deaths, not 1).
         try:
             os.close(os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
         except FileExistsError:
@@ -303,9 +303,9 @@ def test_fit_image_on_the_cluster_matches_the_local_bytes(tmp_path, capsys, dask
            "was accepted, but no answer to Dask's handshake came back in 6 s)"),
 ])
 def test_a_service_that_is_not_dask_is_one_line_and_exit_2(tmp_path, reply, why):
-    """An HTTP server at the address printed distributed's traceback after our line and
-    took 22 s; a server that accepts and never answers held the command for good (a
-    trial). Both are one line, exit 2, within the timeout and a few seconds."""
+    """An HTTP server at the address must not print distributed's traceback after our line
+    and take 22 s; a server that accepts and never answers must not hold the command for
+    good. Both are one line, exit 2, within the timeout and a few seconds."""
     import socket
     import threading
 
@@ -339,7 +339,7 @@ def test_a_service_that_is_not_dask_is_one_line_and_exit_2(tmp_path, reply, why)
 
 def test_a_connection_given_up_on_is_closed_when_it_ends():
     """`_within` leaves `fn` running when it gives up; what `fn` returns or raises later is
-    handed to `cleanup`, not leaked (a review: an IO loop thread outlived `connect`)."""
+    handed to `cleanup`, not leaked (an IO loop thread would outlive `connect`)."""
     import threading
 
     done, cleaned = threading.Event(), []
@@ -360,8 +360,8 @@ def test_a_connection_given_up_on_is_closed_when_it_ends():
 
 
 def test_a_long_unit_keeps_its_progress_bar_counting():
-    """tqdm draws only on an update: one long unit (a single scene) showed `0/1 [00:00<?]`
-    until it ended (a trial). `_ticking` redraws the bar while the work runs, and stops."""
+    """tqdm draws only on an update: one long unit (a single scene) shows `0/1 [00:00<?]`
+    until it ends. `_ticking` redraws the bar while the work runs, and stops."""
     class Bar:
         disable, refreshed = False, 0
 

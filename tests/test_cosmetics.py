@@ -83,9 +83,9 @@ def test_a_kernel_wider_than_the_image_is_cut_without_changing_the_blur(x64):
 
 @pytest.mark.parametrize("texel", [1e-6, 1e-4, 0.2])
 def test_texels_far_below_the_profile_blur_to_the_mean_not_to_black(texel):
-    """A mesh a million times too small (`mesh.unit_mm = 1e-6`, in range) rendered black,
-    and `sss.texel_mm = 1e-6` dark blue (a trial): the kernel's mass within the image was
-    ~1e-8, under the absolute 1e-6 the blur took for "off the mesh". Now a uniform field
+    """A mesh a million times too small (`mesh.unit_mm = 1e-6`, in range) must not render
+    black, nor `sss.texel_mm = 1e-6` dark blue: the kernel's mass within the image is
+    ~1e-8, under an absolute 1e-6 threshold for "off the mesh". A uniform field
     stays uniform under a mask, and with texels far below the profile's 0.08–2.7 mm every
     texel gets the masked mean (the profile is flat over the image); the 4σ window (11
     million samples at 1e-6 mm) is not built."""
@@ -107,7 +107,7 @@ def test_texels_far_below_the_profile_blur_to_the_mean_not_to_black(texel):
 def test_energy_near_an_open_edge_is_as_documented(x64):
     """The normalised convolution keeps a uniform field uniform but does not conserve
     energy within a few mm of the mesh's edge (sss.py and docs/explanations/sss.md give
-    these figures; a trial measured 0.81–1.04 on another image): a unit impulse in red at
+    these figures; another image gives 0.81–1.04): a unit impulse in red at
     0.1 mm texels beside a straight edge keeps 0.81 at the edge, 0.94 two texels in, 1.015
     at 27 texels; 6 mm from it (and 8 from the image's other edges), 1.0085."""
     H, W = 160, 200
@@ -346,9 +346,9 @@ def test_a_material_name_is_a_shipped_one_only_when_it_is_a_bare_name(tmp_path):
 
 
 def test_a_colour_thickness_map_is_read_as_its_mean_with_one_warning(tmp_path):
-    """A pure red PNG as a layer's `image` rendered at a third of the thickness without a
-    word (a trial): it is still read as the mean of R, G, B (as documented), and said once
-    per file; a grey image is read without a word."""
+    """A pure red PNG as a layer's `image` renders at a third of the thickness: it is read
+    as the mean of R, G, B (as documented), and said once per file; a grey image is read
+    without a word."""
     import warnings
 
     import imageio.v3 as iio
@@ -371,8 +371,8 @@ def test_a_colour_thickness_map_is_read_as_its_mean_with_one_warning(tmp_path):
 
 
 def test_a_map_that_is_not_square_is_warned_about_once(tmp_path):
-    """A 300x200 layer map was stretched over the square texture without a word (a trial):
-    the checks say so, once a file; a square map, or one a pixel off, is read without one."""
+    """A 300x200 layer map is stretched over the square texture: the checks say so, once
+    a file; a square map, or one a pixel off, is read without a word."""
     import warnings
 
     import imageio.v3 as iio
@@ -398,7 +398,7 @@ def test_a_map_that_is_not_square_is_warned_about_once(tmp_path):
 
 
 def test_blur_names_a_wrong_shape():
-    """An image without its channel axis was a broadcasting TypeError (a trial)."""
+    """An image without its channel axis is named, not a broadcasting TypeError."""
     with pytest.raises(ValueError, match=r"irradiance must be \(H, W, 3\)"):
         sss.blur(jnp.ones((8, 8)), 0.1)
     with pytest.raises(ValueError, match=r"mask \(4, 4\) must be the image's"):
@@ -406,8 +406,8 @@ def test_blur_names_a_wrong_shape():
 
 
 def test_an_image_past_pillows_pixel_limit_is_named_so(tmp_path, monkeypatch):
-    """A 30000² PNG was "not a file format imageio decodes, or a truncated or damaged one",
-    where Pillow had refused its size (a trial); here the limit is lowered to 1000 pixels
+    """A 30000² PNG that Pillow refuses for its size is named so, not "not a file format
+    imageio decodes, or a truncated or damaged one"; here the limit is lowered to 1000 pixels
     (Pillow refuses past twice it)."""
     from PIL import Image
 

@@ -90,9 +90,9 @@ def test_the_cli_page_has_every_command_and_option():
 
 
 def test_the_generated_pages_kept_in_the_repository_are_current():
-    """docs/reference/scene.md and cli.md were generated only while the site built, so the
-    links to them dead-ended where the Markdown is read in the repository (a newcomer's
-    trial). They are kept there too; this fails when the code has changed under them."""
+    """docs/reference/scene.md and cli.md are generated when the site builds, and links to
+    them must not dead-end where the Markdown is read in the repository: they are kept
+    there too; this fails when the code has changed under them."""
     for name, page in reference.KEPT.items():
         kept = reference.ROOT / "docs" / name
         assert kept.is_file() and kept.read_text() == page(), (

@@ -378,8 +378,8 @@ def test_uploads_are_checked_bounded_and_kept_in_the_output_folder(session, fold
         r = await c.post("/api/set", json={"changes": {"layer.blush.material": path}})
         assert r.status == 200
         assert (await r.json())["layers"][0]["material"] == path
-        # by its bare name too (a trial: 'rouge.json' was "no material file" though the
-        # message named the output folder)
+        # by its bare name too: 'rouge.json' is not "no material file" where the message
+        # names the output folder
         r = await c.post("/api/set", json={"changes": {"layer.blush.material": "rouge.json"}})
         assert r.status == 200, await r.json()
         assert (await r.json())["layers"][0]["material"] == path
@@ -461,8 +461,8 @@ def test_camera_size_alone_keeps_the_frame_as_render_dash_d_does(tmp_path):
 
 
 def test_the_page_shows_the_render_commands_warnings_on_what_it_shows(session, tmp_path):
-    """The foot turned 70° showed texel blocks on the page with no word, where `jaxskin
-    render` warns (a trial): the state carries the same warnings, as long as they hold."""
+    """The foot turned 70° shows texel blocks on the page, where `jaxskin render` warns:
+    the state carries the same warnings, as long as they hold."""
     foot = Session("foot", tmp_path)
     assert foot.state()["warnings"] == []
     foot.set({"camera.rotate": [0, -70, 0]})
@@ -545,8 +545,8 @@ def test_the_command_line_serves_where_asked(monkeypatch, capsys, tmp_path):
     assert cli.main(["edit", "hand", "--no-browser", "-D", "material.melanin=6"]) == 2
     assert "jaxskin: error: -D: key 'material.melanin': must be in [0, 1], got 6.0" in (
         capsys.readouterr().err)
-    # -o checked as render checks it, before serving: a file served, and Save failed with
-    # an internal error (a trial)
+    # -o checked as render checks it, before serving: else a file is served, and Save
+    # fails with an internal error
     (tmp_path / "afile").write_text("hi")
     n = len(served)
     for out, words in ((tmp_path / "afile", "-o: expected a folder, but this is a file"),
@@ -559,7 +559,7 @@ def test_the_command_line_serves_where_asked(monkeypatch, capsys, tmp_path):
 def test_the_command_line(monkeypatch, capsys, tmp_path):
     assert cli.main(["edit", "no_such_scene.toml", "--no-browser"]) == 2
     assert "no scene file" in capsys.readouterr().err
-    bad = tmp_path / "bad1.toml"  # the file and key once twice (a trial)
+    bad = tmp_path / "bad1.toml"  # the file and key once, not twice
     bad.write_text('[camera]\nsize = "big"\n')
     assert cli.main(["edit", str(bad), "--no-browser"]) == 2
     assert capsys.readouterr().err == (f"jaxskin: error: {bad}: key 'camera.size': expected "
@@ -896,7 +896,7 @@ def test_saved_paint_is_not_modified_until_painted_again(tmp_path):
 
 def test_a_scene_the_page_uploads_or_opens_may_not_name_files_outside(tmp_path):
     """The page could read any file: upload a scene whose layer image (or mesh) names it,
-    open that scene, render (a newcomer's trial rendered an outside photo as the blush).
+    open that scene, render (an outside photo would render as the blush).
     Scenes the page uploads or opens are held to the session's folders and the shipped
     data, as /api/set is; the scene the editor was started on keeps the files it names."""
     import imageio.v3 as iio
@@ -1004,9 +1004,9 @@ def test_the_stroke_reports_the_brush_size_it_paints(tmp_path):
 
 
 def test_requests_from_other_pages_are_refused(session, folder):
-    """A web page on another origin sent a "simple" POST (text/plain, no preflight) to the
-    editor on 127.0.0.1 and overwrote the scene it started from; a DNS-rebinding name got
-    in too (a newcomer's trial). Refused now, and nothing changes; the editor's own
+    """A web page on another origin can send a "simple" POST (text/plain, no preflight) to
+    the editor on 127.0.0.1 to overwrite the scene it started from, or come in through a
+    DNS-rebinding name. Both are refused, and nothing changes; the editor's own
     requests (same Origin, or none, as curl sends) still work."""
     tiny = folder / "scenes" / "tiny.toml"
 
@@ -1041,9 +1041,9 @@ def test_requests_from_other_pages_are_refused(session, folder):
 
 
 def test_save_names_files_and_far_points(tmp_path):
-    """Save as "mine.toml" wrote mine.toml.toml; with the output folder the scene's own,
-    Open listed every file twice; a paint point at x = 1e300 was accepted (and a segment to
-    it would have listed 1e300 / spacing dabs). A newcomer's trial."""
+    """Save as "mine.toml" writes mine.toml, not mine.toml.toml; with the output folder
+    the scene's own, Open lists every file once; a paint point at x = 1e300 is refused (a
+    segment to it would list 1e300 / spacing dabs)."""
     (tmp_path / "tiny.toml").write_text(SCENE)
     s = Session(str(tmp_path / "tiny.toml"), tmp_path)
     files = s.files()
@@ -1060,10 +1060,10 @@ def test_save_names_files_and_far_points(tmp_path):
 
 
 def test_a_relative_scene_path_with_a_folder_and_a_pick_far_outside(tmp_path, monkeypatch):
-    """`jaxskin edit scenes/tiny.toml -o out` looked for scenes/scenes/tiny.toml and
-    out/scenes/tiny.toml and refused (a trial): the command line's scene is read from the
-    working directory, as `render` reads it. A pick at x = 1e308 was a 500 (an overflow
-    in floor); it is a 400 naming the image's size."""
+    """`jaxskin edit scenes/tiny.toml -o out` must not look for scenes/scenes/tiny.toml or
+    out/scenes/tiny.toml: the command line's scene is read from the working directory, as
+    `render` reads it. A pick at x = 1e308 is not a 500 (an overflow in floor) but a 400
+    naming the image's size."""
     (tmp_path / "scenes").mkdir()
     (tmp_path / "scenes" / "tiny.toml").write_text(SCENE)
     monkeypatch.chdir(tmp_path)

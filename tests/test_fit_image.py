@@ -48,8 +48,8 @@ def test_scalars_recovered_on_the_hand():
 def test_a_small_first_step_does_not_end_the_fit():
     """skin.melanin on NIST subject 44's face, 0.1 → 0.3, noiseless: the first LM step is
     small and the loss (a sum of squares) only ~1e-3, so an absolute 1e-4 tolerance on the
-    loss once ended the fit after 2 steps at the start value, exit 0 (a newcomer found it).
-    Measured now: 0.2998 in 16 steps; the limit 0.01."""
+    loss would end the fit after 2 steps at the start value, exit 0.
+    Measured: 0.2998 in 16 steps; the limit 0.01."""
     overrides = ["camera.size=48", "texture.size=24", "wrinkles.enabled=false",
                  "skin.subject=44"]
     target = np.asarray(render.render(*_split(load_scene("face", overrides
@@ -687,8 +687,8 @@ def test_a_flat_colour_target_ends_with_a_warning_not_a_crash(tmp_path, capsys):
 
 
 def test_a_jpeg_target_is_warned_about(tmp_path, capsys):
-    """An ordinary JPEG target (quality 95, 4:2:0) halved the fitted blood (0.16 for 0.3)
-    with the RMS near its noise, so nothing was said (a newcomer's trial). A JPEG gets one
+    """An ordinary JPEG target (quality 95, 4:2:0) halves the fitted blood (0.16 for 0.3)
+    with the RMS near its noise, so the fit's own checks say nothing. A JPEG gets one
     warning naming its subsampling; the same image as PNG gets none."""
     from PIL import Image
 
@@ -712,10 +712,10 @@ def test_a_jpeg_target_is_warned_about(tmp_path, capsys):
 @pytest.mark.parametrize("key, truth", [("layer.blush.thickness_mm", 0.04),
                                         ("skin.melanin", 0.3)])
 def test_a_scalar_that_starts_at_the_end_of_its_range_is_fitted(key, truth):
-    """The makeup scene's own skin.melanin is 0, its range's end: the fit stopped at once
-    (0 → 0.003 for a truth of 0.3; a blush thickness 0 → 0.01 mm for 0.04; a trial), the
+    """The makeup scene's own skin.melanin is 0, its range's end: a fit there can stop at
+    once (0 → 0.003 for a truth of 0.3; a blush thickness 0 → 0.01 mm for 0.04), the
     sigmoid's slope being ~0 there and Levenberg–Marquardt's damping the same for every
-    coordinate. Each scalar is now fitted in a coordinate scaled at its start: both come
+    coordinate. Each scalar is fitted in a coordinate scaled at its start: both come
     back (measured: 0.04000 in 6 steps, 0.30000 in 17)."""
     ov = ["texture.size=64", "camera.size=64", "wrinkles.enabled=false",
           "light.shadows=false"]

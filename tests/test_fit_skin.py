@@ -283,8 +283,8 @@ def test_fits_at_the_ends_of_the_range_or_not_converged_are_named():
 
 
 def test_dark_noise_below_zero_reads_as_zero_as_calibrate_does(tmp_path):
-    """fit-skin refused a spectrum with a reading of -0.001 ("set it to 0 in the file")
-    where calibrate reads noise down to -0.005 as 0 (a review): the same rule, a note."""
+    """fit-skin does not refuse a spectrum with a reading of -0.001 ("set it to 0 in the
+    file"), as calibrate reads noise down to -0.005 as 0: the same rule, a note."""
     rows = "".join(f"{w},{-0.001 if w == 380 else -0.004 if w == 390 else 0.4},0.3\n"
                    for w in range(380, 790, 10))
     notes = []
@@ -321,8 +321,8 @@ def test_spectra_rows_repeated_exactly_are_read_once(tmp_path):
 
 def test_a_spectrum_whose_header_says_percent_is_read_as_percent_and_named_without_it(
         tmp_path):
-    """`Forearm A (%)` kept its unit in the name (fit.csv, the report) and was read as
-    percent only by the median's guess (a trial); calibrate reads the header."""
+    """`Forearm A (%)` drops its unit from the name (fit.csv, the report) and is read as
+    percent by its header, not by the median's guess, as calibrate reads it."""
     rows = "".join(f"{w};37,5;0,2\n" for w in range(380, 790, 10))
     notes = []
     names, wl, R = formats.read_spectra(_spectra_file(
@@ -334,9 +334,9 @@ def test_a_spectrum_whose_header_says_percent_is_read_as_percent_and_named_witho
 
 
 def test_a_number_with_percent_in_a_name_is_not_a_unit(tmp_path):
-    """`Foundation 30%` was read as the spectrum `Foundation 30` in percent, its 0.3-0.5
-    divided to a near-black 0.003 and fitted with exit 0 (a review): a number's % is part
-    of the name; a column that says % over readings all at most 1 is refused."""
+    """`Foundation 30%` is not the spectrum `Foundation 30` in percent, its 0.3-0.5
+    divided to a near-black 0.003 and fitted with exit 0: a number's % is part of the
+    name; a column that says % over readings all at most 1 is refused."""
     from jaxskin.io import InputError
 
     rows = "".join(f"{w},0.4,0.3\n" for w in range(380, 790, 10))
@@ -353,8 +353,8 @@ def test_a_number_with_percent_in_a_name_is_not_a_unit(tmp_path):
 
 
 def test_spectra_in_micrometres_are_named_as_such(tmp_path):
-    """fit-skin's "not a name this reader knows" for `wavelength_um`, a name it knows in a
-    unit it does not take (a review)."""
+    """`wavelength_um` is a name fit-skin knows, in a unit it does not take: it says so,
+    not "not a name this reader knows"."""
     from jaxskin.io import InputError
 
     path = _spectra_file(tmp_path, "wavelength_um,a\n0.4,0.3\n0.41,0.3\n")
@@ -373,9 +373,9 @@ def test_spectra_in_micrometres_are_named_as_such(tmp_path):
     ("=a,b", "\"'=a,b\""),
 ])
 def test_a_spectrums_name_is_a_safe_csv_cell(name, cell):
-    """A spectrum named `=cmd|' /C calc'!A0` went into `*_fit.csv` as it was, where a
-    spreadsheet may run it as a formula; an inner quote was not doubled (a trial). A CSV
-    reader reads the name back, led by `'` where it started like a formula."""
+    """A spectrum named `=cmd|' /C calc'!A0` must not go into `*_fit.csv` as it is, where a
+    spreadsheet may run it as a formula, and an inner quote is doubled. A CSV reader reads
+    the name back, led by `'` where it started like a formula."""
     import io
 
     from jaxskin.fitting.skin import _cell

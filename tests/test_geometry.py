@@ -167,8 +167,8 @@ def _tube(path, around=24, along=8, split_seam=True, reverse=False):
 
 
 def test_a_mesh_wound_inward_is_turned_outward_once_with_a_warning(tmp_path):
-    """A tube whose triangles wind inward (normals into the body: it rendered flat and dark
-    with no word, a newcomer's trial) loads with its faces reversed, one warning for the
+    """A tube whose triangles wind inward (normals into the body: it would render flat and
+    dark with no word) loads with its faces reversed, one warning for the
     file however often it is loaded, and the same vertex normals as the tube wound right.
     The built-in meshes (open at the wrist, cut, a face's shell) are left as they are: their
     signed volume measured +0.12 to +0.35 of their box."""
@@ -190,9 +190,9 @@ def test_a_mesh_wound_inward_is_turned_outward_once_with_a_warning(tmp_path):
 
 
 def test_uv_seam_with_shared_vertices_wraps_like_a_split_one(tmp_path):
-    """A tube's UVs with the seam's vertices shared: the last column of triangles ran from
-    u ≈ 1 back to 0 and was drawn across every row of the texture (scrambled normals, a
-    newcomer's trial). Now read as a wrap in u, with a warning: the texture's mask equals
+    """A tube's UVs with the seam's vertices shared: the last column of triangles runs from
+    u ≈ 1 back to 0 and must not be drawn across every row of the texture (scrambled
+    normals). It is read as a wrap in u, with a warning: the texture's mask equals
     that of the same tube with the seam split, and its normals are the cylinder's."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

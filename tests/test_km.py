@@ -247,9 +247,9 @@ def test_stack_gradients_through_layers(x64, ratio, SX):
 @pytest.mark.parametrize("dtype, X", [(jnp.float32, 2e19), (jnp.float32, 1e30),
                                       (jnp.float64, 1e160)])
 def test_layer_gradient_is_r_infs_at_a_thickness_whose_square_overflows(x64, dtype, X):
-    """Past X ~ 2e19 mm (float32; 1e155 in float64) X² overflowed in the branch test, and
-    its derivative made ∂R0/∂S, ∂R0/∂K NaN while the values were right (a researcher's
-    trial). There the layer is R∞'s: its gradient, by autodiff of the closed form
+    """Past X ~ 2e19 mm (float32; 1e155 in float64) X² overflows in a branch test, and its
+    derivative would make ∂R0/∂S, ∂R0/∂K NaN while the values are right. There the layer
+    is R∞'s: its gradient, by autodiff of the closed form
     S / (S + K + sqrt(K² + 2KS)); T and its gradient 0. Measured: equal to 1e-7."""
     S, K = jnp.asarray(30.0, dtype), jnp.asarray(2.0, dtype)
     gR = jax.grad(lambda s, k: km.layer(s, k, jnp.asarray(X, dtype))[0], (0, 1))(S, K)
@@ -276,8 +276,8 @@ def test_a_stack_laid_out_texels_first_is_warned_about():
 
 
 def test_float64_tiny_k_and_huge_thickness_takes_the_right_branch(x64):
-    """X was clamped to 1e15 for the branch test in float64 too: at K = 1e-40, X = 1e20
-    (z ~ 1.4) the series branch gave T = 1.0e-20 for 7.3e-21 (a trial, against mpmath)."""
+    """X must not be clamped to 1e15 for the branch test in float64: at K = 1e-40, X = 1e20
+    (z ~ 1.4) the series branch would give T = 1.0e-20 for 7.3e-21 (mpmath's value)."""
     R, T = km.layer(*f64(1.0, 1e-40, 1e20))
     R_ref, T_ref = reference_layer(1.0, 1e-40, 1e20)
     assert float(T) == pytest.approx(float(T_ref), rel=1e-12)  # measured 7.3e-21 both
@@ -290,6 +290,7 @@ def test_float64_tiny_k_and_huge_thickness_takes_the_right_branch(x64):
     (lambda: km.compose((0.2,), (0.1, 0.2)), r"a layer is \(R, T\) or \(R, T, R_back\), got 1"),
 ])
 def test_malformed_stacks_are_named(call, words):
-    """Were an IndexError, a tuple index error and an unpacking error (a trial)."""
+    """Named as a ValueError, not an IndexError, a tuple index error or an unpacking
+    error."""
     with pytest.raises(ValueError, match=words):
         call()

@@ -75,9 +75,9 @@ def test_uniform_light_and_layers_make_the_blur_a_no_op(x64, three_materials):
 def test_light_from_bare_neighbours_leaves_a_strong_absorber_without_negative_light(
         x64, name, s_scale, k_scale, X):
     """At a strongly absorbing layer's edge the blurred light is the bare skin's (from the
-    neighbours), not the colour of a under the layer: the exit factor per XYZ channel took
-    it out of the gamut (a trial: red −0.05, green +0.025 in the makeup scene at range
-    values; before, blue −2e-4, −0.009, −0.026 in these cases). Now no channel is below 0,
+    neighbours), not the colour of a under the layer: an exit factor per XYZ channel takes
+    it out of the gamut (red −0.05, green +0.025 in the makeup scene at range values; blue
+    −2e-4, −0.009, −0.026 in these cases). No channel is below 0,
     or below the texel's own light E rgb(T a) where a saturated stack makes that negative:
     the XYZ result x is moved toward y, the light dimmed by t_Y alone, by the least λ that
     lifts every channel to that floor — computed here by hand in NumPy from the spectra."""

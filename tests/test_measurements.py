@@ -153,8 +153,8 @@ BAD = [
     ),
     ("no data", lambda t: t.split("400")[0], 2, None, "needs at least 2 data rows"),
     ("radiance without white", lambda t: t.replace("R_inf", "E_inf"), 2, "E_inf", "E_white"),
-    # an instrument's extra column (a trial: 'unknown column' with no way past it) is named
-    # with the two ways to skip it
+    # an instrument's extra column is named with the two ways to skip it, not a bare
+    # 'unknown column' with no way past it
     ("extra column", lambda t: t.replace("R_g\n", "R_g,SD_0.05mm\n").replace("0.04\n",
                                                                              "0.04,0.01\n"),
      2, "SD_0.05mm", "skip other columns with '# ignore: NAME' or --ignore"),
@@ -223,14 +223,13 @@ STYLES = {
         ["Wavelength (nm)", *NAMES], ",",
         "Date,2026-11-29\nOperator,lab 3\nIntegration Time (ms),100\n", trailing=","),
     "µm with the unit in the header": _export(["wavelength [µm]", *NAMES], scale_wl=1e-3),
-    # The wavelength column named by its unit alone (a newcomer's trial: refused before).
+    # The wavelength column named by its unit alone.
     "nm as the wavelength column": _export(["nm", *NAMES]),
     # A preamble row that starts with the wavelength's name but has no reading column is not
     # the header (it was: 'unknown column 400-420').
     "a preamble row starting 'Wavelength'": _export(["Wavelength (nm)", *NAMES], ",",
                                                     "Wavelength,400-420\nPoints,3\n"),
-    # What spreadsheets in other languages and the SI style write (refused as "no header
-    # row"; a trial).
+    # What spreadsheets in other languages and the SI style write (not "no header row").
     **{f"header {name!r}": _export([name, *NAMES], ";") for name in (
         "Wellenlänge (nm)", "Wellenlaenge [nm]", "Wavelength nm", "wavelength/nm",
         "Longueur d onde (nm)", "Longueur d'onde (nm)", "Longitud de onda (nm)",
@@ -251,8 +250,8 @@ def test_instrument_exports_read_like_the_plain_format(tmp_path, style):
 
 
 def test_no_header_names_what_the_first_row_begins_with(tmp_path):
-    """"no header row" left the user to guess which cell was not understood (a trial); the
-    row quoted is the one above the data, not the preamble's first (a review)."""
+    """A bare "no header row" leaves the user to guess which cell was not understood; the
+    row quoted is the one above the data, not the preamble's first."""
     pre = write(tmp_path, "Instrument: CM-700d\nDate: 2026\nWavelenght (nm);R_0,05mm;R_inf;"
                 "R_g\n400;0,3;0,4;0,04\n410;0,3;0,4;0,04\n", "pre.csv")
     with pytest.raises(InputError, match=r"\(line 3 begins with 'Wavelenght \(nm\)': not a "):
@@ -287,10 +286,10 @@ def test_dark_percent_data_is_not_guessed(tmp_path):
 
 
 def test_percent_on_fractions_is_refused(tmp_path):
-    """`--percent` given to data already in 0-1 (a newcomer's slip: the fit then ran on
-    reflectances 100x too dark and said nothing; then only a warning, and calibrate wrote a
-    material with 12 of 81 bands identifiable): calibrate's and fit-skin's readers refuse
-    it, naming the file; percent data with the flag is read without a word."""
+    """`--percent` given to data already in 0-1 (an easy slip: the fit would run on
+    reflectances 100x too dark; a warning alone still lets calibrate write a material with
+    12 of 81 bands identifiable): calibrate's and fit-skin's readers refuse it, naming the
+    file; percent data with the flag is read without a word."""
     import warnings
 
     from jaxskin.formats import read_spectra
@@ -310,8 +309,8 @@ def test_percent_on_fractions_is_refused(tmp_path):
 
 
 def test_a_file_name_that_is_not_a_name_is_made_safe_with_a_note(tmp_path):
-    """`Lipstick Red (batch 5).csv` without '# name:' (a newcomer's trial: refused, then a
-    crash): named `lipstick_red_batch_5`, and a note says so; a valid stem is kept as it is;
+    """`Lipstick Red (batch 5).csv` without '# name:' is neither refused nor a crash: named
+    `lipstick_red_batch_5`, and a note says so; a valid stem is kept as it is;
     a derived name that is empty or over the length limit is an error naming the file."""
     text = GOOD.replace("# name: test_foundation\n", "")
     m = read_measurement(write(tmp_path, text, "Lipstick Red (batch 5).csv"))
@@ -321,8 +320,8 @@ def test_a_file_name_that_is_not_a_name_is_made_safe_with_a_note(tmp_path):
                        "'lipstick_red_batch_5' (set it with '# name: NAME')",)
     m = read_measurement(write(tmp_path, text, "Foundation_2.csv"))
     assert m.name == "Foundation_2" and m.notes == ()
-    # letters of any script are letters (a newcomer's 'Crème teint 3' lost its è, and
-    # '日本語 ファンデ' was said to have no letters)
+    # letters of any script are letters ('Crème teint 3' keeps its è, and '日本語 ファンデ'
+    # has letters)
     for stem, name in (("Crème teint 3", "crème_teint_3"), ("日本語 ファンデ", "日本語_ファンデ"),
                        ("日本語ファンデ", "日本語ファンデ")):
         assert read_measurement(write(tmp_path, text, f"{stem}.csv")).name == name
@@ -339,9 +338,9 @@ def test_a_file_name_that_is_not_a_name_is_made_safe_with_a_note(tmp_path):
 
 
 def test_descending_wavelengths_are_read_in_order_and_a_negative_reading_is_named(tmp_path):
-    """Some instruments export the long wavelengths first: refused before ("wavelengths must
-    increase, got 420 then 410"), now read in increasing order with a note. A dark-corrected
-    reading of -0.0012 was told "percent data? use --percent" (a newcomer's trial)."""
+    """Some instruments export the long wavelengths first: not refused ("wavelengths must
+    increase, got 420 then 410") but read in increasing order with a note. A dark-corrected
+    reading of -0.0012 is not told "percent data? use --percent"."""
     lines = GOOD.splitlines()
     flipped = write(tmp_path, "\n".join([*lines[:2], *lines[:1:-1]]) + "\n", "down.csv")
     up, down = read_measurement(write(tmp_path, GOOD, "up.csv")), read_measurement(flipped)
@@ -353,8 +352,8 @@ def test_descending_wavelengths_are_read_in_order_and_a_negative_reading_is_name
                                          r"noise: reflectances cannot be negative\)"):
         read_measurement(write(tmp_path, GOOD.replace("400,0.30,0.40,0.45,0.04",
                                                       "400,0.30,0.40,0.45,-0.012"), "bad.csv"))
-    # a black card's dark-corrected noise, -0.0012 and -0.005, is read as 0 with a note (it
-    # refused the whole file; a trial); in percent the same margin is 0.5
+    # a black card's dark-corrected noise, -0.0012 and -0.005, is read as 0 with a note,
+    # not a refusal of the whole file; in percent the same margin is 0.5
     noisy = read_measurement(write(tmp_path, GOOD.replace("0.04\n410", "-0.0012\n410")
                                    .replace("0.04\n420", "-0.005\n420"), "noisy.csv"))
     np.testing.assert_array_equal(noisy.R_g, [0.0, 0.0, 0.04])
@@ -370,8 +369,8 @@ def test_descending_wavelengths_are_read_in_order_and_a_negative_reading_is_name
     "wavelength_nm,R_0.05mm,R_0.15mm,Rinf,R_g",
 ])
 def test_other_spellings_of_the_columns_read_like_the_format(tmp_path, header):
-    """`R_3um`, `R 0.05 mm` and the like were 'unknown column' (a trial): they are the
-    format's columns, thicknesses in mm (50 µm = 0.05 mm)."""
+    """`R_3um`, `R 0.05 mm` and the like are not 'unknown column': they are the format's
+    columns, thicknesses in mm (50 µm = 0.05 mm)."""
     plain = read_measurement(write(tmp_path, GOOD, "plain.csv"))
     m = read_measurement(write(tmp_path, GOOD.replace(
         "wavelength_nm,R_0.05mm,R_0.15mm,R_inf,R_g", header)))
@@ -410,8 +409,8 @@ def test_ignored_columns_are_not_read_and_are_named(tmp_path):
 
 
 def test_fit_skin_reads_percent_spectra_with_a_note(tmp_path):
-    """fit-skin refused percent spectra without --percent where calibrate guessed them (a
-    trial): both guess now, from a median above 1.5, and say so."""
+    """fit-skin and calibrate read percent spectra without --percent alike: both guess,
+    from a median above 1.5, and say so."""
     from jaxskin.formats import read_spectra
 
     (tmp_path / "p.csv").write_text("wavelength_nm,a,b\n400,20,35.5\n500,30,41\n600,40,52\n")
@@ -430,7 +429,7 @@ def test_spreadsheet_exports_decimal_commas_empty_rows_and_a_footer(tmp_path):
     they cannot be a column break) read as points, with a note; rows of bare delimiters
     (",,,,") skipped like blank lines; a footer line after the data named as one (it was
     "1 cells where the header has 5"). A decimal comma in a comma-separated file stays an
-    error (a trial: all three refused the whole file)."""
+    error (none of the three refuses the whole file)."""
     plain = read_measurement(write(tmp_path, GOOD, "plain.csv"))
     for sep in (";", "\t"):
         head, rows = GOOD.split("R_g\n")
@@ -451,7 +450,7 @@ def test_spreadsheet_exports_decimal_commas_empty_rows_and_a_footer(tmp_path):
     with pytest.raises(InputError, match=r"column 'R_inf': expected a number with a decimal "
                                          r"point, got '0,45' \(in a comma-separated file"):
         read_measurement(write(tmp_path, GOOD.replace("0.45", '"0,45"'), "c.csv"))
-    # decimal commas in a comma-separated file: the cells split at every comma (a trial)
+    # decimal commas in a comma-separated file: the cells split at every comma
     commas = ("wavelength_nm,R_0.05mm,R_0.15mm,R_inf,R_g\n400,0,30,0,40,0,45,0,04\n"
               "410,0,31,0,41,0,46,0,05\n")
     with pytest.raises(InputError, match=r"dc.csv:2: 9 cells where the header has 5 \(decimal "
@@ -474,20 +473,20 @@ def test_spreadsheet_exports_decimal_commas_empty_rows_and_a_footer(tmp_path):
     ("Sample,wavelength_nm,R_0.05mm,R_0.15mm,R_inf,R_g\nA,400,0.3,0.4,0.45,0.04\n", 1,
      "the wavelength column 'wavelength_nm' is not the first: move it first, or delete the "
      "column before it ('Sample')"),
-    # skin spectra (what fit-skin reads), given to calibrate: the message once said the
-    # wavelengths were not in nm, of a header 'wavelength_nm' (a trial)
+    # skin spectra (what fit-skin reads), given to calibrate: named as such, not as
+    # wavelengths not in nm, of a header 'wavelength_nm'
     ("wavelength_nm,subject_12,subject_44,subject_90\n400,0.21,0.05,0.12\n"
      "410,0.22,0.06,0.13\n", 1,
      "no column is a cosmetic's reading ('subject_12', 'subject_44', ...; calibrate reads "
      "R_<X>mm, R_inf, R_g or E_... columns): skin reflectance spectra, one per column, are "
      "fitted with 'jaxskin fit-skin "),
-    # columns that merely start with r or e are no lower-case readings (a review)
+    # columns that merely start with r or e are no lower-case readings
     ("wavelength_nm,reflectance_arm,e1\n400,0.21,0.05\n410,0.22,0.06\n", 1,
      "no column is a cosmetic's reading ('reflectance_arm', 'e1'; calibrate reads "),
 ])
 def test_other_layouts_are_named(tmp_path, text, line, words):
-    """A transposed export or a sample-name column first said "no header row" with no line
-    (a trial)."""
+    """A transposed export or a sample-name column first is named, with its line, not a
+    bare "no header row"."""
     with pytest.raises(InputError) as info:
         read_measurement(write(tmp_path, text, "x.csv"))
     assert str(info.value).startswith(f"{tmp_path / 'x.csv'}:{line}: {words}"), str(info.value)
@@ -500,8 +499,8 @@ def test_other_layouts_are_named(tmp_path, text, line, words):
                  "thick, and S, K scale as 1 / thickness: mm meant?"),
 ])
 def test_a_film_thickness_far_from_a_cosmetics_is_named(tmp_path, column, note):
-    """R_3mm written for R_3um fitted as well as the right unit, with S and K 1000× too
-    small, and said nothing (a trial)."""
+    """R_3mm written for R_3um fits as well as the right unit, with S and K 1000× too
+    small: a note names it."""
     m = read_measurement(write(tmp_path, GOOD.replace("R_0.05mm", column)))
     assert any(note in n for n in m.notes), m.notes
     assert not any("film" in n for n in read_measurement(write(tmp_path, GOOD, "g.csv")).notes)
@@ -514,8 +513,8 @@ def test_a_name_line_that_is_no_name_suggests_one(tmp_path):
 
 
 def test_a_white_standards_certified_reflectance_scales_radiance(tmp_path):
-    """Radiance was divided by E_white as if the standard reflected 1: a tile certified at
-    0.98 put every reflectance 2 % high and K/S up to 9 % off (a trial). `# white_reflectance:`
+    """Radiance divided by E_white as if the standard reflected 1 puts every reflectance
+    2 % high and K/S up to 9 % off for a tile certified at 0.98. `# white_reflectance:`
     or `white_reflectance=` (the CLI's --white-reflectance, which wins, with a note) scale
     R = E / E_white by it."""
     rad = ("wavelength_nm,E_0.1mm,E_inf,E_g,E_white\n"
@@ -539,7 +538,7 @@ def test_a_white_standards_certified_reflectance_scales_radiance(tmp_path):
 
 @pytest.mark.parametrize("order", ["utf-16-le", "utf-16-be"])
 def test_utf16_without_a_byte_order_mark_is_read(tmp_path, order):
-    """Windows' "Unicode" saved without its mark was "a binary file (a NUL byte)" (a trial):
+    """Windows' "Unicode" saved without its mark is not "a binary file (a NUL byte)":
     plainly UTF-16 text (every other byte NUL, none of the rest) is read as it; a binary
     file with NULs is still refused."""
     plain = read_measurement(write(tmp_path, GOOD, "plain.csv"))
@@ -554,8 +553,8 @@ def test_utf16_without_a_byte_order_mark_is_read(tmp_path, order):
 
 
 def test_a_header_that_says_percent_reads_percent(tmp_path):
-    """`R_inf (%)` was read once its unit was stripped, but as fractions unless the median
-    guessed percent: dark percent data came out 100× too high (a review). A header that
+    """`R_inf (%)` read as fractions unless the median guesses percent makes dark percent
+    data come out 100× too high. A header that
     says % reads its file as percent, with a note, even where every reading is below 1."""
     plain = read_measurement(write(tmp_path, GOOD, "plain.csv"))
     head, rows = GOOD.split("R_g\n")
@@ -572,9 +571,9 @@ def test_a_header_that_says_percent_reads_percent(tmp_path):
     dark = read_measurement(write(tmp_path, "wavelength_nm,R_0.05mm (%),R_inf (%),R_g (%)\n"
                                   "400,0.2,0.5,0.1\n410,0.3,0.6,0.1\n", "dark.csv"))
     np.testing.assert_allclose(dark.R_inf, [0.005, 0.006], rtol=1e-12)
-    # One column says %, the others do not and read either way: every column was divided
-    # once (R 0.12 became 0.0012, exit 0); then only the marked one, and a black card's
-    # 0.6 % read as a white card's 0.6 (two reviews). Ambiguous: refused, naming them.
+    # One column says %, the others do not and read either way: dividing every column
+    # turns R 0.12 into 0.0012 (exit 0); dividing only the marked one reads a black card's
+    # 0.6 % as a white card's 0.6. Ambiguous: refused, naming them.
     with pytest.raises(InputError, match=r"mixed.csv: column 'R_inf \(%\)' says %, columns "
                                          r"'R_0.05mm', 'R_g' do not, and their readings "
                                          r"\(median 0.085\) could be fractions or percent"):
@@ -593,7 +592,7 @@ def test_a_header_that_says_percent_reads_percent(tmp_path):
 
 
 def test_thousands_separators_and_lone_decimal_commas(tmp_path):
-    """In a ';' file a wavelength written 1,050 read as 1.05 (a review): refused, naming
+    """In a ';' file a wavelength written 1,050 must not read as 1.05: refused, naming
     both readings; a decimal comma in a '# thickness_mm:' or '# white_reflectance:' line
     (one number: nothing to confuse it with) is read as a point; a '# white_reflectance:'
     line is only checked where radiance columns use it."""
@@ -624,8 +623,8 @@ def test_thousands_separators_and_lone_decimal_commas(tmp_path):
 
 
 def test_a_hole_in_the_wavelengths_is_warned_about(tmp_path, capsys):
-    """A 110 nm hole across the greens (rows lost) was bridged by a straight line in silence
-    and a red lipstick rendered orange (a trial): calibrate warns, naming the hole; regular
+    """A 110 nm hole across the greens (rows lost) is bridged by a straight line, and a red
+    lipstick renders orange: calibrate warns, naming the hole; regular
     steps, a small hole at 1 nm steps and a hole outside 380-780 nm are not warned about."""
     from jaxskin.cli import main
     from jaxskin.formats import wavelength_gaps
@@ -651,8 +650,8 @@ def test_a_hole_in_the_wavelengths_is_warned_about(tmp_path, capsys):
 
 
 def test_a_row_repeated_exactly_is_read_once(tmp_path):
-    """An export's doubled row (the same wavelength and readings) was refused as "must
-    increase" (a trial): read once, with a note naming it; the same wavelength with other
+    """An export's doubled row (the same wavelength and readings) is not refused as "must
+    increase": read once, with a note naming it; the same wavelength with other
     readings is still refused."""
     plain = read_measurement(write(tmp_path, GOOD, "plain.csv"))
     lines = GOOD.splitlines()
@@ -669,7 +668,7 @@ def test_a_row_repeated_exactly_is_read_once(tmp_path):
 
 
 def test_a_device_or_pipe_is_read_no_further_than_the_limit(monkeypatch):
-    """`calibrate /dev/zero` grew to 24 GB and ignored Ctrl-C (a trial): a device or pipe
+    """`calibrate /dev/zero` must not grow to 24 GB and ignore Ctrl-C: a device or pipe
     reports no size, so the limit is on what is read."""
     from jaxskin.formats import _text
 
@@ -680,8 +679,8 @@ def test_a_device_or_pipe_is_read_no_further_than_the_limit(monkeypatch):
 
 
 def test_ignoring_the_wavelength_column_by_name_is_refused(tmp_path):
-    """`calibrate --ignore wavelength_nm` ran as if the option were not given (a trial); a
-    pattern that happens to match it (`w*`) still passes it by."""
+    """`calibrate --ignore wavelength_nm` is refused, not run as if the option were not
+    given; a pattern that happens to match it (`w*`) still passes it by."""
     path = write(tmp_path, GOOD)
     with pytest.raises(InputError, match=r"m.csv:2: column 'wavelength_nm': --ignore names the "
                                          r"first column, the wavelengths, which cannot be "

@@ -300,10 +300,10 @@ def test_a_long_scene_name_gives_way_to_the_digest_or_names_the_scene(tmp_path, 
 
 
 def test_a_name_given_with_D_is_the_whole_name(tmp_path, capsys):
-    """`-D name=espresso_look` with other -D values wrote espresso_look_D-13e6f4956f9c.png
-    (a trial comparing products): a name given with -D is the file's name, nothing added;
-    the same name for two scenes of one command is refused before any work, naming -D
-    (it said "give the inputs distinct names")."""
+    """`-D name=espresso_look` with other -D values must not write
+    espresso_look_D-13e6f4956f9c.png: a name given with -D is the file's name, nothing
+    added; the same name for two scenes of one command is refused before any work, naming
+    -D (not a bare "give the inputs distinct names")."""
     from jaxskin.cli import main
 
     small = ["-D", "camera.size=32", "-D", "texture.size=32"]
@@ -326,7 +326,7 @@ def test_a_name_given_with_D_is_the_whole_name(tmp_path, capsys):
 
 
 def test_renders_are_tagged_srgb_and_data_maps_are_not(tmp_path):
-    """A render's PNG held sRGB-encoded values without saying so (a trial): it now has an
+    """A render's PNG holds sRGB-encoded values and says so: it has an
     sRGB chunk (perceptual intent) and PNG 1.2's gAMA of 1/2.2 right after IHDR, 8 and 16
     bits, with the same samples; a height or thickness map (data, not colour) has neither."""
     import io
@@ -349,9 +349,9 @@ def test_renders_are_tagged_srgb_and_data_maps_are_not(tmp_path):
 
 
 def test_an_output_folder_named_like_a_file(tmp_path):
-    """`calibrate -o fit.json` made a folder 'fit.json' (a trial): refused where the command
+    """`calibrate -o fit.json` must not make a folder 'fit.json': refused where the command
     names the files; `fit.json/` (a trailing slash), an existing folder of that name, and
-    fit-brdf's folder (its -o is the file) are taken (a review)."""
+    fit-brdf's folder (its -o is the file) are taken."""
     from jaxskin.io import InputError
     from jaxskin.outputs import check_folder
 
@@ -364,9 +364,9 @@ def test_an_output_folder_named_like_a_file(tmp_path):
 
 
 def test_a_name_from_a_file_name_that_is_not_utf8_is_kept():
-    """A Latin-1 file name `café.toml` reads (on POSIX) with a surrogate for é; refusing
-    surrogates as control characters refused the scene that had rendered before (a
-    review). Invisible characters that make two names look alike are refused."""
+    """A Latin-1 file name `café.toml` reads (on POSIX) with a surrogate for é; surrogates
+    are not control characters, and refusing them would refuse a scene that renders.
+    Invisible characters that make two names look alike are refused."""
     from jaxskin.io import InputError
     from jaxskin.outputs import check_name
 

@@ -166,9 +166,9 @@ def test_render_command_with_a_vmapped_sweep(tmp_path):
 
 
 def test_a_sweep_over_a_key_one_scene_lacks_renders_that_scene_once(tmp_path):
-    """`render hand face --sweep material.shininess=…` stopped the whole command on the
-    face (spectral: no shininess), where -D warns and renders (a trial). The face is now
-    rendered once, with a warning naming it; a key no scene has is still an error."""
+    """`render hand face --sweep material.shininess=…` must not stop the whole command on
+    the face (spectral: no shininess), where -D warns and renders. The face is rendered
+    once, with a warning naming it; a key no scene has is still an error."""
     out = tmp_path / "out"
     small = ["-D", "texture.size=64", "-D", "camera.size=32"]
     proc = subprocess.run([sys.executable, "-m", "jaxskin.cli", "render", "hand", "face", "-o",
@@ -194,7 +194,7 @@ def test_a_sweep_over_a_key_one_scene_lacks_renders_that_scene_once(tmp_path):
 
 def test_a_key_of_the_other_skin_model_is_warned_with_the_key_the_scene_reads(tmp_path):
     """`-D skin.melanin=0.3` on the Blinn hand and `--sweep material.melanin` on the
-    spectral face: each warning names the key that scene reads (a trial's first guesses)."""
+    spectral face (natural first guesses): each warning names the key that scene reads."""
     out = tmp_path / "out"
     small = ["-D", "texture.size=64", "-D", "camera.size=32"]
     proc = subprocess.run([sys.executable, "-m", "jaxskin.cli", "render", "hand", "face", "-o",
@@ -335,9 +335,9 @@ def test_a_sweep_frame_does_not_depend_on_the_sweep_around_it():
 
 
 def test_render_refuses_what_it_would_otherwise_render_wrong():
-    """A map of another size was read at clamped indices (the blush on the wrong texels, no
-    error); a misspelt key was ignored (its gradient exactly 0); a Scene for its config
-    failed with "'Scene' object has no attribute 'shadow'" (a newcomer's trial)."""
+    """A map of another size would be read at clamped indices (the blush on the wrong
+    texels, no error); a misspelt key ignored (its gradient exactly 0); a Scene for its
+    config fail with "'Scene' object has no attribute 'shadow'". Each is refused."""
     import jax.numpy as jnp
 
     s = load_scene("makeup", ["texture.size=32", "camera.size=16"])
@@ -370,8 +370,8 @@ def test_render_refuses_what_it_would_otherwise_render_wrong():
 
 
 def test_python_numbers_as_params_reuse_the_compiled_render(x64):
-    """A Python float in params traced as a weakly typed value: every new one compiled
-    `_render` again (0.7-0.8 s on the 32² hand, a newcomer's trial). Now numbers become
+    """A Python float in params traces as a weakly typed value: every new one would compile
+    `_render` again (0.7-0.8 s on the 32² hand). Numbers become
     arrays of the other params' dtype: float32 scene params keep a float32 image, float64
     ones (under x64) a float64 image, and new values reuse the program."""
     s = load_scene("hand", ["camera.size=24", "texture.size=24"])
@@ -390,10 +390,10 @@ def test_python_numbers_as_params_reuse_the_compiled_render(x64):
 
 
 def test_render_checks_missing_keys_ranges_lists_and_mixed_dtypes(x64):
-    """A newcomer's trial through the Python API: a missing key was a bare KeyError from
-    deep inside; out-of-range values rendered unphysical pixels without a word (a negative
-    thickness: −2e19); a list for light.direction failed in jnp.linalg.norm; one float64
-    value among float32 ones crashed the makeup scene in lax.switch (mismatched branch
+    """Through the Python API: a missing key is not a bare KeyError from deep inside;
+    out-of-range values would render unphysical pixels without a word (a negative
+    thickness: −2e19); a list for light.direction would fail in jnp.linalg.norm; one float64
+    value among float32 ones would crash the makeup scene in lax.switch (mismatched branch
     types) while the hand promoted. Each is now an error naming the key, or works."""
     s = load_scene("makeup", ["texture.size=32", "camera.size=16"])
     h = load_scene("hand", ["texture.size=32", "camera.size=16"])
@@ -411,7 +411,7 @@ def test_render_checks_missing_keys_ranges_lists_and_mixed_dtypes(x64):
             (h, "light.direction", [0.0, 0.0, 0.0], "expected a finite, non-zero 3-vector")):
         with pytest.raises(ValueError, match=rf"^params\['{re.escape(key)}'\]: {words}"):
             render.render(sc.config, sc.params | {key: jnp.asarray(value, jnp.float32)})
-    for value in (True, np.bool_(False)):  # True rendered as 1.0 (a trial)
+    for value in (True, np.bool_(False)):  # not True rendered as 1.0
         with pytest.raises(ValueError, match=r"^params\['material.melanin'\]: expected a "
                                              r"number, got (True|False)$"):
             render.render(h.config, h.params | {"material.melanin": value})
@@ -430,9 +430,9 @@ def test_render_checks_missing_keys_ranges_lists_and_mixed_dtypes(x64):
 
 
 def test_every_range_end_passes_the_range_check_in_float32():
-    """`render`'s range check compared a float32 value with the float64 bound: float32(0.1)
-    is above 0.1, so a scene at six documented range ends (skin.haemoglobin = 0.1,
-    skin.roughness = 0.01, ...) failed to render (a newcomer's trial). Every scalar key
+    """`render`'s range check must not compare a float32 value with the float64 bound:
+    float32(0.1) is above 0.1, so a scene at six documented range ends (skin.haemoglobin =
+    0.1, skin.roughness = 0.01, ...) would fail to render. Every scalar key
     at both of its ends, as float32 and float64, passes; just outside them fails."""
     configs = [load_scene(name, ["texture.size=32", "camera.size=16", *more]).config
                for name, more in (("makeup", []), ("face", ["material.model=biophysical"]),

@@ -74,7 +74,7 @@ def test_bad_scene_files(tmp_path, what, text, key, words):
 def test_invalid_toml_and_unknown_scene(tmp_path):
     path = tmp_path / "broken.toml"
     path.write_text('name = "x"\n[mesh\n')
-    with pytest.raises(InputError) as info:  # the line where every error puts it (a trial)
+    with pytest.raises(InputError) as info:  # the line where every error puts it
         load_scene(path)
     assert str(info.value) == (f"{path}:2: not valid TOML: Expected ']' at the end of a table "
                                "declaration (column 6)")
@@ -92,8 +92,8 @@ def test_invalid_toml_and_unknown_scene(tmp_path):
     ("a.jpg", b"\xff\xd8\xff\xe0\x00\x10JFIF", "an image, not a TOML scene file"),
 ])
 def test_another_kind_of_file_given_as_a_scene_is_named(tmp_path, name, content, words):
-    """`jaxskin render rouge.json` (a material calibrate wrote) said "not valid TOML:
-    Invalid statement" (a trial): a JSON file, a table or an image is named as what it is."""
+    """`jaxskin render rouge.json` (a material calibrate wrote) is not "not valid TOML:
+    Invalid statement": a JSON file, a table or an image is named as what it is."""
     path = tmp_path / name
     path.write_bytes(content)
     with pytest.raises(InputError) as info:
@@ -111,13 +111,13 @@ def test_overrides_are_checked_like_the_file(tmp_path):
         load_scene(path, ["wrinkles.k_bump=7"])
     with pytest.raises(InputError, match="did you mean 'texture.size'"):
         load_scene(path, ["texture.sise=32"])
-    # the command line names its own flag: API errors said "-D", which Python users never
-    # typed (a newcomer's trial)
+    # the command line names its own flag: API errors do not say "-D", which Python users
+    # never type
     with pytest.raises(InputError, match="^-D wrinkles.k_bump=7: key 'wrinkles.k_bump'"):
         load_scene(path, ["wrinkles.k_bump=7"], flag="-D")
     with pytest.raises(InputError, match="^expected override key=value, got 'k_bump'"):
         load_scene(path, ["k_bump"])
-    # "unknown key; did you mean 'fields.edit'?" for fields.edit itself (a newcomer's trial)
+    # not "unknown key; did you mean 'fields.edit'?" for fields.edit itself
     for item, table in (("fields.edit=[]", "[[fields.edit]]"), ("layer=1", "[[layer]]")):
         with pytest.raises(InputError, match=re.escape(f"{table} tables are written in a scene "
                                                        "file; they cannot be set as one value")):
@@ -227,8 +227,8 @@ def test_paths_from_the_file_and_from_the_command_line(tmp_path, monkeypatch):
 
 def test_an_override_the_scene_does_not_use_is_found():
     """`jaxskin render` warns (after its checks, before any work) about a -D value that
-    changes nothing: a newcomer's `-D skin.subject=50` on the Blinn hand once rendered the
-    default hand under a new name, without a word."""
+    changes nothing: `-D skin.subject=50` on the Blinn hand would render the default hand
+    under a new name, without a word."""
     from jaxskin.checks import unused_overrides
 
     def unused(name, *items):
@@ -241,8 +241,8 @@ def test_an_override_the_scene_does_not_use_is_found():
     assert unused("makeup", "layer.blush.thickness_mm=0.02", "camera.size=64") == []
     brdf = str(Path(__file__).resolve().parents[1] / "data" / "brdf" / "skin_samples.csv")
     assert unused("hand", f"material.brdf={brdf}") == [f"material.brdf={brdf}"]
-    # a trial: camera.fov on an orthographic scene gave the same image and no warning, and
-    # wrinkles.method=sequential was "not used" on a CPU, where auto picks it
+    # camera.fov on an orthographic scene gives the same image, so is warned of, and
+    # wrinkles.method=sequential counts as used on a CPU, where auto picks it
     assert unused("hand", "camera.fov=60") == ["camera.fov=60"]
     assert unused("hand", "camera.fov=60", "camera.projection=perspective") == []
     assert unused("hand", "wrinkles.method=sequential") == []
@@ -250,8 +250,8 @@ def test_an_override_the_scene_does_not_use_is_found():
 
 
 def test_an_unused_override_names_the_key_the_scene_reads():
-    """The warning for a `-D` key of the other skin model names the one the scene reads (a
-    trial's `-D skin.melanin=0.3` on the Blinn hand); a key with no such twin names none."""
+    """The warning for a `-D` key of the other skin model names the one the scene reads
+    (`-D skin.melanin=0.3` on the Blinn hand); a key with no such twin names none."""
     from jaxskin.checks import read_instead
 
     small = ["texture.size=32"]
@@ -259,7 +259,7 @@ def test_an_unused_override_names_the_key_the_scene_reads():
     assert read_instead(load_scene("face", small), "material.melanin=0.3") == "skin.melanin"
     assert read_instead(load_scene("hand", small), "skin.subject=50") is None
     assert read_instead(load_scene("hand", small), "camera.fov=60") is None
-    # with the command's other -D values: Lafortune reads neither melanin (a review)
+    # with the command's other -D values: Lafortune reads neither melanin
     lafortune = [*small, "material.model=lafortune", "skin.melanin=0.3"]
     assert read_instead(load_scene("hand", lafortune), "skin.melanin=0.3", lafortune) is None
 
@@ -373,9 +373,9 @@ def test_a_skin_map_whose_scalar_is_0_is_found(tmp_path, capsys):
 
 def test_a_skin_map_the_model_does_not_read_is_named_and_never_overwritten(tmp_path, capsys):
     """A Blinn scene with `skin.melanin_image = "n.png"`, rendered into its own folder,
-    replaced the user's n.png with the render (the map was no input of a model that does
-    not read it) and said nothing (a trial). Now a warning names the idle key, and the map
-    is an input the outputs may not overwrite."""
+    must not replace the user's n.png with the render (the map is no input of a model that
+    does not read it). A warning names the idle key, and the map is an input the outputs
+    may not overwrite."""
     import imageio.v3 as iio
 
     from jaxskin.checks import idle_maps
@@ -389,8 +389,8 @@ def test_a_skin_map_the_model_does_not_read_is_named_and_never_overwritten(tmp_p
         "skin.melanin_image changes nothing in scene 'n': its material model (blinn) reads "
         "no skin map"]
     # A map of the other spectral skin: left out of the configuration, named (the
-    # biophysical face rendered the same to the byte with skin.melanin_image, and the
-    # spectral face with skin.melanin_fraction_image, without a word; a trial).
+    # biophysical face renders the same to the byte with skin.melanin_image, and the
+    # spectral face with skin.melanin_fraction_image).
     bio = load_scene("face", ["material.model=biophysical", "skin.melanin_fraction=0.3",
                               f"skin.melanin_image={tmp_path / 'n.png'}"])
     assert bio.config == load_scene("face", ["material.model=biophysical",
@@ -435,7 +435,7 @@ def test_a_check_failing_on_a_D_value_names_the_D_item(tmp_path, capsys):
 
 def test_a_biophysical_material_over_an_explicit_measured_skin_is_refused(tmp_path):
     """`material.model = "biophysical"` renders the biophysical skin; an explicit
-    `skin.model = "nist"` beside it was silently ignored (a newcomer's trial). It is an
+    `skin.model = "nist"` beside it would be silently ignored. It is an
     error naming where the nist skin came from; left at its default, nothing is said."""
     with pytest.raises(InputError, match=r"^override skin.model=nist: key 'skin.model': .*"
                                          r"material.model = \"spectral\""):
@@ -451,9 +451,9 @@ def test_a_biophysical_material_over_an_explicit_measured_skin_is_refused(tmp_pa
 
 def test_the_modules_example_scene_shows_the_defaults(tmp_path):
     """`render --help` sends readers to `python -m pydoc jaxskin.scene` for the defaults; its
-    example said `k_scale = 1.1` where the default is 1.0 (a trial). Every key of the
-    example that has a default shows it, and the example is a valid scene: its edit gave
-    both `at` and `vertex`, which the parser refuses (a trial)."""
+    example must not say `k_scale = 1.1` where the default is 1.0. Every key of the
+    example that has a default shows it, and the example is a valid scene: its edit must
+    not give both `at` and `vertex`, which the parser refuses."""
     import tomllib
 
     from jaxskin import scene
@@ -478,9 +478,9 @@ def test_the_modules_example_scene_shows_the_defaults(tmp_path):
 
 
 def test_the_modules_cosmetics_example_is_a_valid_scene(tmp_path):
-    """The second example (the cosmetics model's keys) gave a layer both `image` and
-    regions, which the parser refuses: copied into a file it failed (a trial). With the
-    model it names and its images made, it parses, and its layer is the regions'."""
+    """The second example (the cosmetics model's keys) must not give a layer both `image`
+    and regions, which the parser refuses, or copied into a file it fails. With the model
+    it names and its images made, it parses, and its layer is the regions'."""
     import tomllib
 
     from jaxskin import scene
@@ -496,8 +496,8 @@ def test_the_modules_cosmetics_example_is_a_valid_scene(tmp_path):
 
 
 def test_a_cosmetic_layer_millimetres_thick_is_warned():
-    """`-D layer.foundation.thickness_mm=10` meant as 10 µm was accepted (the key allows up
-    to 10 mm) and rendered an opaque mask, silently (a trial)."""
+    """`-D layer.foundation.thickness_mm=10` meant as 10 µm is accepted (the key allows up
+    to 10 mm) and renders an opaque mask: it is warned of."""
     from jaxskin.checks import thick_layers
 
     assert thick_layers(load_scene("makeup")) == []
@@ -509,7 +509,7 @@ def test_a_cosmetic_layer_millimetres_thick_is_warned():
 
 def test_an_edit_with_null_for_the_missing_key_is_read():
     """The editor's /api/state lists each edit with `"vertex": null` (or `"at": null`);
-    posting that list back was "give exactly one of 'at' or 'vertex'" (a trial). JSON's
+    posting that list back must not be "give exactly one of 'at' or 'vertex'". JSON's
     null is no value: the edit reads as without that key."""
     from jaxskin.scene import parse_scene
 
@@ -526,7 +526,7 @@ def test_an_edit_with_null_for_the_missing_key_is_read():
 
 
 def test_a_list_given_to_D_without_brackets_is_the_list():
-    """`-D camera.rotate=0,60,0` was refused as the string '0,60,0' (a trial): numbers with
+    """`-D camera.rotate=0,60,0` is not refused as the string '0,60,0': numbers with
     commas are the list; words with commas stay a string, a vector key's message shows the
     form."""
     from jaxskin.io import InputError
@@ -549,8 +549,8 @@ def test_a_list_given_to_D_without_brackets_is_the_list():
 @pytest.mark.parametrize("text, value", [(".5", 0.5), ("5.", 5.0), ("-.5e1", -5.0),
                                          ("+.25", 0.25), ("0,5", "0,5"), ("abc", "abc")])
 def test_a_number_without_a_digit_before_or_after_the_point_is_a_number(text, value):
-    """`-D material.melanin=.5` was "expected a finite number, got '.5'" (TOML wants digits
-    on both sides of the point; a trial): such numbers are read as numbers."""
+    """`-D material.melanin=.5` is not "expected a finite number, got '.5'" (TOML wants
+    digits on both sides of the point): such numbers are read as numbers."""
     from jaxskin.scene import parse_override
 
     assert parse_override(f"material.melanin={text}") == ("material.melanin", value)
@@ -562,7 +562,7 @@ def test_a_number_without_a_digit_before_or_after_the_point_is_a_number(text, va
 @pytest.mark.parametrize("item, value", [
     ("camera.rotate=.5,0,0", [0.5, 0, 0]), ("camera.rotate=[0, 60., 0]", [0, 60.0, 0]),
     ("layer.blush.thickness_mm=.01", 0.01), ("texture.size=512.", 512.0),
-    # text keys keep what was typed (a review: name=5. became 5.0)
+    # text keys keep what was typed (name=5. stays '5.', not 5.0)
     ("name=5.", "5."), ("material.brdf=.5.json", ".5.json"),
     ("layer.blush.material=.5.json", ".5.json"),
 ])
@@ -573,8 +573,8 @@ def test_a_point_alone_is_completed_in_numbers_only(item, value):
 
 
 def test_a_scene_with_a_txt_ending_and_a_toml_error_gets_the_toml_error(tmp_path):
-    """A `.txt` scene with a syntax error was called "a table" for its commas (a review):
-    only a first row of cells without `=` is a table."""
+    """A `.txt` scene with a syntax error is not called "a table" for its commas: only a
+    first row of cells without `=` is a table."""
     path = tmp_path / "s.txt"
     path.write_text("# my scene\n[camera]\nrotate = [0, 60, 0\n")
     with pytest.raises(InputError, match=r"s.txt: not valid TOML: Unclosed array"):

@@ -74,8 +74,8 @@ def test_resample_onto_grid():
 
 
 def test_resample_reads_descending_wavelengths_and_refuses_others():
-    """Wavelengths long ones first gave [1, 0, 0, …] for a ramp (np.interp wants them
-    increasing; a trial): read in increasing order; a shuffled order, a length other than
+    """Wavelengths long ones first would give [1, 0, 0, …] for a ramp (np.interp wants
+    them increasing): read in increasing order; a shuffled order, a length other than
     the values' and NaN are refused."""
     grid = spectral.Grid(step=10)
     np.testing.assert_allclose(spectral.resample([1.0, 0.0], [780.0, 380.0], grid),
@@ -87,8 +87,8 @@ def test_resample_reads_descending_wavelengths_and_refuses_others():
 
 
 def test_grid_takes_whole_floats_and_the_conversions_check_the_bands():
-    """Grid(step=5.0) failed deep in arange; 40 bands on a 41-band grid was a dot_general
-    TypeError (a trial)."""
+    """Grid(step=5.0) is a whole step, not a failure deep in arange; 40 bands on a 41-band
+    grid is named, not a dot_general TypeError."""
     assert spectral.Grid(step=5.0) == spectral.Grid(step=5)
     assert hash(spectral.Grid(step=10.0)) == hash(spectral.Grid(step=10))
     for bad in (5.5, "5", True, float("nan")):

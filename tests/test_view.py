@@ -154,9 +154,9 @@ def _sphere_with_a_hole(tmp_path):
 @pytest.mark.parametrize("model", ["blinn", "lafortune", "spectral"])
 def test_the_inside_of_an_open_mesh_is_black_whatever_the_light(tmp_path, model):
     """Through an open mesh's opening the camera sees the back of triangles, whose texels
-    hold the outside's shading: the inside of a sphere with a hole was lit by a light
-    behind the sphere (0.60 where the light cannot reach, a trial) and flat under a light
-    from the camera. Those samples are now black, opaque (alpha 1), under either light;
+    hold the outside's shading: the inside of a sphere with a hole would be lit by a light
+    behind the sphere (0.60 where the light cannot reach) and flat under a light from the
+    camera. Those samples are black, opaque (alpha 1), under either light;
     the sphere's outside (the ring round the hole) is lit by the light from the camera."""
     path = _sphere_with_a_hole(tmp_path)
     common = ["texture.size=64", "camera.size=64", "camera.supersample=1",
@@ -181,9 +181,9 @@ def test_the_built_in_views_see_no_triangle_from_behind(scene):
 
 
 def test_a_planar_scene_seen_from_behind_is_lit_and_a_side_view_warned():
-    """The hand turned 180° about y showed its palm shaded with the back's texels (their
-    normals face away from the light): a flat silhouette, mean (108, 87, 75) with little
-    variation (a trial). A camera that sees the −z side now gives that side the shared
+    """The hand turned 180° about y must not show its palm shaded with the back's texels
+    (their normals face away from the light): a flat silhouette, mean (108, 87, 75) with
+    little variation. A camera that sees the −z side gives that side the shared
     texels ("planar-back"), so the palm is lit like the back (its mean within 5 % of the
     front view's) and keeps its furrows; a view from the side, where the two sides'
     texels interleave, is warned; no built-in scene's own view is."""
@@ -217,8 +217,8 @@ def test_a_planar_scene_seen_from_behind_is_lit_and_a_side_view_warned():
 @pytest.mark.parametrize("rotate", [(0, 180, 0), (180, 0, 0), (0, 180, 30), (170, 10, 0),
                                     (0, 0, 0), (0, 0, 90)])
 def test_the_field_plot_shows_the_back_side_the_way_the_render_does(rotate):
-    """The hand seen from −z: the field plot mirrored x for every such view, so a turn
-    about x (upside down in the render) came out turned half round against it (a review).
+    """The hand seen from −z: mirroring x in the field plot for every such view would show
+    a turn about x (upside down in the render) turned half round against it.
     The plot's x and y of a point have the signs the render's rotation gives them."""
     from jaxskin.maps import plot_flip
     from jaxskin.scene import planar_side
