@@ -227,3 +227,16 @@ def test_the_rules_fail_where_they_should(tmp_path):
         "jaxskin.core (line 2) takes _hidden from jaxskin.c",
         "jaxskin.editor (line 1) imports jaxskin.cli._run, private to jaxskin.cli",
     ]
+
+
+def test_every_package_is_in_the_wheel():
+    """pyproject lists the packages by name (the repository's fitting/ and data/ install
+    under jaxskin): a package missing there is missing from the wheel, though an editable
+    install still finds it."""
+    import tomllib
+
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+                 ["packages"])
+    packages = {name for name, path in module_files().items() if path.name == "__init__.py"}
+    packages.add("jaxskin.data")
+    assert packages == listed
