@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from conftest import check_grads_scaled
 
-from jaxskin import render, texture, wrinkles
+from jaxskin import render, render_args, texture, wrinkles
 from jaxskin.scene import load_scene
 from jaxskin.shading import blinn, lafortune
 
@@ -437,16 +437,16 @@ def test_every_range_end_passes_the_range_check_in_float32():
     configs = [load_scene(name, ["texture.size=32", "camera.size=16", *more]).config
                for name, more in (("makeup", []), ("face", ["material.model=biophysical"]),
                                   ("hand", []))]
-    specs = {k: s for c in configs for k, s in render._known_keys(c)[0].items()
+    specs = {k: s for c in configs for k, s in render_args.known_keys(c)[0].items()
              if s is not None and s.kind is float}
     assert {"skin.haemoglobin", "layer.blush.roughness", "material.melanin"} <= set(specs)
     for key, spec in specs.items():
         for end in (spec.lo, spec.hi):
             for dtype in (np.float32, np.float64):
-                render._check_ranges({key: np.asarray(end, dtype)}, specs)
+                render_args.check_ranges({key: np.asarray(end, dtype)}, specs)
         for outside in (spec.lo - abs(spec.lo) * 1e-3 - 1e-3, spec.hi + abs(spec.hi) * 1e-3):
             with pytest.raises(ValueError, match="the scene key's range"):
-                render._check_ranges({key: np.float32(outside)}, specs)
+                render_args.check_ranges({key: np.float32(outside)}, specs)
     s = load_scene("face", ["texture.size=32", "camera.size=16", "material.model=biophysical",
                             "skin.haemoglobin=0.1", "skin.epidermis_mm=0.01"])
     assert np.isfinite(np.asarray(render.render(s.config, s.params))).all()
