@@ -8,6 +8,8 @@ it was.
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from .. import cosmetics, texture
@@ -107,8 +109,10 @@ class Changes:
                     raise
                 builtin = ("a built-in mesh: " + ", ".join(BUILTIN_MESHES)
                            if key == "mesh.file" else 'the built-in "skin"')
+                # `lexists`: a link there that leads outside is the 403 whether or not
+                # its target exists (`exists` follows it, and the answer told which)
                 if isinstance(value, str) and not {"/", "\\"} & set(value) and not any(
-                        (r / value).exists() for r in [self.path.parent, *self.roots]):
+                        os.path.lexists(r / value) for r in [self.path.parent, *self.roots]):
                     raise EditorError(f"no file {value!r} in {self._roots_text()}; expected "
                                       f"{builtin}, or a file there", 400, key) from None
                 raise EditorError(f"{e.message}; or {builtin}", e.status, key) from None

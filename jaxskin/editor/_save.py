@@ -3,6 +3,7 @@ the output folder; a saved scene keeps its source's comments."""
 
 from __future__ import annotations
 
+import os
 import tomllib
 from pathlib import Path
 
@@ -37,7 +38,11 @@ class Saving:
         layers = [spec.name for spec in self.scene.layers]
         pngs = {layer: self.output / f"{name}_{layer}.png" for layer in self.paint
                 if layer in layers}
+        for p in [toml_path, *pngs.values()]:  # each checked before any is looked at
+            self.output_file(p.name)
         for p in [toml_path, *pngs.values()]:
+            if os.path.lexists(p):
+                _replaceable(p, self.output)
             if p.exists() and not overwrite:
                 raise EditorError(f"{p.name} exists in {self.output}; save with overwrite to "
                                   "replace it", 409, "name")
@@ -80,9 +85,14 @@ class Saving:
         suffix = Path(name).suffix
         if suffix not in (".toml", ".json"):
             raise EditorError("expected a scene (.toml) or a material (.json)", 400, "name")
-        target = self.output / name
-        if target.exists():
-            if target.read_bytes() == data:
+        target = self.output_file(name)  # a link that leads outside: 403, nothing read
+        if os.path.lexists(target):
+            _replaceable(target, self.output)
+            # compared only when it is a file of this folder's own (a hard link may be
+            # another name of a file outside) and of the same size (a large file there is
+            # not read to tell it differs)
+            st = target.stat()
+            if st.st_nlink == 1 and st.st_size == len(data) and target.read_bytes() == data:
                 return str(target)
             raise EditorError(f"{name} exists in {self.output} with other contents; rename "
                               "the file to upload it", 409, "name")
@@ -108,6 +118,15 @@ class Saving:
             fh.write(data)
         self.written.append(target)
         return str(target)
+
+
+def _replaceable(path: Path, output: Path) -> None:
+    """An `EditorError` (409) when `path`, which exists, is no regular file that a save or
+    an upload may compare or replace: a folder (replaced, a 500), a named pipe (read,
+    the editor hung), a link loop."""
+    if not path.is_file():
+        raise EditorError(f"{path.name} in {output} is not a regular file (a folder, a "
+                          "pipe or a broken link?); choose another name", 409, "name")
 
 
 def keep_comments(source: str, doc: dict) -> str:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import os
 import tomllib
 from pathlib import Path
 
@@ -39,7 +40,7 @@ from ._paint import Painting, Stroke
 from ._render import Rendering
 from ._save import Saving
 
-__all__ = ["Session", "schema"]
+__all__ = ["Session", "real", "schema"]
 
 PAINTED = "painted"  # in a link: the layers painted where it was made (the maps stay there)
 
@@ -155,12 +156,30 @@ class Session(Changes, Rendering, Painting, Saving):
         candidates = [p] if p.is_absolute() else [
             (b / p) for b in ([base] if base is not None else self.roots)]
         for c in candidates:
-            r = c.resolve()
+            r = real(c)
             if any(r.is_relative_to(root) for root in self.roots) and (
                     r.exists() or c is candidates[-1]):
                 return r
         raise EditorError(f"{text!r} is outside the folders this editor may read "
                           f"({self._roots_text()})", 403, what)
+
+    def inside(self, path: Path) -> bool:
+        """Whether `path`, its links resolved, lies in one of the session's folders."""
+        r = real(path)
+        return any(r.is_relative_to(root) for root in self.roots)
+
+    def output_file(self, name: str) -> Path:
+        """`<output>/<name>`, which Save and uploads look at (is it there, what it holds)
+        and replace: an `EditorError` (403) before anything is looked at when it is a link
+        that leads outside the session's folders (or the output folder became one), since
+        `exists()` and `read_bytes()` follow links and the answers would tell the page
+        whether a file outside exists and what it holds."""
+        target = self.output / name
+        if not self.inside(target):
+            raise EditorError(f"{name} in {self.output} is a link that leads outside the "
+                              f"folders this editor may read ({self._roots_text()}); remove "
+                              "it or choose another name", 403, "name")
+        return target
 
     def document(self, changes: dict | None = None) -> dict:
         """The scene's TOML document with `changes` (default: the session's) applied, as
@@ -203,9 +222,10 @@ class Session(Changes, Rendering, Painting, Saving):
         """Scenes and materials the page can open: built-in ones and files in the folders."""
         scenes, materials = list(BUILTIN_SCENES), cosmetics.shipped_materials()
         for root in dict.fromkeys(r.resolve() for r in self.roots):  # once if they are one
-            if root.is_dir():
-                scenes += sorted(str(p) for p in root.glob("*.toml"))[:200]
-                materials += sorted(str(p) for p in root.glob("*.json"))[:200]
+            if root.is_dir():  # not links that lead outside (`open` refuses them)
+                scenes += sorted(str(p) for p in root.glob("*.toml") if self.inside(p))[:200]
+                materials += sorted(str(p) for p in root.glob("*.json")
+                                    if self.inside(p))[:200]
         return {"scenes": scenes, "materials": materials}
 
     def state(self) -> dict:
@@ -248,6 +268,12 @@ class Session(Changes, Rendering, Painting, Saving):
 
         painted = [[PAINTED, ",".join(sorted(self.paint))]] if self.paint else []
         return [[k, value_text(v)] for k, v in self.changes.items()] + painted
+
+
+def real(path) -> Path:
+    """`path` with every link resolved, as `os.path.realpath` does: a link loop gives a
+    path (that is no file), not the `RuntimeError` of `Path.resolve` (a 500)."""
+    return Path(os.path.realpath(path))
 
 
 def _scene_files(scene: Scene) -> dict:
