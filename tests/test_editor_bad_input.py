@@ -18,7 +18,7 @@ pytest.importorskip("aiohttp", reason="the editor needs aiohttp (the edit extra)
 from aiohttp.test_utils import TestClient, TestServer  # noqa: E402
 from test_editor import SCENE  # noqa: E402
 
-from jaxskin import texture  # noqa: E402
+from jaxskin import cli, texture  # noqa: E402
 from jaxskin.editor import EditorError, Session, _changes, make_app  # noqa: E402
 from jaxskin.io import data_dir  # noqa: E402
 
@@ -185,3 +185,70 @@ def test_no_regular_file_in_the_folders_is_a_409_not_a_500_or_a_hang(place):
     files = s.files()
     assert not [f for f in files["scenes"] + files["materials"] if "away" in f]
     assert str(place / "scenes" / "tiny.toml") in files["scenes"]
+
+
+# --- Item 3: names too long to be file names ---------------------------------------------
+
+LONG = "a" * 250
+
+
+def test_a_long_layer_name_is_refused_when_the_scene_is_read(place):
+    """A 250-character `[[layer]] name`, painted, then Save: an OSError (File name too
+    long), a 500. The name is now limited where the scene is read: the editor's open and
+    upload answer 400 naming it, `jaxskin render` exits 2 with one line."""
+    text = SCENE.replace('name = "blush"', f'name = "{LONG}"')
+    (place / "scenes" / "long.toml").write_text(text)
+    s = session_in(place)
+    for call in (lambda: s.open(str(place / "scenes" / "long.toml")),
+                 lambda: s.upload("long.toml", text.encode())):
+        message = refused(call, 400, "layer[0].name", "a layer's name is at most 64 characters")
+        assert "got 250" in message and len(message) < 400
+    assert not (place / "out" / "long.toml").exists()
+    # 64 characters is a name; 65 is not
+    for n, ok in ((65, False), (64, True)):
+        name = "b" * n
+        change = {f"layer.{name}.material": "blush_rose"}
+        if ok:
+            s.set(change)
+            assert s.scene.layers[-1].name == name
+        else:  # a layer the page adds (a link's key, the Add layer field)
+            refused(lambda c=change: s.set(c), 400, "layer[1].name", "at most 64 characters")
+
+
+def test_a_long_layer_name_on_the_command_line_exits_2_with_one_line(place, capsys):
+    text = SCENE.replace('name = "blush"', f'name = "{LONG}"')
+    (place / "scenes" / "long.toml").write_text(text)
+    for argv in (["render", str(place / "scenes" / "long.toml"), "-o", str(place / "o")],
+                 ["edit", str(place / "scenes" / "long.toml"), "-o", str(place / "o"),
+                  "--no-browser"]):
+        assert cli.main(argv) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and err.startswith("jaxskin: error:"), err
+        assert "layer[0].name" in err and "at most 64 characters" in err
+    assert not (place / "o").exists()
+
+
+@pytest.mark.parametrize("name, layer, words", [
+    # 190 + "_" + 64 + ".png": 259 bytes, over the 255 of a file system's file name
+    ("n" * 190, "b" * 64, f"layer '{'b' * 64}''s painted map would be saved as"),
+    # 200 + "_" + 40 + ".png": 245 bytes, and the temporary file beside it 14 more
+    ("n" * 200, "b" * 40, f"layer '{'b' * 40}''s painted map would be saved as"),
+    # 240 bytes is a save name; with ".toml" and the temporary file's 14, over 255
+    ("é" * 120, None, "the scene would be saved as"),
+    # and what fits is saved: 200 characters, 205 with ".toml", 210 with "_blush.png"
+    ("n" * 200, "blush", None),
+])
+def test_a_save_whose_files_would_not_be_file_names_is_a_400(place, name, layer, words):
+    s = session_in(place)
+    if layer is not None:
+        if layer != "blush":
+            s.set({f"layer.{layer}.material": "blush_rose"})
+        painted(s, layer)
+    if words is None:
+        s.save(name)
+        assert sorted(p.name for p in (place / "out").iterdir()) == [
+            f"{name}.toml", f"{name}_{layer}.png"]
+        return
+    message = refused(lambda: s.save(name), 400, "name", words)
+    assert "shorter name" in message and len(message) < 400
+    assert not list((place / "out").iterdir())

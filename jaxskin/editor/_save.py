@@ -9,7 +9,7 @@ from pathlib import Path
 
 from .. import cosmetics, maps
 from ..io import InputError, atomic_write
-from ..outputs import check_name
+from ..outputs import MAX_NAME_BYTES, check_name
 from ..scene import (
     BUILTIN_SCENES,
     dumps,
@@ -38,7 +38,8 @@ class Saving:
         layers = [spec.name for spec in self.scene.layers]
         pngs = {layer: self.output / f"{name}_{layer}.png" for layer in self.paint
                 if layer in layers}
-        for p in [toml_path, *pngs.values()]:  # each checked before any is looked at
+        for layer, p in [(None, toml_path), *pngs.items()]:  # all before any is looked at
+            _file_name(p.name, layer)
             self.output_file(p.name)
         for p in [toml_path, *pngs.values()]:
             if os.path.lexists(p):
@@ -118,6 +119,20 @@ class Saving:
             fh.write(data)
         self.written.append(target)
         return str(target)
+
+
+def _file_name(name: str, layer: str | None) -> None:
+    """An `EditorError` (400) when a file Save writes, `<name>.toml` or a painted layer's
+    `<name>_<layer>.png`, is longer than a file name may be (`outputs.MAX_NAME_BYTES`: a
+    save name near its limit with a long layer name was an OSError, a 500). The save name
+    itself is checked as every output name is; the layer's is letters, digits and _."""
+    size = len(name.encode("utf-8", "surrogatepass"))
+    if size > MAX_NAME_BYTES:
+        what = f"layer {layer!r}'s painted map" if layer else "the scene"
+        raise EditorError(f"{what} would be saved as {name[:40]!r}... ({size} bytes in "
+                          f"UTF-8), longer than a file name may be here ({MAX_NAME_BYTES} "
+                          f"bytes): save under a shorter name"
+                          f"{' or rename the layer' if layer else ''}", 400, "name")
 
 
 def _replaceable(path: Path, output: Path) -> None:

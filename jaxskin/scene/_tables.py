@@ -13,6 +13,11 @@ from ._config import LayerSpec
 from ._overrides import check_value, number, numbers, vector
 from ._schema import EDIT_KEYS, ELLIPSE_KEYS, LAYER_KEYS, LAYER_SCHEMA, POLYGON_KEYS
 
+# A layer's name is part of file names (the editor's `<name>_<layer>.png`, fit-image's
+# `<name>_layer.<layer>.map.png`), each checked when written; kept short, it leaves the
+# scene's name most of the 255 bytes a file name may take.
+MAX_LAYER_NAME = 64
+
 
 def parse_edit(i, e, path) -> EditSpec:
     """The `i`th [[fields.edit]] table `e`, checked, as an `EditSpec`."""
@@ -74,6 +79,10 @@ def _layer_name(i, e, path) -> str:
         got = "none (add name = \"...\")" if name is None else repr(name)
         raise InputError(f"expected a name (letters, digits, _), got {got}", path,
                          key=f"{where}.name")
+    if len(name) > MAX_LAYER_NAME:
+        raise InputError(f"a layer's name is at most {MAX_LAYER_NAME} characters (it is part "
+                         f"of the names of the map files written for it), got {len(name)}: "
+                         f"{name[:24]!r}...", path, key=f"{where}.name")
     return name
 
 
