@@ -16,7 +16,8 @@ import pytest
 
 pytest.importorskip("aiohttp", reason="the editor needs aiohttp (the edit extra)")
 from aiohttp.test_utils import TestClient, TestServer  # noqa: E402
-from test_editor import SCENE  # noqa: E402
+from test_editor import SCENE, Server, needs_browser, wait_idle  # noqa: E402
+from test_editor import browser as browser  # noqa: E402, F401  (its fixture)
 
 from jaxskin import cli, texture  # noqa: E402
 from jaxskin.editor import EditorError, Session, _changes, make_app  # noqa: E402
@@ -252,3 +253,78 @@ def test_a_save_whose_files_would_not_be_file_names_is_a_400(place, name, layer,
     message = refused(lambda: s.save(name), 400, "name", words)
     assert "shorter name" in message and len(message) < 400
     assert not list((place / "out").iterdir())
+
+
+# --- Item 10: a link's keys without scene= ---------------------------------------------
+
+def test_a_links_keys_apply_to_the_scene_open_now_and_each_refused_one_is_named(place):
+    """`/?material.melanin=0.9` (no `scene=`) opened the server's scene unchanged and said
+    nothing. The page now sends such keys to /api/apply: applied to the scene open now
+    (its changes and paint kept, one undo step), each refused key named."""
+    s = session_in(place)
+    s.set({"wrinkles.k_bump": 0.1})
+    painted(s)
+    undo = len(s.undo_stack)
+
+    async def main():
+        async with TestClient(TestServer(make_app(s, log=lambda line: None))) as c:
+            r = await c.post("/api/apply", json={"changes": [
+                ["skin.melanin", "0.9"], ["materal.melanin", "0.5"],
+                ["layer.nope.thickness_mm", "0.1"], ["camera.rotate", "[0.0, 10.0, 0.0]"],
+                ["painted", "blush"]]})
+            state = await r.json()
+            assert r.status == 200, state
+            assert state["values"]["skin.melanin"] == 0.9
+            assert state["values"]["camera.rotate"] == [0.0, 10.0, 0.0]
+            assert state["values"]["wrinkles.k_bump"] == 0.1 and state["painted"] == ["blush"]
+            assert [r["key"] for r in state["refused"]] == [
+                "materal.melanin", "layer.nope.thickness_mm", "painted"]
+            assert state["refused"][0]["error"] == ("unknown table [materal]; did you mean "
+                                                    "'material.melanin'?")
+            assert "no layer named 'nope'" in state["refused"][1]["error"]
+            assert state["undo"] == undo + 1  # one step for the link
+            state = await (await c.post("/api/undo")).json()
+            assert state["values"]["skin.melanin"] == 0.0 and state["painted"] == ["blush"]
+            # nothing applied: no undo step
+            r = await c.post("/api/apply", json={"changes": [["bogus", "1"]]})
+            assert (await r.json())["undo"] == undo
+            # bad bodies, too many keys (for a link with scene= too): 400, nothing changed
+            for path, body in (("/api/apply", {"changes": "skin.melanin=1"}),
+                               ("/api/apply", {}),
+                               ("/api/apply", {"changes": [["skin.melanin", "1"]] * 1001}),
+                               ("/api/open", {"scene": s.source,
+                                              "changes": [["skin.melanin", "1"]] * 1001})):
+                r = await c.post(path, json=body)
+                assert r.status == 400 and "error" in await r.json(), (path, body)
+            state = await (await c.get("/api/state")).json()
+            assert state["values"]["skin.melanin"] == 0.0 and state["painted"] == ["blush"]
+    asyncio.run(main())
+
+
+@needs_browser
+def test_a_link_without_scene_changes_the_scene_in_the_page(place, browser):
+    """The issue's link in the browser: keys without `scene=` reach the server's scene
+    (when this browser last showed that scene too: its remembered state once replaced
+    the link), a key that is no scene's is named in the status line."""
+    server = Server(session_in(place))
+    d = browser
+    status = "return document.getElementById('message').textContent"
+    try:
+        d.get(f"http://127.0.0.1:{server.port}/?skin.melanin=0.9&bogus=1")
+        v = wait_idle(d)
+        assert d.execute_script("return S.values['skin.melanin']") == 0.9
+        assert d.execute_script(status).startswith("not applied: bogus: unknown key"), \
+            d.execute_script(status)
+        assert "scene=" in d.current_url and "skin.melanin=0.9" in d.current_url
+        d.get(f"http://127.0.0.1:{server.port}/?light.ambient=0.5")
+        v = wait_idle(d)
+        assert d.execute_script("return [S.values['light.ambient'], S.values['skin.melanin']]"
+                                ) == [0.5, 0.9]
+        assert d.execute_script(status) == f"applied to {place / 'scenes' / 'tiny.toml'}: " \
+                                           "light.ambient"
+        d.get(f"http://127.0.0.1:{server.port}/?scene=&camera.exposure=1")  # scene= empty
+        wait_idle(d, v)
+        assert d.execute_script("return [S.values['camera.exposure'], S.undo]") == [1.0, 3]
+        assert not [e for e in d.get_log("browser") if e["level"] == "SEVERE"]
+    finally:
+        server.close()

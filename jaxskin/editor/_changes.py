@@ -136,8 +136,9 @@ class Changes:
             raise EditorError(str(e), 400, key) from None
         return str(path)
 
-    def _record(self) -> None:
-        self.undo_stack.append((self.changes, self.paint))
+    def _record(self, state: tuple | None = None) -> None:
+        """An undo step back to `state` (default: now), `(changes, paint)`."""
+        self.undo_stack.append(state or (self.changes, self.paint))
         del self.undo_stack[:-HISTORY]
         self.redo_stack.clear()
 

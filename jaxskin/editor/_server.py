@@ -14,6 +14,7 @@ rendered. Every error is a JSON object `{"error": ..., "key": ...}` with a 4xx s
 | GET | `/api/state` | | the session (`Session.state`) |
 | GET | `/api/files` | | scenes and materials the page may open |
 | POST | `/api/open` | `{scene, changes?}` | state, and `refused` changes |
+| POST | `/api/apply` | `{changes}` (a link's, without `scene=`) | state, and `refused` |
 | POST | `/api/set` | `{changes: {key: value or null}}` | state |
 | POST | `/api/undo`, `/api/redo` | | state |
 | POST | `/api/pick` | `{x, y}` (image pixels) | the nearest vertex |
@@ -186,7 +187,8 @@ class _Api:
             web.get("/", self.page), web.get("/static/{name}", self.static),
             web.get("/favicon.ico", _no_content),
             web.get("/api/state", self.state), web.get("/api/files", self.files),
-            web.post("/api/open", self.open_), web.post("/api/set", self.set_),
+            web.post("/api/open", self.open_), web.post("/api/apply", self.apply),
+            web.post("/api/set", self.set_),
             web.post("/api/undo", self.undo), web.post("/api/redo", self.redo),
             web.post("/api/pick", self.pick), web.get("/api/fields", self.fields),
             web.post("/api/paint", self.paint), web.get("/api/render", self.render),
@@ -223,6 +225,19 @@ class _Api:
 
         def run():
             refused = self.session.open(scene, changes)
+            return {**self.session.state(), "refused": refused}
+        return web.json_response(await self.work(run))
+
+    async def apply(self, request):
+        """POST `/api/apply` `{changes}`: a link's changes applied to the scene open now;
+        the state, and the changes `refused`."""
+        changes = (await _body(request)).get("changes")
+        if not isinstance(changes, (dict, list)):
+            raise EditorError("expected {changes: {key: value} or [[key, TOML value], ...]}",
+                              400)
+
+        def run():
+            refused = self.session.apply(changes)
             return {**self.session.state(), "refused": refused}
         return web.json_response(await self.work(run))
 

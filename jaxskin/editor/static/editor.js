@@ -888,18 +888,41 @@ async function upload() {
   } catch (e) { fail(e); }
 }
 
-async function openScene(scene, query) {
+// the changes of a link that the server refused (and `extra` ones the page did), named
+function refusedMessage(state, extra) {
+  const refused = [...extra, ...(state.refused || [])];
+  return refused.length ?
+    "not applied: " + refused.map((r) => `${r.key}: ${r.error}`).join("; ") : null;
+}
+
+async function openScene(scene, query, extra = []) {
   try {
     const state = await api("POST", "/api/open", {scene, changes: query});
     selected = -1;
     adopt(state);
     loadFiles();
-    if (state.refused && state.refused.length)
-      message("not applied: " + state.refused.map((r) => `${r.key}: ${r.error}`).join("; "), "error");
+    const refused = refusedMessage(state, extra);
+    if (refused) message(refused, "error");
     else message(`opened ${state.source}`);
     requestRender(false);
     return true;
   } catch (e) { fail(e); return false; }
+}
+
+// A link without scene=: its keys are changes to the scene the server has open now (its
+// changes and paint kept, one undo step); each refused one is named, none dropped.
+async function applyLink(current, query, extra) {
+  let state = current;
+  try {
+    state = await api("POST", "/api/apply", {changes: query});
+  } catch (e) {
+    adopt(current); requestRender(false); loadFiles(); fail(e);
+    return;
+  }
+  adopt(state); requestRender(false); loadFiles();
+  const refused = refusedMessage(state, extra);
+  if (refused) message(refused, "error");
+  else message(`applied to ${state.source}: ${query.map(([k]) => k).join(", ")}`, "ok");
 }
 
 async function start() {
@@ -908,13 +931,18 @@ async function start() {
   let params = new URLSearchParams(location.search);
   const state = await api("GET", "/api/state");
   const last = new URLSearchParams(localStorage.getItem("jaxskin.last") || "");
-  if (!params.has("scene") && last.get("scene") === state.source) params = last;
-  const wanted = params.get("scene");
+  // the bare address: what this browser last showed, while the server has that scene (a
+  // link's keys are never replaced by it)
+  if (!location.search.replace("?", "") && last.get("scene") === state.source) params = last;
+  const scenes = params.getAll("scene");
+  const wanted = scenes[0];  // none, or "scene=": the scene the server has open
+  const extra = scenes.slice(1).map((s) => ({key: "scene", error: `given twice; ${s} not opened`}));
   const query = [...params.entries()].filter(([k]) => k !== "scene");
-  const same = !wanted || (wanted === state.source &&
-    JSON.stringify(query) === JSON.stringify(state.query));
-  if (same) { adopt(state); requestRender(false); loadFiles(); }
-  else if (!await openScene(wanted, query)) {
+  const same = wanted === state.source && !extra.length &&
+    JSON.stringify(query) === JSON.stringify(state.query);
+  if (!wanted && (query.length || extra.length)) await applyLink(state, query, extra);
+  else if (!wanted || same) { adopt(state); requestRender(false); loadFiles(); }
+  else if (!await openScene(wanted, query, extra)) {
     // a link to a scene that cannot be opened: the scene the server has, and the reason
     const text = $("message").textContent;
     adopt(state); requestRender(false); loadFiles();
