@@ -150,7 +150,7 @@ def test_what_a_link_leads_to_is_not_told_by_a_mesh_files_error(place):
     assert len(answers) == 1, answers
 
 
-def test_no_regular_file_in_the_folders_is_a_409_not_a_500_or_a_hang(place):
+def test_no_regular_file_in_the_folders_is_a_409_not_a_500_or_a_hang(place, capsys):
     """A folder, a named pipe, a link loop or a hard link where an upload or Save would
     compare or replace a file: a folder was replaced (IsADirectoryError, a 500), a pipe
     read (the editor's one worker waited forever), a link loop resolved (RuntimeError, a
@@ -186,6 +186,11 @@ def test_no_regular_file_in_the_folders_is_a_409_not_a_500_or_a_hang(place):
     files = s.files()
     assert not [f for f in files["scenes"] + files["materials"] if "away" in f]
     assert str(place / "scenes" / "tiny.toml") in files["scenes"]
+    # the command line's scene a link loop: exit 2, one line ("edit failed unexpectedly
+    # (RuntimeError: Symlink loop ...)" was)
+    assert cli.main(["edit", str(out / "loop.toml"), "-o", str(out), "--no-browser"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("jaxskin: error: no scene file") and "\n" not in err, err
 
 
 # --- Item 3: names too long to be file names ---------------------------------------------

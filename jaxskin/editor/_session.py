@@ -56,12 +56,12 @@ class Session(Changes, Rendering, Painting, Saving):
     """
 
     def __init__(self, scene: str = "hand", output=".", roots=()):
-        self.output = Path(output).resolve()
+        self.output = real(output)
         first = Path(str(scene))
         self.roots = [self.output]
         if str(scene) not in BUILTIN_SCENES:
-            self.roots.append(first.resolve().parent)
-        self.roots += [Path(r).resolve() for r in roots]
+            self.roots.append(real(first).parent)
+        self.roots += [real(r) for r in roots]
         self._keys: dict = {}  # signature → the configuration compiled for it
         self._cover_cache: tuple | None = None
         self._side: tuple | None = None  # (configuration, its hidden-side warning)
@@ -72,7 +72,7 @@ class Session(Changes, Rendering, Painting, Saving):
         self.written: list[Path] = []  # every file Save and uploads wrote (for the last line)
         # the command line's scene from the working directory, as `render` reads it
         # (`edit dir/s.toml -o out` reads dir/s.toml, not dir/dir/s.toml or out/dir/s.toml)
-        self.open(str(scene) if str(scene) in BUILTIN_SCENES else str(first.resolve()), {})
+        self.open(str(scene) if str(scene) in BUILTIN_SCENES else str(real(first)), {})
         self._trusted = set(_scene_files(self.scene).values())
 
     # --- opening and the document --------------------------------------------------------
@@ -238,7 +238,7 @@ class Session(Changes, Rendering, Painting, Saving):
     def files(self) -> dict:
         """Scenes and materials the page can open: built-in ones and files in the folders."""
         scenes, materials = list(BUILTIN_SCENES), cosmetics.shipped_materials()
-        for root in dict.fromkeys(r.resolve() for r in self.roots):  # once if they are one
+        for root in dict.fromkeys(self.roots):  # once if they are one
             if root.is_dir():  # not links that lead outside (`open` refuses them)
                 scenes += sorted(str(p) for p in root.glob("*.toml") if self.inside(p))[:200]
                 materials += sorted(str(p) for p in root.glob("*.json")
@@ -323,7 +323,7 @@ def _scene_files(scene: Scene) -> dict:
         out[f"layer.{layer.name}.material"] = layer.material
         if layer.image:
             out[f"layer.{layer.name}.image"] = layer.image
-    return {k: Path(f).resolve() for k, f in out.items()}
+    return {k: real(f) for k, f in out.items()}
 
 
 def schema() -> dict:
