@@ -224,13 +224,17 @@ def test_a_long_layer_name_is_refused_when_the_scene_is_read(place):
 def test_a_long_layer_name_on_the_command_line_exits_2_with_one_line(place, capsys):
     text = SCENE.replace('name = "blush"', f'name = "{LONG}"')
     (place / "scenes" / "long.toml").write_text(text)
+    tiny = str(place / "scenes" / "tiny.toml")
     for argv in (["render", str(place / "scenes" / "long.toml"), "-o", str(place / "o")],
                  ["edit", str(place / "scenes" / "long.toml"), "-o", str(place / "o"),
-                  "--no-browser"]):
+                  "--no-browser"],
+                 # a layer that -D adds (the editor's -D is a link's keys)
+                 ["edit", tiny, "-o", str(place / "o"), "--no-browser", "-D",
+                  f"layer.{'c' * 65}.material=blush_rose"]):
         assert cli.main(argv) == 2, argv
         err = capsys.readouterr().err.strip()
         assert err.count("\n") == 0 and err.startswith("jaxskin: error:"), err
-        assert "layer[0].name" in err and "at most 64 characters" in err
+        assert "].name" in err and "at most 64 characters" in err, err
     assert not (place / "o").exists()
 
 
