@@ -95,8 +95,9 @@ class Saving:
             st = target.stat()
             if st.st_nlink == 1 and st.st_size == len(data) and target.read_bytes() == data:
                 return str(target)
-            raise EditorError(f"{name} exists in {self.output} with other contents; rename "
-                              "the file to upload it", 409, "name")
+            other = "with other contents" if st.st_nlink == 1 else "(a file with other names)"
+            raise EditorError(f"{name} exists in {self.output} {other}; rename the file to "
+                              "upload it", 409, "name")
         import tempfile
 
         with tempfile.TemporaryDirectory() as tmp:
