@@ -337,3 +337,13 @@ def test_a_link_without_scene_changes_the_scene_in_the_page(place, browser):
         assert not [e for e in d.get_log("browser") if e["level"] == "SEVERE"]
     finally:
         server.close()
+
+
+def test_a_long_key_or_value_is_not_echoed_whole(place):
+    """A 100,000-character key (or a material given as a long list) came back whole in the
+    error, the line the page shows."""
+    s = session_in(place)
+    for change, key in (({"k" * 100_000: 1}, None),
+                        ({"layer.blush.material": list(range(30_000))}, "layer.blush.material")):
+        message = refused(lambda c=change: s.set(c), 400, key)
+        assert len(message) < 300, len(message)

@@ -68,7 +68,7 @@ class Changes:
         """A change's key and value checked as far as they can be alone (the rest when the
         document is parsed): known keys, paths confined, materials and meshes found."""
         if not isinstance(key, str) or len(key) > 200:
-            raise EditorError(f"expected a scene key, got {key!r}", 400)
+            raise EditorError(f"expected a scene key, got {key!r:.100}", 400)
         if key == "fields.edit":
             if not isinstance(value, list) or len(value) > 1000:
                 raise EditorError("fields.edit: expected a list of edits (at most 1000)", 400,
@@ -120,7 +120,7 @@ class Changes:
 
     def _material(self, value, key):
         if not isinstance(value, str):
-            raise EditorError(f"expected a material name or file, got {value!r}", 400, key)
+            raise EditorError(f"expected a material name or file, got {value!r:.100}", 400, key)
         if value in cosmetics.shipped_materials():
             return value
         path = self.confine(value, key, self.path.parent)
