@@ -912,7 +912,7 @@ async function openScene(scene, query, extra = []) {
 // A link without scene=: its keys are changes to the scene the server has open now (its
 // changes and paint kept, one undo step); each refused one is named, none dropped.
 async function applyLink(current, query, extra) {
-  let state = current;
+  let state;
   try {
     state = await api("POST", "/api/apply", {changes: query});
   } catch (e) {
