@@ -85,6 +85,7 @@ method = "fft"                     # fft (exact) | separable (3-sigma passes)
 texel_mm = 0.0                     # 0: from the mesh's scale and UV area
 [[layer]]                          # any number, bottom (applied first) to top
 name = "blush"                     # names the layer's keys: -D layer.blush.thickness_mm=0.02
+                                   #   (letters, digits and _, at most 64 characters)
 material = "blush_rose"            # a shipped material, or a jaxskin calibrate JSON
 thickness_mm = 0.01                # thickness where the map is 1
 roughness = 0.3                    # its highlight: Kelemen m
