@@ -26,10 +26,10 @@ __all__ = ["mix", "reflectance"]
 
 
 def mix(
-    S: Float[ArrayLike, "m *n"],
-    K: Float[ArrayLike, "m *n"],
+    S: Float[ArrayLike, " m *bands"],
+    K: Float[ArrayLike, " m *bands"],
     c: Float[ArrayLike, " m"],
-) -> tuple[Float[Array, "*n"], Float[Array, "*n"]]:
+) -> tuple[Float[Array, "*bands"], Float[Array, "*bands"]]:
     """S and K of a mixture: the two-constant rule Σ c_i S_i, Σ c_i K_i.
 
     **Arguments:**

@@ -83,7 +83,10 @@ def run(args, record: Run) -> int:
     if any(ci == 0 for ci in c):
         warn("a component at concentration 0 adds nothing: "
              + ", ".join(n for n, ci in zip(comps.names, c, strict=True) if ci == 0))
-    doc = mixture_json(name, comps, c / c.sum())
+    if abs(c.sum() - 1.0) > 1e-12:  # a formula's rounding: the shares, scaled to sum to 1
+        note(f"the concentrations sum to {c.sum():.6g}: each divided by that sum")
+        c = c / c.sum()
+    doc = mixture_json(name, comps, c)
     record.stage = f"writing {json_path.name}"
     write_json(doc, json_path)
     outputs.done(json_path)
