@@ -36,6 +36,7 @@ from pathlib import Path
 
 import jax
 import jax.numpy as jnp
+import lineax as lx
 import numpy as np
 import optimistix as optx
 
@@ -230,7 +231,10 @@ def _residuals(p, args, film, fit_x):
 
 @functools.partial(jax.jit, static_argnames=("film", "fit_x", "max_steps"))
 def _solve(p0, S, K, W, lab_t, R_t, w, X_fixed, background, film, fit_x, max_steps=400):
-    solver = optx.LevenbergMarquardt(rtol=1e-10, atol=1e-12)
+    # The damped step by Cholesky of the small normal equations (as fitting.skin): less to
+    # compile than the default QR.
+    solver = optx.LevenbergMarquardt(rtol=1e-10, atol=1e-12,
+                                     linear_solver=lx.Normal(lx.Cholesky()))
     args = (S, K, W, lab_t, R_t, w, X_fixed, background)
     residuals = functools.partial(_residuals, film=film, fit_x=fit_x)
 

@@ -70,8 +70,9 @@ def test_gradients_of_the_mixture(x64, c):
                 modes=("fwd", "rev"), eps=1e-6)
     check_grads(lambda c: mixture.reflectance(S, K, c), (c,), order=2, modes=("fwd", "rev"),
                 eps=1e-6)
+    # first order for the film (km.layer's own second-order checks are in test_km.py)
     check_grads_scaled(lambda c, x: mixture.reflectance(S, K, c, x, 0.4), (c, 0.01),
-                       (0.01, 0.001))
+                       (0.01, 0.001), order=1)
     g = jax.grad(lambda c: mixture.reflectance(S, K, c).sum())(c)
     assert np.all(np.isfinite(g))
 
@@ -158,6 +159,8 @@ def test_match_recovers_known_concentrations(tmp_path, capsys):
 
 
 def test_match_recovers_a_film_and_its_thickness(x64):
+    """Concentrations within 0.01 and the thickness within 2 % (compiles the film's LM,
+    km.layer inside: about 15 s on two shared cores)."""
     from jaxskin.fitting import match
 
     c = np.array([0.5, 0.2, 0.3])
@@ -217,12 +220,10 @@ def test_out_of_gamut_gives_the_closest_match_and_says_so(tmp_path, capsys):
     S = np.stack([np.interp(grid, comps.wavelength_nm, s) for s in comps.S])
     K = np.stack([np.interp(grid, comps.wavelength_nm, k) for k in comps.K])
     white_xy = colour.XYZ_to_xy(W.sum(0))
-    best = np.inf
-    for t in np.linspace(0, 1, 2001):
-        q = (t * K[0] + (1 - t) * K[1]) / (t * S[0] + (1 - t) * S[1])
-        R = 1 + q - np.sqrt(q * q + 2 * q)
-        lab = colour.XYZ_to_Lab(R @ W, white_xy)
-        best = min(best, float(np.linalg.norm(lab - doc["Lab_target"])))
+    t = np.linspace(0, 1, 2001)[:, None]
+    q = (t * K[0] + (1 - t) * K[1]) / (t * S[0] + (1 - t) * S[1])
+    lab = colour.XYZ_to_Lab((1 + q - np.sqrt(q * q + 2 * q)) @ W, white_xy)
+    best = float(np.min(np.linalg.norm(lab - doc["Lab_target"], axis=1)))
     got = float(np.linalg.norm(np.subtract(doc["Lab_match"], doc["Lab_target"])))
     assert got <= best + 1e-3, (got, best)
 
