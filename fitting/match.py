@@ -7,10 +7,12 @@ whose two-constant Kubelka–Munk mixture (`jaxskin.mixture`) best matches a tar
   they are resampled (linearly in log S, log K, as the renderer does) onto the range they
   all cover, as a colour lab compares instruments only where both measured; that range
   must include 400–700 nm (`read_components`).
-- **Colour**: CIELAB under D65 with the CIE 1964 10° observer, the colour-matching
-  industry's convention (ISO 105-J03, ASTM D2244 practice), XYZ by colour-science's ASTM
-  E308 weights on a 5 nm grid over the range the target and the components share within
-  380–780 nm; ΔE is CIEDE2000. (`jaxskin fit-skin` reports 2°, like the renderer.)
+- **Colour**: CIELAB under D65 with the CIE 1964 10° observer by default, the
+  colour-matching industry's convention (ASTM D2244, ISO 105-J03 practice), or the 2°
+  observer the renderer and `jaxskin fit-skin` use; XYZ by colour-science's ASTM E308
+  weights on a 5 nm grid over the range the target and the components share within
+  380–780 nm; ΔE is CIEDE2000. A spectral target's match also gets its metamerism: ΔE2000
+  under illuminant A and with the other observer.
 - **Unknowns**: concentrations by a softmax of unbounded logits (non-negative, summing to
   1: the base is one of the components, its share what the pigments leave); a film's
   thickness as log X mapped into [`THICKNESS_MM`] by a sigmoid.
@@ -44,10 +46,12 @@ from jaxskin import mixture
 from jaxskin.formats import read_json, read_material
 from jaxskin.io import FitError, InputError
 
-__all__ = ["COLOUR", "GAMUT_DE", "NEEDED", "THICKNESS_MM", "Components", "Match", "colour_weights",
-           "delta_e2000", "fit", "lab", "read_components", "resample_target"]
+__all__ = ["GAMUT_DE", "NEEDED", "OBSERVERS", "THICKNESS_MM", "Components", "Match",
+           "colour_name", "colour_weights", "delta_e2000", "fit", "lab", "read_components",
+           "resample_target"]
 
-COLOUR = "CIELAB, D65, CIE 1964 10° observer; ΔE CIEDE2000"
+# colour-science's names of the two CIE observers, by field of view in degrees
+OBSERVERS = {10: "CIE 1964 10 Degree Standard Observer", 2: "CIE 1931 2 Degree Standard Observer"}
 NEEDED = (400.0, 700.0)  # nm: colour needs at least this much of the spectrum
 STEP = 5  # nm: the fit's grid (ASTM E308 interval)
 THICKNESS_MM = (1e-4, 10.0)  # a film's fitted thickness stays within (0.1 µm to 1 cm)
@@ -129,30 +133,38 @@ def read_components(paths, names=None) -> Components:
     return Components(names, [f.path for f in files], wl, S, K, extrapolate, notes)
 
 
+def colour_name(observer: int = 10, illuminant: str = "D65") -> str:
+    """How the colours are computed, in words (for the JSON and the messages)."""
+    return f"CIELAB, {illuminant}, {OBSERVERS[observer][:8]} {observer}° observer; ΔE CIEDE2000"
+
+
 @functools.cache
-def _weights(start: int, stop: int) -> np.ndarray:
+def _weights(start: int, stop: int, observer: int, illuminant: str) -> np.ndarray:
     import warnings
 
     import colour
 
     shape = colour.SpectralShape(start, stop, STEP)
     basis = colour.MultiSpectralDistributions(np.eye(len(shape.wavelengths)), shape.wavelengths)
-    cmfs = colour.MSDS_CMFS["CIE 1964 10 Degree Standard Observer"]
+    cmfs = colour.MSDS_CMFS[OBSERVERS[observer]]
     with warnings.catch_warnings():  # colour announces the (expected) shape alignments
         warnings.simplefilter("ignore", colour.utilities.ColourRuntimeWarning)
-        W = colour.msds_to_XYZ(basis, cmfs, colour.SDS_ILLUMINANTS["D65"], method="ASTM E308")
+        W = colour.msds_to_XYZ(basis, cmfs, colour.SDS_ILLUMINANTS[illuminant],
+                               method="ASTM E308")
     W = np.asarray(W, np.float64) / 100.0
     W.setflags(write=False)
     return W
 
 
-def colour_weights(lo: float, hi: float) -> tuple[np.ndarray, np.ndarray]:
+def colour_weights(lo: float, hi: float, observer: int = 10,
+                   illuminant: str = "D65") -> tuple[np.ndarray, np.ndarray]:
     """The fit's grid over `lo`–`hi` nm (5 nm steps inside it, within 380–780) and its
-    weights `W (n, 3)`: XYZ = R @ W under D65, 10° observer, a perfect reflector's Y = 1
-    over the grid (so CIELAB is relative to the white of the same range)."""
+    weights `W (n, 3)`: XYZ = R @ W under `illuminant` for the `observer` (10 or 2
+    degrees), a perfect reflector's Y = 1 over the grid (so CIELAB is relative to the white
+    of the same range)."""
     start = int(math.ceil(max(lo, 380.0) / STEP) * STEP)
     stop = int(math.floor(min(hi, 780.0) / STEP) * STEP)
-    W = _weights(start, stop)
+    W = _weights(start, stop, observer, illuminant)
     return np.arange(start, stop + 1, STEP, dtype=np.float64), W / W.sum(axis=0)[1]
 
 
@@ -185,8 +197,11 @@ def resample_target(wavelengths, R, grid) -> np.ndarray:
 class Match:
     """The result of `fit`: `concentrations (m,)` by component `names`; `thickness_mm`
     (None: opaque); on `wavelength_nm (n,)` the target (None for a CIELAB target) and the
-    match's reflectance; their CIELAB (`COLOUR`), `dE2000`, `rms` reflectance difference
-    (None for CIELAB), `converged`, `steps`, `loss`, and `thickness_fitted`."""
+    match's reflectance; their CIELAB (`colour_name(observer)`), `dE2000`, `rms`
+    reflectance difference (None for CIELAB), `converged`, `steps`, `loss`,
+    `thickness_fitted`; `metamerism`: for a spectral target, ΔE2000 between target and
+    match under illuminant A and with the other observer (a match that holds under every
+    light and for every eye has both near 0)."""
 
     names: list[str]
     concentrations: np.ndarray
@@ -202,6 +217,8 @@ class Match:
     converged: bool
     steps: int
     loss: float
+    observer: int = 10
+    metamerism: dict | None = None
 
     @property
     def in_gamut(self) -> bool:
@@ -266,18 +283,19 @@ def _starts(m, starts, fit_x, seed):
 
 def fit(components: Components, target_wavelengths=None, target_R=None, target_lab=None,
         thickness_mm=None, background=None, spectral_weight: float = 0.05, starts: int = 12,
-        seed: int = 0) -> Match:
+        seed: int = 0, observer: int = 10) -> Match:
     """Match a target with a mixture of `components`.
 
     **Arguments:**
 
     - `components`: `read_components`.
     - `target_wavelengths (k,)`, `target_R (k,)`: a target spectrum (0–1); or
-      `target_lab (3,)`: a target colour (`COLOUR`).
+      `target_lab (3,)`: a target colour (`colour_name(observer)`).
     - `thickness_mm`: "fit" to fit a film's thickness, a number to hold it, None for an
       opaque mixture; a film needs `background`: `(wavelengths, R)` or a number (0–1).
     - `spectral_weight`: w of the loss (module docstring); unused for a CIELAB target.
     - `starts`, `seed`: the number of starts and the seed of the random ones.
+    - `observer`: 10 (default, the colour-matching industry's) or 2 (the renderer's) degrees.
 
     **Returns:** a `Match`. **Raises:** `InputError` if the target and components share
     less than 400–700 nm; `FitError` if every start failed.
@@ -293,7 +311,7 @@ def fit(components: Components, target_wavelengths=None, target_R=None, target_l
         raise InputError(f"the target, the components (and background) share only "
                          f"{lo:g}-{hi:g} nm; matching a colour needs {NEEDED[0]:g}-"
                          f"{NEEDED[1]:g} nm")
-    grid, W = colour_weights(lo, hi)
+    grid, W = colour_weights(lo, hi, observer)
     wl = components.wavelength_nm
     S = np.stack([np.exp(np.interp(grid, wl, np.log(s))) for s in components.S])
     K = np.stack([np.exp(np.interp(grid, wl, np.log(k))) for k in components.K])
@@ -324,13 +342,22 @@ def fit(components: Components, target_wavelengths=None, target_R=None, target_l
         c = np.asarray(c)
     lab_m = _lab_np(R, W)
     lab_t = _lab_np(R_t, W) if R_t is not None else lab_t
+    metamerism = None
+    if R_t is not None:
+        other = 2 if observer == 10 else 10
+        W_a, W_o = colour_weights(lo, hi, observer, "A")[1], colour_weights(lo, hi, other)[1]
+        metamerism = {
+            "dE2000 under illuminant A": float(delta_e2000(_lab_np(R_t, W_a), _lab_np(R, W_a))),
+            f"dE2000 with the {other}° observer": float(delta_e2000(_lab_np(R_t, W_o),
+                                                                   _lab_np(R, W_o)))}
     return Match(
         names=list(components.names), concentrations=c,
         thickness_mm=None if X is None else float(X), thickness_fitted=fit_x,
         wavelength_nm=grid, R_target=R_t, R_match=R, lab_target=lab_t, lab_match=lab_m,
         dE2000=float(delta_e2000(lab_t, lab_m)),
         rms=None if R_t is None else float(np.sqrt(np.mean((R - R_t) ** 2))),
-        converged=bool(ok[best]), steps=int(steps[best]), loss=float(loss[best]))
+        converged=bool(ok[best]), steps=int(steps[best]), loss=float(loss[best]),
+        observer=observer, metamerism=metamerism)
 
 
 def _lab_np(R, W) -> np.ndarray:

@@ -7,7 +7,7 @@ import numpy as np
 
 from jaxskin.io import atomic_write
 
-from .match import COLOUR, GAMUT_DE, Components, Match
+from .match import GAMUT_DE, OBSERVERS, Components, Match, colour_name
 
 __all__ = ["match_json", "write_report"]
 
@@ -15,7 +15,7 @@ __all__ = ["match_json", "write_report"]
 def match_json(result: Match, comps: Components, target=None, spectrum=None, background=None,
                spectral_weight=None, starts=None, seed=None, seconds=None) -> dict:
     """The `<TARGET>_match.json` document: `concentrations` (material name → volume
-    fraction), `thickness_mm` for a film, `dE2000` (`COLOUR`), the target's and match's
+    fraction), `thickness_mm` for a film, `dE2000` (`colour`), the target's and match's
     CIELAB, their spectra on the fit's grid, and how the fit ran."""
 
     def floats(a):
@@ -38,7 +38,8 @@ def match_json(result: Match, comps: Components, target=None, spectrum=None, bac
     doc.update({
         "dE2000": result.dE2000,
         "in_gamut": bool(result.in_gamut),
-        "colour": COLOUR,
+        "colour": colour_name(result.observer),
+        **({"metamerism": result.metamerism} if result.metamerism else {}),
         "Lab_target": floats(result.lab_target),
         "Lab_match": floats(result.lab_match),
         **({"rms_reflectance": result.rms} if result.rms is not None else {}),
@@ -57,11 +58,10 @@ def match_json(result: Match, comps: Components, target=None, spectrum=None, bac
     return doc
 
 
-def _srgb(lab):
+def _srgb(lab, observer):
     import colour
 
-    xyz = colour.Lab_to_XYZ(np.asarray(lab), colour.CCS_ILLUMINANTS[
-        "CIE 1964 10 Degree Standard Observer"]["D65"])
+    xyz = colour.Lab_to_XYZ(np.asarray(lab), colour.CCS_ILLUMINANTS[OBSERVERS[observer]]["D65"])
     return np.clip(colour.XYZ_to_sRGB(xyz), 0.0, 1.0)
 
 
@@ -87,14 +87,13 @@ def write_report(result: Match, comps: Components, path, title: str = "match") -
         ax.plot(result.wavelength_nm, result.R_target, "k-", lw=2, label="target")
     ax.plot(result.wavelength_nm, result.R_match, "r--", lw=1.8, label="match")
     ax.set(xlabel="wavelength (nm)", ylabel="reflectance", ylim=(0, 1.02),
-           title=f"{title}: ΔE2000 {result.dE2000:.3f} (D65, 10°)"
+           title=f"{title}: ΔE2000 {result.dE2000:.3f} (D65, {result.observer}°)"
                  + ("" if result.in_gamut else f" — OUT OF GAMUT (> {GAMUT_DE:g})"))
     ax.legend(fontsize=7, loc="upper left")
     side.axis("off")
-    side.add_patch(plt.Rectangle((0.0, 0.62), 0.48, 0.36, color=_srgb(result.lab_target),
-                                 transform=side.transAxes))
-    side.add_patch(plt.Rectangle((0.52, 0.62), 0.48, 0.36, color=_srgb(result.lab_match),
-                                 transform=side.transAxes))
+    for x, lab in ((0.0, result.lab_target), (0.52, result.lab_match)):
+        side.add_patch(plt.Rectangle((x, 0.62), 0.48, 0.36, color=_srgb(lab, result.observer),
+                                     transform=side.transAxes))
     side.text(0.24, 0.58, "target", ha="center", va="top", transform=side.transAxes)
     side.text(0.76, 0.58, "match", ha="center", va="top", transform=side.transAxes)
     lines = [f"{n}: {c:.4f}" for n, c in zip(result.names, result.concentrations, strict=True)]
@@ -106,6 +105,8 @@ def write_report(result: Match, comps: Components, path, title: str = "match") -
               f"match  L* {lm[0]:.1f} a* {lm[1]:.1f} b* {lm[2]:.1f}"]
     if result.rms is not None:
         lines.append(f"RMS reflectance difference {result.rms:.4f}")
+    for k, v in (result.metamerism or {}).items():
+        lines.append(f"{k}: {v:.2f}")
     side.text(0.0, 0.48, "volume fractions\n" + "\n".join(lines), va="top", fontsize=9,
               family="monospace", transform=side.transAxes)
     with atomic_write(path, "wb") as fh:

@@ -29,7 +29,9 @@ def add_parser(sub) -> None:
         "skin file's subject_38), or a CIELAB colour (--lab). The mixture is opaque, unless "
         "--background is given: then a film over it, of --thickness or of the thickness "
         "that matches best. Colour is CIELAB under D65 with the CIE 1964 10-degree observer "
-        "(the colour-matching industry's convention), differences CIEDE2000. The loss is "
+        "(the colour-matching industry's convention; --observer 2 for the renderer's), "
+        "differences CIEDE2000; a spectral target's match also reports its metamerism "
+        "(dE2000 under illuminant A and with the other observer). The loss is "
         "dE*ab^2 + W^2 (100 x RMS reflectance difference)^2 (W = --spectral-weight): the "
         "colour first, the spectrum to choose the least metameric of mixtures of the same "
         "colour. Levenberg-Marquardt (optimistix, float64) from several starts. Writes "
@@ -65,6 +67,9 @@ def add_parser(sub) -> None:
                    metavar="W", help="weight W of the spectral term, 0-100 (0.05: at 5 %% RMS "
                    "reflectance difference the spectrum counts like dE 0.25; 0: colour only); "
                    "unused with --lab")
+    m.add_argument("--observer", type=int, choices=(10, 2), default=10,
+                   help="the CIE standard observer in degrees: 10 (default; colour matching's "
+                   "convention) or 2 (what the renderer and fit-skin use)")
     m.add_argument("--starts", type=number(int, 1, 256), default=12, metavar="S",
                    help="starts, 1-256: equal shares, each component dominant, then random (12)")
     seed(m)
@@ -185,7 +190,7 @@ def run(args, record: Run) -> int:
     record.stage = "matching"
     t0 = time.perf_counter()
     result = match.fit(comps, wl, R, None if args.lab is None else target_lab, thickness,
-                       background, args.spectral_weight, args.starts, args.seed)
+                       background, args.spectral_weight, args.starts, args.seed, args.observer)
     seconds = time.perf_counter() - t0
     record.stage = f"writing {json_path.name}"
     from ..fitting.match_report import match_json, write_report
@@ -212,8 +217,10 @@ def _say(result, items, seconds: float) -> None:
         print(f"{n:<{wide}} {c:8.4f}")
     film = "" if result.thickness_mm is None else f", film {result.thickness_mm * 1000:.2f} µm"
     rms = "" if result.rms is None else f", RMS reflectance difference {result.rms:.4f}"
-    print(f"dE2000 {result.dE2000:.3f} (D65, 10°){rms}{film}; {result.steps} steps"
-          f"{'' if result.converged else ' (not converged)'}, {seconds:.1f} s")
+    print(f"dE2000 {result.dE2000:.3f} (D65, {result.observer}°){rms}{film}; {result.steps} "
+          f"steps{'' if result.converged else ' (not converged)'}, {seconds:.1f} s")
+    if result.metamerism:
+        print("metamerism: " + ", ".join(f"{k} {v:.2f}" for k, v in result.metamerism.items()))
     recipe = " ".join(f"{p}:{c:.4f}" for p, c in zip(items, result.concentrations, strict=True))
     print(f"to make it: jaxskin mix {recipe} -o DIR")
     if not result.in_gamut:

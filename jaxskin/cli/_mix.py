@@ -94,7 +94,7 @@ def run(args, record: Run) -> int:
     if comps.extrapolate is None and (wl[0] > 380 or wl[-1] < 780):
         warn(f"the mixture covers {wl[0]:g}-{wl[-1]:g} nm, not the renderer's 380-780 nm: "
              f"add \"extrapolate\": \"hold\" to {json_path} to render it")
-    print(", ".join(f"{n} {ci:.4g}" for n, ci in zip(comps.names, c, strict=True))
+    print(", ".join(f"{n} {ci:.4f}" for n, ci in zip(comps.names, c, strict=True))
           + f" by volume -> {name}")
     print_written(outputs)
     return 0
