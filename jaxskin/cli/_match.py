@@ -37,7 +37,7 @@ def add_parser(sub) -> None:
         "colour. Levenberg-Marquardt (optimistix, float64) from several starts. Writes "
         "DIR/<TARGET>_match.json (concentrations by material name, thickness_mm where a film, "
         "dE2000) and DIR/<TARGET>_match.png (target and match spectra, swatches). A target "
-        "the components cannot reach (dE2000 above 1) gets the closest match, and a warning "
+        "the components cannot reach (dE2000 above 1) gets the closest match (by the loss), and a warning "
         "saying so.",
     )
     m.add_argument("target", nargs="?", metavar="TARGET.csv",
@@ -46,9 +46,11 @@ def add_parser(sub) -> None:
                    help="the components: material files (jaxskin calibrate's JSON with S, K "
                    "per mm) or shipped materials' names, separated by commas")
     m.add_argument("-o", "--output", required=True, metavar="DIR",
-                   help="folder for <TARGET>_match.json and .png (created if missing)")
+                   help="folder for <TARGET>_match.json and .png (created if missing); with "
+                   "--spectrum, <TARGET>_<SPECTRUM>_match.*")
     m.add_argument("--lab", metavar="L,a,b",
-                   help="a target colour in CIELAB (D65, 10-degree) instead of TARGET.csv")
+                   help="a target colour in CIELAB (D65, the --observer's white) instead of "
+                   "TARGET.csv")
     m.add_argument("--name", metavar="NAME",
                    help="the outputs' stem instead of TARGET's (default for --lab: lab)")
     m.add_argument("--spectrum", metavar="COLUMN",
