@@ -199,7 +199,9 @@ class Match:
     (None: opaque); on `wavelength_nm (n,)` the target (None for a CIELAB target) and the
     match's reflectance; their CIELAB (`colour_name(observer)`), `dE2000`, `rms`
     reflectance difference (None for CIELAB), `converged`, `steps`, `loss`,
-    `thickness_fitted`; `metamerism`: for a spectral target, ΔE2000 between target and
+    `thickness_fitted`, `hides_background` (the film reflects within 0.001 of the opaque
+    mixture in every band: a fitted thickness is then only a lower bound); `metamerism`:
+    for a spectral target, ΔE2000 between target and
     match under illuminant A and with the other observer (a match that holds under every
     light and for every eye has both near 0)."""
 
@@ -219,6 +221,7 @@ class Match:
     loss: float
     observer: int = 10
     metamerism: dict | None = None
+    hides_background: bool = False
 
     @property
     def in_gamut(self) -> bool:
@@ -339,6 +342,8 @@ def fit(components: Components, target_wavelengths=None, target_R=None, target_l
         c, X = _unpack(f64(p[best]), m, fit_x)
         X = X if fit_x else (float(thickness_mm) if film else None)
         R = np.asarray(mixture.reflectance(f64(S), f64(K), c, X, f64(Rg) if film else None))
+        hides = film and float(np.max(np.abs(R - np.asarray(mixture.reflectance(
+            f64(S), f64(K), c))))) < 1e-3
         c = np.asarray(c)
     lab_m = _lab_np(R, W)
     lab_t = _lab_np(R_t, W) if R_t is not None else lab_t
@@ -357,7 +362,7 @@ def fit(components: Components, target_wavelengths=None, target_R=None, target_l
         dE2000=float(delta_e2000(lab_t, lab_m)),
         rms=None if R_t is None else float(np.sqrt(np.mean((R - R_t) ** 2))),
         converged=bool(ok[best]), steps=int(steps[best]), loss=float(loss[best]),
-        observer=observer, metamerism=metamerism)
+        observer=observer, metamerism=metamerism, hides_background=hides)
 
 
 def _lab_np(R, W) -> np.ndarray:

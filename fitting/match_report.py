@@ -33,6 +33,7 @@ def match_json(result: Match, comps: Components, target=None, spectrum=None, bac
         doc["thickness_mm"] = result.thickness_mm
         doc["thickness"] = "fitted" if result.thickness_fitted else "given"
         doc["background"] = str(background)
+        doc["hides_background"] = bool(result.hides_background)
     else:
         doc["opaque"] = True
     doc.update({

@@ -171,7 +171,13 @@ def test_match_recovers_a_film_and_its_thickness(x64):
     r = match.fit(comps, wl, R, thickness_mm="fit", background=(wl, Rg), starts=6)
     assert np.max(np.abs(r.concentrations - c)) < 0.01, r.concentrations
     assert r.thickness_mm == pytest.approx(0.008, rel=0.02)
-    assert r.dE2000 <= 0.1
+    assert r.dE2000 <= 0.1 and not r.hides_background
+    # an opaque target: the film hides the background, and the fit says its thickness is
+    # only a lower bound
+    opaque = np.asarray(mixture.reflectance(comps.S, comps.K, c))
+    r = match.fit(comps, wl, opaque, thickness_mm="fit", background=(wl, Rg), starts=6)
+    assert r.hides_background and r.dE2000 <= 0.1
+    assert np.max(np.abs(r.concentrations - c)) < 0.01, r.concentrations
 
 
 def test_match_from_cielab(x64):

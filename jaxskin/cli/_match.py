@@ -37,8 +37,8 @@ def add_parser(sub) -> None:
         "colour. Levenberg-Marquardt (optimistix, float64) from several starts. Writes "
         "DIR/<TARGET>_match.json (concentrations by material name, thickness_mm where a film, "
         "dE2000) and DIR/<TARGET>_match.png (target and match spectra, swatches). A target "
-        "the components cannot reach (dE2000 above 1) gets the closest match (by the loss), and a warning "
-        "saying so.",
+        "the components cannot reach (dE2000 above 1) gets the closest match (by the "
+        "loss), and a warning saying so.",
     )
     m.add_argument("target", nargs="?", metavar="TARGET.csv",
                    help="the target reflectance spectrum (or give --lab instead)")
@@ -225,6 +225,10 @@ def _say(result, items, seconds: float) -> None:
         print("metamerism: " + ", ".join(f"{k} {v:.2f}" for k, v in result.metamerism.items()))
     recipe = " ".join(f"{p}:{c:.4f}" for p, c in zip(items, result.concentrations, strict=True))
     print(f"to make it: jaxskin mix {recipe} -o DIR")
+    if result.thickness_fitted and result.hides_background:
+        warn(f"the matched film ({result.thickness_mm * 1000:.3g} µm) hides the background: "
+             "its reflectance is the opaque mixture's, so the thickness is not determined "
+             "by the target (any thicker film matches as well)")
     if not result.in_gamut:
         from ..fitting.match import GAMUT_DE
 

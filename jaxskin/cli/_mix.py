@@ -80,9 +80,6 @@ def run(args, record: Run) -> int:
     for line in comps.notes:
         note(line)
     c = np.array([c for _, c in parsed])
-    if any(ci == 0 for ci in c):
-        warn("a component at concentration 0 adds nothing: "
-             + ", ".join(n for n, ci in zip(comps.names, c, strict=True) if ci == 0))
     if abs(c.sum() - 1.0) > 1e-12:  # a formula's rounding: the shares, scaled to sum to 1
         note(f"the concentrations sum to {c.sum():.6g}: each divided by that sum")
         c = c / c.sum()
