@@ -160,7 +160,7 @@ def test_match_recovers_known_concentrations(tmp_path, capsys):
 
 def test_match_recovers_a_film_and_its_thickness(x64):
     """Concentrations within 0.01 and the thickness within 2 % (compiles the film's LM,
-    km.layer inside: about 15 s on two shared cores)."""
+    km.layer inside, twice: 14-21 s on two shared cores)."""
     from jaxskin.fitting import match
 
     c = np.array([0.5, 0.2, 0.3])
