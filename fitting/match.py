@@ -130,6 +130,9 @@ def read_components(paths, names=None) -> Components:
     extrapolate = rules.pop() if len(rules) == 1 else None
     if extrapolate is None and None not in {f.extrapolate for f in files}:
         extrapolate = "hold"  # all extend, in different ways: the mixture holds its ends
+        notes.append("the components extend beyond their wavelengths in different ways "
+                     f"({', '.join(sorted(rules | {f.extrapolate for f in files}))}): the "
+                     "mixture holds its end values (\"extrapolate\": \"hold\")")
     return Components(names, [f.path for f in files], wl, S, K, extrapolate, notes)
 
 
