@@ -10,7 +10,7 @@ from ..outputs import Outputs, check_name
 from ._process import Run, print_written
 from ._terminal import note, warn
 
-__all__ = ["SUM_TOLERANCE", "add_parser", "parse_component", "run"]
+__all__ = ["SUM_TOLERANCE", "add_parser", "mixture_json", "parse_component", "run"]
 
 SUM_TOLERANCE = 1e-3  # concentrations must sum to 1 within this (a formula's rounding)
 
