@@ -127,6 +127,18 @@ def test_mix_resamples_components_on_other_grids(tmp_path, capsys):
     assert "not the renderer's 380-780 nm" in err
 
 
+def test_mix_scales_a_rounded_formula_to_one(tmp_path, capsys):
+    """Shares that sum to 1 within 0.001 (a formula rounded to 4 decimals) are divided by
+    their sum, with a note; further off is refused (the bad-input table)."""
+    code, out, err = _run(["mix", f"{W}:0.6667", f"{R}:0.3332", "-o", tmp_path], capsys)
+    assert code == 0, err
+    assert "sum to 0.9999: each divided by that sum" in err
+    doc = json.loads((tmp_path / "mix_pigment_white_pigment_red.json").read_text())
+    shares = doc["mixture"]["concentrations"]
+    assert shares["pigment_white"] == pytest.approx(0.6667 / 0.9999, rel=1e-12)
+    assert sum(shares.values()) == pytest.approx(1.0, abs=1e-15)
+
+
 def _target(tmp_path, c, names=PIGMENTS, thickness=None, background=None):
     """A target spectrum mixed from the shipped pigments at `c` (float64), as a CSV."""
     from jaxskin.fitting.match import read_components
@@ -180,7 +192,7 @@ def test_match_recovers_a_film_and_its_thickness(x64):
     assert np.max(np.abs(r.concentrations - c)) < 0.01, r.concentrations
 
 
-def test_match_from_cielab(x64):
+def test_match_from_cielab(x64, tmp_path, capsys):
     """Three components: two free fractions, three coordinates, one answer. The CIELAB of
     the target is colour-science's (the fit's own `lab` is only its loss)."""
     import colour
@@ -198,6 +210,15 @@ def test_match_from_cielab(x64):
     r = match.fit(comps, target_lab=lab, starts=6)
     assert np.max(np.abs(r.concentrations - c)) < 0.01, r.concentrations
     assert r.dE2000 <= 0.1
+    code, out, err = _run(["match", "--lab", ",".join(f"{v:.4f}" for v in lab), "--from",
+                           ",".join(PIGMENTS[:3]), "-o", tmp_path, "--name", "shade",
+                           "--starts", "6"], capsys)
+    assert code == 0, err
+    doc = json.loads((tmp_path / "shade_match.json").read_text())
+    assert doc["target"] == {"Lab": pytest.approx(list(lab), abs=1e-4)}
+    got = [doc["concentrations"][n] for n in PIGMENTS[:3]]
+    assert np.max(np.abs(np.subtract(got, c))) < 0.01 and doc["dE2000"] <= 0.1
+    assert "R_target" not in doc and "metamerism" not in doc
     # the fit's differentiable CIELAB agrees with colour-science's on the same weights
     grid, W = match.colour_weights(380, 780)
     # (measured 0.008 in b*: colour's tabulated white point is rounded to 4 decimals in xy)
