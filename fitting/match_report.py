@@ -13,9 +13,11 @@ __all__ = ["match_json", "write_report"]
 
 
 def match_json(result: Match, comps: Components, target=None, spectrum=None, background=None,
-               spectral_weight=None, starts=None, seed=None, seconds=None) -> dict:
+               spectral_weight=None, starts=None, seed=None, seconds=None,
+               densities=None) -> dict:
     """The `<TARGET>_match.json` document: `concentrations` (material name → volume
-    fraction), `thickness_mm` for a film, `dE2000` (`colour`), the target's and match's
+    fraction; by weight too, `concentrations_by_weight`, when the components' `densities`
+    are given), `thickness_mm` for a film, `dE2000` (`colour`), the target's and match's
     CIELAB, their spectra on the fit's grid, and how the fit ran."""
 
     def floats(a):
@@ -27,6 +29,7 @@ def match_json(result: Match, comps: Components, target=None, spectrum=None, bac
         "concentrations": {n: float(c) for n, c in zip(result.names, result.concentrations,
                                                          strict=True)},
         "by": "volume fraction (two-constant Kubelka-Munk mixing of S, K per mm)",
+        **_by_weight(result, densities),
         "components": {n: str(p) for n, p in zip(comps.names, comps.paths, strict=True)},
     }
     if result.thickness_mm is not None:
@@ -57,6 +60,17 @@ def match_json(result: Match, comps: Components, target=None, spectrum=None, bac
         },
     })
     return doc
+
+
+def _by_weight(result: Match, densities) -> dict:
+    """`concentrations_by_weight` and the `densities` they come from, if given."""
+    if not densities:
+        return {}
+    rho = np.array([densities[n] for n in result.names])
+    w = result.concentrations * rho / np.sum(result.concentrations * rho)
+    return {"concentrations_by_weight": {n: float(v) for n, v in zip(result.names, w,
+                                                                       strict=True)},
+            "densities": dict(densities)}
 
 
 def _srgb(lab, observer):

@@ -22,7 +22,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from . import km
 
-__all__ = ["mix", "reflectance"]
+__all__ = ["mix", "reflectance", "volume_fractions", "weight_fractions"]
 
 
 def mix(
@@ -63,3 +63,16 @@ def reflectance(S, K, c, thickness_mm=None, background=None):
         raise ValueError("mixture.reflectance: a film (thickness_mm) needs a background")
     R, T = km.layer(S_mix, K_mix, thickness_mm)
     return km.over(R, T, background)
+
+
+def volume_fractions(w, density):
+    """Weight fractions `w (m,)` → volume fractions, with the components' densities
+    `density (m,)` (any one unit): c_i = (w_i/ρ_i) / Σ_j (w_j/ρ_j)."""
+    v = jnp.asarray(w) / jnp.asarray(density)
+    return v / jnp.sum(v)
+
+
+def weight_fractions(c, density):
+    """The inverse of `volume_fractions`: w_i = c_i ρ_i / Σ_j c_j ρ_j."""
+    m = jnp.asarray(c) * jnp.asarray(density)
+    return m / jnp.sum(m)

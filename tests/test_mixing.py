@@ -139,6 +139,24 @@ def test_mix_scales_a_rounded_formula_to_one(tmp_path, capsys):
     assert sum(shares.values()) == pytest.approx(1.0, abs=1e-15)
 
 
+def test_weight_fractions_by_hand(x64, tmp_path, capsys):
+    # 0.5 g at 4 g/cm3 is 0.125 cm3, 0.5 g at 1 g/cm3 is 0.5 cm3: 20 % and 80 % by volume
+    np.testing.assert_allclose(mixture.volume_fractions([0.5, 0.5], [4.0, 1.0]), [0.2, 0.8],
+                               rtol=1e-15)
+    np.testing.assert_allclose(mixture.weight_fractions([0.2, 0.8], [4.0, 1.0]), [0.5, 0.5],
+                               rtol=1e-15)
+    code, out, err = _run(["mix", f"{W}:0.5", f"{R}:0.5", "--density", "pigment_white=4",
+                           "--density", "pigment_red=1", "-o", tmp_path, "--name", "w"], capsys)
+    assert code == 0, err
+    doc = json.loads((tmp_path / "w.json").read_text())
+    assert doc["mixture"]["concentrations"] == pytest.approx(
+        {"pigment_white": 0.2, "pigment_red": 0.8}, rel=1e-14)
+    assert doc["mixture"]["weight_fractions"] == {"pigment_white": 0.5, "pigment_red": 0.5}
+    white, red = (json.loads((MATERIALS / f"{n}.json").read_text()) for n in PIGMENTS[:2])
+    np.testing.assert_allclose(doc["K_per_mm"], 0.2 * np.array(white["K_per_mm"])
+                               + 0.8 * np.array(red["K_per_mm"]), rtol=1e-12)
+
+
 def _target(tmp_path, c, names=PIGMENTS, thickness=None, background=None):
     """A target spectrum mixed from the shipped pigments at `c` (float64), as a CSV."""
     from jaxskin.fitting.match import read_components
@@ -158,12 +176,16 @@ def test_match_recovers_known_concentrations(tmp_path, capsys):
     about 8 s)."""
     c = [0.62, 0.07, 0.25, 0.06]
     path, _, _ = _target(tmp_path, c)
-    code, out, err = _run(["match", path, "--from", ",".join(PIGMENTS), "-o", tmp_path / "o"],
+    rho = [4.0, 5.2, 4.0, 5.1]  # titanium dioxide, haematite, goethite, magnetite (g/cm3)
+    code, out, err = _run(["match", path, "--from", ",".join(PIGMENTS), "-o", tmp_path / "o",
+                           *(f"--density={n}={r}" for n, r in zip(PIGMENTS, rho, strict=True))],
                           capsys)
     assert code == 0, err
     doc = json.loads((tmp_path / "o" / "target_match.json").read_text())
     got = [doc["concentrations"][n] for n in PIGMENTS]
     assert np.max(np.abs(np.subtract(got, c))) < 0.01, got
+    by_weight = np.multiply(got, rho) / np.dot(got, rho)
+    assert [doc["concentrations_by_weight"][n] for n in PIGMENTS] == pytest.approx(by_weight)
     assert doc["dE2000"] <= 0.1 and doc["in_gamut"] and doc["opaque"]
     assert sum(got) == pytest.approx(1.0, abs=1e-12)
     assert (tmp_path / "o" / "target_match.png").stat().st_size > 10_000
@@ -332,6 +354,12 @@ CASES = {
         "500,0.4", "500,1.4")), *FROM, "-o", "out"],
     "match-spectrum-with-lab": lambda t: ["match", "--lab", "50,0,0", "--spectrum", "x",
                                           *FROM, "-o", "out"],
+    "mix-density-missing": lambda t: ["mix", f"{W}:0.5", f"{R}:0.5", "--density",
+                                      "pigment_white=4", "-o", "out"],
+    "mix-density-bad": lambda t: ["mix", f"{W}:0.5", f"{R}:0.5", "--density",
+                                  "pigment_white=-4", "--density", "pigment_red=5", "-o", "out"],
+    "match-density-unknown": lambda t: ["match", "--lab", "50,0,0", *FROM, "-o", "out",
+                                        "--density", "titanium=4"],
     "match-bad-starts": lambda t: ["match", "--lab", "50,0,0", *FROM, "-o", "out",
                                    "--starts", "0"],
 }

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from ..io import InputError
 from ..outputs import Outputs, check_name, slug
+from ._mix import add_density, densities
 from ._options import no_report, number, seed
 from ._process import Run, print_written
 from ._terminal import note, warn
@@ -75,6 +76,7 @@ def add_parser(sub) -> None:
     m.add_argument("--starts", type=number(int, 1, 256), default=12, metavar="S",
                    help="starts, 1-256: equal shares, each component dominant, then random (12)")
     seed(m)
+    add_density(m, "the match also gives its recipe by weight (concentrations_by_weight)")
     no_report(m, "JSON")
 
 
@@ -182,6 +184,7 @@ def run(args, record: Run) -> int:
 
     paths = [material_path(p) for p in items]
     comps = match.read_components(paths)
+    rho = densities(args.density, comps.names)
     inputs = [*paths, args.target, args.background if isinstance(background, tuple) else None]
     outputs = Outputs(args.output, inputs)
     json_path = outputs.plan(f"{stem}_match.json", "the match")
@@ -201,29 +204,43 @@ def run(args, record: Run) -> int:
     target = args.target if args.lab is None else None
     write_json(match_json(result, comps, target=target, spectrum=args.spectrum,
                           background=args.background, spectral_weight=args.spectral_weight,
-                          starts=args.starts, seed=args.seed, seconds=seconds), json_path)
+                          starts=args.starts, seed=args.seed, seconds=seconds, densities=rho),
+               json_path)
     outputs.done(json_path)
     if png_path is not None:
         record.stage = f"writing {png_path.name}"
         write_report(result, comps, png_path, title=stem)
         outputs.done(png_path)
-    _say(result, items, seconds)
+    _say(result, items, seconds, rho)
     print_written(outputs)
     return 0
 
 
-def _say(result, items, seconds: float) -> None:
+def _say(result, items, seconds: float, rho=None) -> None:
     """The concentrations, ΔE and the mix command line; a warning if out of reach."""
+    import jax
+    import numpy as np
+
+    from .. import mixture
+
     wide = max(12, *(len(n) for n in result.names))
-    for n, c in zip(result.names, result.concentrations, strict=True):
-        print(f"{n:<{wide}} {c:8.4f}")
+    shares = result.concentrations
+    if rho is not None:
+        with jax.enable_x64(True):
+            shares = np.asarray(mixture.weight_fractions(shares, np.array(
+                [rho[n] for n in result.names])))
+    print(f"{'':<{wide}} {'volume':>8}" + (f" {'weight':>8}" if rho else ""))
+    for n, c, w in zip(result.names, result.concentrations, shares, strict=True):
+        print(f"{n:<{wide}} {c:8.4f}" + (f" {w:8.4f}" if rho else ""))
     film = "" if result.thickness_mm is None else f", film {result.thickness_mm * 1000:.2f} µm"
     rms = "" if result.rms is None else f", RMS reflectance difference {result.rms:.4f}"
     print(f"dE2000 {result.dE2000:.3f} (D65, {result.observer}°){rms}{film}; {result.steps} "
           f"steps{'' if result.converged else ' (not converged)'}, {seconds:.1f} s")
     if result.metamerism:
         print("metamerism: " + ", ".join(f"{k} {v:.2f}" for k, v in result.metamerism.items()))
-    recipe = " ".join(f"{p}:{c:.4f}" for p, c in zip(items, result.concentrations, strict=True))
+    recipe = " ".join(f"{p}:{c:.4f}" for p, c in zip(items, shares, strict=True))
+    if rho:
+        recipe += "".join(f" --density {n}={r:g}" for n, r in rho.items())
     print(f"to make it: jaxskin mix {recipe} -o DIR")
     if result.thickness_fitted and result.hides_background:
         warn(f"the matched film ({result.thickness_mm * 1000:.3g} µm) hides the background: "

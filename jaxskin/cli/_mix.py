@@ -10,7 +10,8 @@ from ..outputs import Outputs, check_name
 from ._process import Run, print_written
 from ._terminal import note, warn
 
-__all__ = ["SUM_TOLERANCE", "add_parser", "mixture_json", "parse_component", "run"]
+__all__ = ["SUM_TOLERANCE", "add_density", "add_parser", "densities", "mixture_json",
+           "parse_component", "run"]
 
 SUM_TOLERANCE = 1e-3  # concentrations must sum to 1 within this (a formula's rounding)
 
@@ -24,8 +25,9 @@ def add_parser(sub) -> None:
         "material's name) by the two-constant Kubelka-Munk rule: the mixture's S and K per mm "
         "are the concentration-weighted sums of its components'. Concentrations are VOLUME "
         "fractions (S, K per mm add per unit volume), each >= 0, summing to 1 (within 0.001: "
-        "a rounded formula is scaled to 1, with a note); "
-        "from weight fractions w_i and densities rho_i, c_i = (w_i/rho_i) / sum_j (w_j/rho_j). "
+        "a rounded formula is scaled to 1, with a note); with --density for every component "
+        "they are weight fractions w_i instead, converted to volume fractions "
+        "c_i = (w_i/rho_i) / sum_j (w_j/rho_j). "
         "Components on different wavelength grids are resampled (linearly in log S, log K) "
         "onto the range they all cover, with a note; that range must include 400-700 nm. "
         "Writes OUTDIR/<name>.json, a material the renderer reads at once "
@@ -39,6 +41,41 @@ def add_parser(sub) -> None:
     c.add_argument("--name", metavar="NAME",
                    help="the mixture's material name and file name (default: mix_ and the "
                    "components' names joined by _)")
+    add_density(c, "the concentrations are WEIGHT fractions, converted to volume fractions "
+                "with these densities")
+
+
+def add_density(p, what: str) -> None:
+    """`--density NAME=RHO` (repeatable, into `args.density`)."""
+    p.add_argument("--density", action="append", default=[], metavar="NAME=RHO",
+                   help=f"a component's density (g/cm3, or any one unit for all), by its "
+                   f"material name; repeat it for every component, and {what}")
+
+
+def densities(items, names) -> dict[str, float] | None:
+    """`--density NAME=RHO` items → `{name: rho}` for every one of `names`, or None when
+    none is given; `InputError` for a bad item, an unknown or repeated name, or a component
+    left without one."""
+    if not items:
+        return None
+    out = {}
+    for item in items:
+        name, sep, text = (s.strip() for s in item.partition("="))
+        try:
+            rho = float(text)
+        except ValueError:
+            rho = math.nan
+        if not sep or name not in names or not (math.isfinite(rho) and rho > 0):
+            raise InputError(f"--density expects NAME=RHO with RHO > 0 and NAME a component's "
+                             f"material name ({', '.join(names)}), got {item!r}")
+        if name in out:
+            raise InputError(f"--density {name} given twice; give it once")
+        out[name] = rho
+    missing = [n for n in names if n not in out]
+    if missing:
+        raise InputError(f"--density: every component needs one (weight fractions need all "
+                         f"the densities); missing {', '.join(missing)}")
+    return out
 
 
 def parse_component(text: str) -> tuple[str, float]:
@@ -60,8 +97,10 @@ def parse_component(text: str) -> tuple[str, float]:
 
 def run(args, record: Run) -> int:
     """Read and check every component, then write the mixture's material JSON."""
+    import jax
     import numpy as np
 
+    from .. import mixture
     from ..cosmetics import material_path
     from ..fitting.match import read_components
     from ..formats import write_json
@@ -73,6 +112,7 @@ def run(args, record: Run) -> int:
                          f"whole mixture must sum to 1 (within {SUM_TOLERANCE:g})")
     paths = [material_path(p) for p, _ in parsed]
     comps = read_components(paths)
+    rho = densities(args.density, comps.names)
     name = args.name or "mix_" + "_".join(comps.names)
     check_name(name, key="--name")
     outputs = Outputs(args.output, paths)
@@ -84,7 +124,12 @@ def run(args, record: Run) -> int:
     if abs(c.sum() - 1.0) > 1e-12:  # a formula's rounding: the shares, scaled to sum to 1
         note(f"the concentrations sum to {c.sum():.6g}: each divided by that sum")
         c = c / c.sum()
-    doc = mixture_json(name, comps, c)
+    weights = None
+    if rho is not None:
+        weights = c
+        with jax.enable_x64(True):
+            c = np.asarray(mixture.volume_fractions(c, np.array([rho[n] for n in comps.names])))
+    doc = mixture_json(name, comps, c, weights, rho)
     record.stage = f"writing {json_path.name}"
     write_json(doc, json_path)
     outputs.done(json_path)
@@ -94,13 +139,17 @@ def run(args, record: Run) -> int:
              f"add \"extrapolate\": \"hold\" to {json_path} to render it")
     print(", ".join(f"{n} {ci:.4f}" for n, ci in zip(comps.names, c, strict=True))
           + f" by volume -> {name}")
+    if weights is not None:
+        print("(by weight: " + ", ".join(f"{n} {w:.4f}" for n, w in zip(comps.names, weights,
+                                                                        strict=True)) + ")")
     print_written(outputs)
     return 0
 
 
-def mixture_json(name: str, comps, c) -> dict:
+def mixture_json(name: str, comps, c, weights=None, rho=None) -> dict:
     """The material file of `comps` (`fitting.match.Components`) mixed at volume fractions
-    `c (m,)`: the keys `jaxskin calibrate` writes that the renderer reads, and the recipe."""
+    `c (m,)`: the keys `jaxskin calibrate` writes that the renderer reads, and the recipe
+    (with the weight fractions and densities it was given in, if any)."""
     import jax
     import numpy as np
 
@@ -119,6 +168,9 @@ def mixture_json(name: str, comps, c) -> dict:
             "rule": "two-constant Kubelka-Munk: S = sum c_i S_i, K = sum c_i K_i",
             "by": "volume fraction",
             "concentrations": {n: float(ci) for n, ci in zip(comps.names, c, strict=True)},
+            **({"weight_fractions": {n: float(w) for n, w in zip(comps.names, weights,
+                                                                strict=True)},
+                "densities": rho} if weights is not None else {}),
             "files": {n: str(p) for n, p in zip(comps.names, comps.paths, strict=True)},
         },
     }
