@@ -7,6 +7,8 @@
 - `fitting.skin`: the biophysical skin from reflectance spectra (`jaxskin fit-skin`).
 - `fitting.image`: scene values and texture-space maps from a target image
   (`jaxskin fit-image`, inverse rendering).
+- `fitting.match`: colour matching, a mixture's concentrations (and film thickness) for a
+  target spectrum or CIELAB colour (`jaxskin match`); `fitting.match_report` its JSON and PNG.
 
 Fits run in float64 inside `jax.enable_x64(True)`; nothing here changes JAX's global settings.
 """

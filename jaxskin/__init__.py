@@ -28,6 +28,7 @@ Optics (Bando 2001 §4.2; Huang et al. 2013):
 - `skin`: measured skin reflectance with a melanin control.
 - `biophysical`: the two-layer biophysical skin (melanin, haemoglobin).
 - `cosmetics`: cosmetic layers: measured materials and thickness maps.
+- `mixture`: pigments in a base: the two-constant Kubelka–Munk mixing rule.
 - `sss`: subsurface scattering, the six-Gaussian skin profile.
 - `shading`: one model per module: `shading.blinn`, `shading.lafortune`, `shading.kelemen`
   and `shading.layered` (KM layers over skin with SSS and per-layer specular).
@@ -64,6 +65,8 @@ Fitting (`jaxskin.fitting`, optimistix; the repository's `fitting/`):
 - `fitting.skin`: the biophysical skin from reflectance spectra.
 - `fitting.image`: scene values and texture maps from a target image.
 - `fitting.report`: the calibration report (PNG).
+- `fitting.match`: colour matching: a mixture's concentrations (and film) for a target.
+- `fitting.match_report`: the match's JSON record and PNG report.
 
 Application:
 

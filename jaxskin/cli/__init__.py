@@ -3,6 +3,8 @@
     jaxskin --version
     jaxskin list                                          # built-in scenes, meshes, materials …
     jaxskin calibrate FILE.csv [FILE.csv ...] -o OUTDIR   # S(λ), K(λ) of cosmetics
+    jaxskin mix A.json:0.2 B.json:0.8 -o OUTDIR           # a mixture's material (KM)
+    jaxskin match TARGET.csv --from A.json,B.json -o DIR  # the mixture matching a colour
     jaxskin fit-brdf FILE.csv -o OUT.json [--lobes N]     # Lafortune lobes
     jaxskin render SCENE [SCENE ...] -o DIR --maps        # wrinkle height and normal maps
     jaxskin fit-skin SPECTRA.csv -o DIR                   # the biophysical skin, fitted
@@ -26,7 +28,8 @@ The package is the application around the library: nothing in `jaxskin` or
 - `_options`: one-line parser errors, checked numbers, the options commands share.
 - `_names`: output names from `-D` values and `--sweep`s.
 - `_list`, `_calibrate`, `_render`, `_fit_image`, `_fit_brdf`, `_fit_skin`, `_edit`: one
-  module per command, each with `add_parser(sub)` and `run(args, record)`.
+  module per command, each with `add_parser(sub)` and `run(args, record)`; so are `_mix`
+  and `_match`.
 """
 
 from ._main import COMMANDS as COMMANDS

@@ -17,6 +17,8 @@ from . import (
     _fit_image,
     _fit_skin,
     _list,
+    _match,
+    _mix,
     _render,
 )
 from ._options import Parser
@@ -39,7 +41,9 @@ __all__ = ["COMMANDS", "main", "parser"]
 
 # Each command's module: `add_parser(sub)` and `run(args, record) -> exit code`, in the
 # order `jaxskin --help` lists them.
-COMMANDS = {"list": _list, "calibrate": _calibrate, "render": _render, "fit-image": _fit_image,
+COMMANDS = {"list": _list, "calibrate": _calibrate,
+            "mix": _mix, "match": _match,
+            "render": _render, "fit-image": _fit_image,
             "fit-brdf": _fit_brdf, "fit-skin": _fit_skin, "edit": _edit}
 
 
