@@ -3,6 +3,10 @@
 Huang et al. 2013 eq. 1–2 (one layer) and the corrected eq. 3–4 (Kubelka's two-layer
 formula; the paper prints T1 R1 T1 where T1 R2 T1 is meant — see
 `shared/reference/constants.md`). S and K are per millimetre, thicknesses in millimetres.
+Inversions: K/S from R∞ (`ks_from_r_inf`), R∞ and S·X of a film from its reflectance over
+two backgrounds (Kubelka 1948, `two_backgrounds`); Saunderson's surface correction
+(`saunderson`, `saunderson_inverse`) between an instrument's reading and the internal
+reflectance the layer model describes.
 
 Every function is elementwise over broadcastable arrays of any shape, follows the dtype of
 its inputs (float32 at least: float16 and integers compute in float32), and is jit-, vmap-
