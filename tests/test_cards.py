@@ -296,6 +296,7 @@ def test_card_column_spellings_read(tmp_path):
     assert m.over == ("black", "white") and m.R_inf is None
 
 
+@pytest.mark.slow  # ~30 s: it compiles both solvers for this shape
 def test_card_with_the_prior_agrees_with_the_dense_reference():
     """The block-tridiagonal solver with a smoothness prior, on a card without R∞ (21
     bands), against optimistix over all bands at once: measured 2e-10 (S), 3e-9 (K)."""
