@@ -143,9 +143,11 @@ def test_noiseless_card_recovers_s_and_k_exactly(known):
 
 @pytest.mark.parametrize("known, r_inf", [(True, False), (False, False), (True, True)])
 def test_noisy_card_round_trip(known, r_inf):
-    """σ = 0.001: S and K within 8 % at every identifiable band (measured: 1.5-5.6 % worst,
-    0.3-1.4 % median), the readings reproduced within the instrument's noise (RMS ≤ 0.003;
-    measured 0.0005-0.0007), the hiding thickness within 1 %."""
+    """σ = 0.001: S and K within 8 % at every identifiable band (measured, seed 3: S 2.3 %,
+    7.4 %, 1.8 % worst for the three cases, K 3.7 %, 6.3 %, 2.1 %; medians 0.3-0.6 %: one
+    film of unknown thickness is two readings for two unknowns, so its noise goes straight
+    into S and K), the readings reproduced within the instrument's noise (RMS ≤ 0.003;
+    measured 0.0003-0.0008), the hiding thickness within 1 % (measured 0.07-0.16 %)."""
     S, K = make_measurements.true_spectra("foundation_beige")
     Xs = [0.005, 0.02] if known else [0.01]
     m = card(S, K, Xs, noise=0.001, known=known, seed=3, r_inf=r_inf)
@@ -221,8 +223,9 @@ def _colour_science_Y_and_Lab(R):
 
 def test_coverage_figures_match_colour_science_by_hand(x64):
     """The contrast ratio C = Y(R0) / Y(R0.80), ΔE2000 between the two, and C at the 98 %
-    hiding thickness, each computed by hand with colour-science from the film's spectra;
-    agreement measured 2e-5 (C), 0.01 (ΔE2000)."""
+    hiding thickness, each computed by hand with colour-science from the film's spectra
+    (its ASTM E308 5 nm weights; the library integrates every 1 nm): agreement measured
+    5e-5 (C), 3e-4 (ΔE2000), 2e-5 (C at the hiding thickness)."""
     import colour
 
     S, K = make_measurements.true_spectra("eyeshadow_taupe")
@@ -231,7 +234,7 @@ def test_coverage_figures_match_colour_science_by_hand(x64):
     (Yb, lab_b), (Yw, lab_w) = (_colour_science_Y_and_Lab(R) for R in spectra)
     assert coverage.contrast_ratio(S, K, X, WL) == pytest.approx(Yb / Yw, abs=2e-4)
     assert float(coverage.delta_e2000(*spectra, WL)) == pytest.approx(
-        float(colour.delta_E(lab_b, lab_w, method="CIE 2000")), abs=0.05)
+        float(colour.delta_E(lab_b, lab_w, method="CIE 2000")), abs=0.01)
     X98 = coverage.hiding_thickness(S, K, WL)
     at = [np.asarray(km.over(*km.layer(S, K, X98), g)) for g in (0.0, 0.8)]
     Yb98, Yw98 = (_colour_science_Y_and_Lab(R)[0] for R in at)
