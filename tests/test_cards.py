@@ -311,3 +311,21 @@ def test_card_with_the_prior_agrees_with_the_dense_reference():
     assert a.converged and b.converged
     np.testing.assert_allclose(a.S_per_mm, b.S_per_mm, rtol=1e-7)
     np.testing.assert_allclose(a.K_per_mm, b.K_per_mm, rtol=1e-7)
+
+
+def test_inconsistent_bands_are_warned_of_in_one_line(tmp_path, capsys):
+    S, K = make_measurements.true_spectra("foundation_beige")
+    src = tmp_path / "odd.csv"
+    _write_card(src, S, K, [0.01], header_x=False)
+    lines = src.read_text().splitlines()
+    for i in (21, 22, 23):  # lines 21-23 (a header first): 480-490 nm, over black 0.05 up
+        w, b, wh, gb, gw = lines[i].split(",")
+        lines[i] = ",".join([w, f"{float(wh) + 0.05:.4f}", wh, gb, gw])
+    src.write_text("\n".join(lines) + "\n")
+    assert main(["calibrate", str(src), "-o", str(tmp_path / "o"), "--no-report"]) == 0
+    err = capsys.readouterr().err
+    warned = [line for line in err.splitlines() if "brighter over the card's black" in line]
+    assert len(warned) == 1 and "(480, 485, 490 nm)" in warned[0], err
+    doc = json.loads((tmp_path / "o" / "odd.json").read_text())  # strict JSON: no NaN
+    assert [doc["band_status"][i] for i in (19, 20, 21, 22)] == ["identifiable"] + [
+        "inconsistent"] * 3

@@ -229,21 +229,18 @@ def _warn_about_the_readings(args, measurements, grid, noise: float) -> None:
 
 
 def _card_bands(m, noise: float) -> list[str]:
-    """A contrast card's bands that are inconsistent (a film brighter over black than over
-    white) or isolated, one line each kind, naming the bands."""
+    """A contrast card's inconsistent bands (a film brighter over black than over white), in
+    one line naming them; none for another layout or a consistent card."""
     from jaxskin.fitting import cards
     from jaxskin.fitting import km as fit_km
 
     if not m.is_card:
         return []
-    status = cards.band_status(m, noise, fit_km.MIN_RUN)
-    out = []
-    for kind in ("inconsistent",):
-        wl = m.wavelength_nm[status == kind]
-        if wl.size:
-            shown = ", ".join(f"{w:g}" for w in wl[:8]) + (", ..." if wl.size > 8 else "")
-            out.append(f"{m.path}: {wl.size} band(s) where a film is brighter over the card's "
-                       f"black part than over its white part by over 3√2 x --noise {noise:g} "
-                       f"({shown} nm), which no film does: fitted as opaque there (R∞ from "
-                       "both readings), marked 'inconsistent' in the JSON's band_status")
-    return out
+    wl = m.wavelength_nm[cards.band_status(m, noise, fit_km.MIN_RUN) == "inconsistent"]
+    if not wl.size:
+        return []
+    shown = ", ".join(f"{w:g}" for w in wl[:8]) + (", ..." if wl.size > 8 else "")
+    return [f"{m.path}: {wl.size} band(s) where a film is brighter over the card's black part "
+            f"than over its white part by over 3√2 x --noise {noise:g} ({shown} nm), which no "
+            "film does: fitted as opaque there (R∞ from both readings), marked "
+            "'inconsistent' in the JSON's band_status"]
