@@ -2,6 +2,8 @@
 
 - `fitting.measurements`: spectroradiometer CSVs (thin layer, opaque layer, background).
 - `fitting.km`: S(λ), K(λ) of a cosmetic (Huang et al. 2013 §4).
+- `fitting.cards`: contrast cards (drawdowns): the film over a black and a white part.
+- `fitting.coverage`: contrast ratio, 98 % hiding thickness, ΔE2000 over black vs white.
 - `fitting.report`: the PNG report of a fit.
 - `fitting.brdf`: Lafortune lobes from BRDF samples (`jaxskin fit-brdf`).
 - `fitting.skin`: the biophysical skin from reflectance spectra (`jaxskin fit-skin`).

@@ -33,6 +33,7 @@ from jaxskin.formats import MAX_SK_PER_MM
 from jaxskin.io import FitError, InputError
 from jaxskin.precision import einsum, matmul
 
+from . import cards
 from .measurements import Measurement
 
 __all__ = ["KMFit", "closed_form", "fit", "identifiable", "model_reflectance", "suspect_labels"]
@@ -61,6 +62,10 @@ class KMFit:
     converged: bool
     smooth: float
     noise: float
+    status: np.ndarray | None = None  # a contrast card's `cards.band_status`
+    saunderson: tuple[float, float] | None = None
+    thickness_known: bool = True  # False: S_per_mm, K_per_mm are S·X, K·X of the film
+    coverage: dict | None = None  # `coverage.coverage`
 
     def to_json(self, measurement: Measurement, extrapolate: str | None = None) -> dict:
         """The material file: what `jaxskin` reads for a cosmetic layer, plus the fit's record.
@@ -70,33 +75,59 @@ class KMFit:
         def clean(a):
             return [None if not np.isfinite(v) else float(v) for v in np.asarray(a)]
 
+        card = measurement.is_card
+        if self.thickness_known:
+            sk = {"S_per_mm": clean(self.S_per_mm), "K_per_mm": clean(self.K_per_mm)}
+        else:  # S·X and K·X of the film: unknown where S cannot be told from K
+            sk = {"S_film": clean(np.where(self.identifiable, self.S_per_mm, np.nan)),
+                  "K_film": clean(np.where(self.identifiable, self.K_per_mm, np.nan)),
+                  "note": "the film's thickness was not given: S_film and K_film are S*X and "
+                  "K*X of the film as measured (null where S and K cannot be told apart); "
+                  "calibrate with --thickness MM (or '# thickness_mm:') for S_per_mm and "
+                  "K_per_mm, which a scene needs"}
+        method = ("closed form (Huang et al. 2013 eq. 6-7) then Levenberg-Marquardt on log S, "
+                  "log K (float64; per band, or block-tridiagonal with the prior)")
+        if card:
+            method = ("contrast card: Kubelka's (1948) two-background closed form, then "
+                      "Levenberg-Marquardt on log S, log K over every film on both parts of "
+                      "the card (float64; per band, or block-tridiagonal with the prior)")
+        per = "per_mm" if self.thickness_known else "film"
         return {
             "name": self.name,
             "model": "kubelka-munk",
             "wavelength_nm": clean(self.wavelength_nm),
-            "S_per_mm": clean(self.S_per_mm),
-            "K_per_mm": clean(self.K_per_mm),
+            **sk,
             "identifiable": [bool(v) for v in self.identifiable],
+            **({"band_status": [str(v) for v in self.status]} if self.status is not None
+               else {}),
+            **({"R_inf": clean(self.R_inf_fit)} if card else {}),
             "rmse": float(self.rmse),
             **({"extrapolate": extrapolate} if extrapolate else {}),
+            **({"coverage": self.coverage} if self.coverage is not None else {}),
             "fit": {
                 "source": measurement.path.name,
-                "thickness_mm": clean(measurement.thickness_mm),
-                "method": "closed form (Huang et al. 2013 eq. 6-7) then Levenberg-Marquardt "
-                "on log S, log K (float64; per band, or block-tridiagonal with the prior)",
+                "thickness_mm": (clean(measurement.thickness_mm) if self.thickness_known
+                                 else None),
+                **({"layout": "contrast card", "over": list(measurement.over)} if card
+                   else {}),
+                "method": method,
+                **({"saunderson": list(self.saunderson)} if self.saunderson else {}),
                 "smooth": self.smooth,
                 "noise": self.noise,
                 "steps": int(self.steps),
                 "converged": bool(self.converged),
-                "S_closed_form_per_mm": clean(self.S_closed),
-                "K_closed_form_per_mm": clean(self.K_closed),
+                f"S_closed_form_{per}": clean(self.S_closed),
+                f"K_closed_form_{per}": clean(self.K_closed),
             },
         }
 
 
 def identifiable(m: Measurement, noise: float = DEFAULT_NOISE) -> np.ndarray:
     """Bands where S and K can be told apart: some thin layer differs from R∞ by more than 3σ
-    (`noise` = σ, the standard deviation of one reading) and so does the background."""
+    (`noise` = σ, the standard deviation of one reading) and so does the background. On a
+    contrast card: the bands `cards.band_status` calls identifiable."""
+    if m.is_card:
+        return cards.band_status(m, noise, MIN_RUN) == "identifiable"
     thin = np.max(np.abs(m.R - m.R_inf), axis=0) > NOISE_SIGMAS * noise
     background = np.abs(m.R_g - m.R_inf) > NOISE_SIGMAS * noise
     return _runs(thin & background, MIN_RUN)
@@ -130,6 +161,8 @@ def suspect_labels(m: Measurement, noise: float = DEFAULT_NOISE) -> list[str]:
     at (by more than 3σ) and at 10 % of the bands or 5, whichever is more, so noise alone
     does not trigger it.
     """
+    if m.is_card:  # a card's bands say it themselves: `cards.band_status`
+        return []
     tol = NOISE_SIGMAS * noise
     towards_g = np.sign(m.R_g - m.R_inf)
     # Distance from R_inf, positive on R_g's side: R_g, then the thin layers, thinnest first.
@@ -184,31 +217,41 @@ def closed_form(m: Measurement) -> tuple[np.ndarray, np.ndarray]:
     return S, K
 
 
-def model_reflectance(logS, logK, X, Rg):
-    """The model behind the fit: R of layers of thickness `X (m,)` over `Rg (n,)`, and R∞.
+def model_reflectance(logS, logK, X, Rg, saunderson=None):
+    """The model behind the fit: R of layers of thickness `X (m,)` over `Rg (n,)` (or one
+    background per layer, `(m, n)`: a contrast card), and R∞; as the instrument reads them
+    (`km.saunderson`) when `saunderson` = (k1, k2) is given, Rg then being the backgrounds'
+    internal reflectance.
 
     **Returns:** `(R (m, n), R_inf (n,))`.
     """
     S, K = jnp.exp(logS), jnp.exp(logK)
     R0, T = km.layer(S, K, X[:, None])
-    return km.over(R0, T, Rg), km.r_inf(S, K)
+    return _seen(km.over(R0, T, Rg), saunderson), _seen(km.r_inf(S, K), saunderson)
 
 
-def _band_residuals(y, X, R, R_inf, Rg):
-    """One band's residuals `(m + 1,)`: the thin layers' model minus data, then R∞'s."""
+def _seen(R, saunderson):
+    """An internal reflectance as the instrument reads it (unchanged without Saunderson)."""
+    return R if saunderson is None else km.saunderson(R, saunderson[0], saunderson[1])
+
+
+def _band_residuals(y, X, R, R_inf, Rg, sd=None):
+    """One band's residuals `(m + 1,)`: the thin layers' model minus data, then R∞'s (`(m,)`
+    where there is no R∞ reading, `R_inf` None)."""
     S, K = jnp.exp(y[0]), jnp.exp(y[1])
     R0, T = km.layer(S, K, X)
-    return jnp.append(km.over(R0, T, Rg) - R, km.r_inf(S, K) - R_inf)
+    r = _seen(km.over(R0, T, Rg), sd) - R
+    return r if R_inf is None else jnp.append(r, _seen(km.r_inf(S, K), sd) - R_inf)
 
 
 def _linearise(y, args):
     """Residuals `r (n, m + 1)` and their Jacobian `J (n, m + 1, 2)` per band, at `y (n, 2)`
     with S held where it is not identifiable (its Jacobian column is 0 there)."""
-    X, R, R_inf, Rg, _, ident, logS_fixed = args
+    X, R, R_inf, Rg, _, ident, logS_fixed, sd = args
     y = y.at[:, 0].set(jnp.where(ident, y[:, 0], logS_fixed))
 
     def one(yb, Rb, Rib, Rgb):
-        f = functools.partial(_band_residuals, X=X, R=Rb, R_inf=Rib, Rg=Rgb)
+        f = functools.partial(_band_residuals, X=X, R=Rb, R_inf=Rib, Rg=Rgb, sd=sd)
         return f(yb), jax.jacfwd(f)(yb)
 
     r, J = jax.vmap(one)(y, R, R_inf, Rg)
@@ -329,12 +372,12 @@ def _solve_banded(y0, args, max_steps=256, rtol=1e-9, atol=1e-12):
 
 def _dense_residuals(y, args):
     logS, logK = y[:, 0], y[:, 1]
-    X, R, R_inf, Rg, prior, ident, logS_fixed = args
+    X, R, R_inf, Rg, prior, ident, logS_fixed, sd = args
     logS = jnp.where(ident, logS, logS_fixed)
-    R_model, R_inf_model = model_reflectance(logS, logK, X, Rg)
+    R_model, R_inf_model = model_reflectance(logS, logK, X, Rg.T, sd)
     return (
         (R_model - R.T).ravel(),
-        R_inf_model - R_inf,
+        R_inf_model - (R_inf_model if R_inf is None else R_inf),
         prior * jnp.diff(logS),
         prior * jnp.diff(logK),
     )
@@ -360,15 +403,16 @@ def _solve_coupled(y0, args, max_steps=256):
 def _solve_separable(y0, args, max_steps=256):
     """Without the prior every band is its own 2-parameter problem: `_solve_banded` on one
     band, vmapped over the bands, each with its own damping and its own stopping test."""
-    X, R, R_inf, Rg, prior, ident, logS_fixed = args
+    X, R, R_inf, Rg, prior, ident, logS_fixed, sd = args
     one = lambda y, R, Ri, Rg, i, f: _solve_banded(  # noqa: E731
-        y[None], (X, R[None], Ri[None], Rg[None], prior, i[None], f[None]), max_steps)
+        y[None], (X, R[None], None if Ri is None else Ri[None], Rg[None], prior, i[None],
+                  f[None], sd), max_steps)
     y, ok, steps = jax.vmap(one)(y0, R, R_inf, Rg, ident, logS_fixed)
     return y[:, 0], jnp.all(ok), jnp.max(steps)
 
 
 def fit(m: Measurement, smooth: float = 0.0, noise: float = DEFAULT_NOISE,
-        solver: str = "banded") -> KMFit:
+        solver: str = "banded", saunderson: tuple[float, float] | None = None) -> KMFit:
     """Fit S(λ), K(λ) to one measurement.
 
     **Arguments:**
@@ -383,6 +427,13 @@ def fit(m: Measurement, smooth: float = 0.0, noise: float = DEFAULT_NOISE,
       Levenberg–Marquardt whose normal equations are solved block-tridiagonally; O(n) time
       and memory in the number of bands n. `"dense"`: the reference, optimistix's
       Levenberg–Marquardt over all bands at once (O(n²) memory; for checks at small n).
+    - `saunderson`: `(k1, k2)` of Saunderson's surface correction (`km.saunderson`): the
+      readings include the surface's reflection (SCI), the KM film and the backgrounds under
+      it are internal reflectances. The residuals stay in the instrument's readings.
+
+    A contrast card (`m.is_card`) starts from Kubelka's two-background solution
+    (`cards.closed_form`) and fits every film over both parts of the card (and R∞ where
+    given); its bands' `cards.band_status` says which are identifiable.
 
     **Returns:** a `KMFit`. **Raises:** `InputError` if no band is identifiable;
     `FitError` if the fit ends with a non-finite S, K or residual.
@@ -393,14 +444,22 @@ def fit(m: Measurement, smooth: float = 0.0, noise: float = DEFAULT_NOISE,
         raise ValueError(f"noise must be > 0 and <= {MAX_NOISE:g}, got {noise!r}")
     if not 0.0 <= smooth <= MAX_SMOOTH:
         raise ValueError(f"smooth must be >= 0 and <= {MAX_SMOOTH:g}, got {smooth!r}")
+    check_saunderson(m, saunderson)
+    status = cards.band_status(m, noise, MIN_RUN) if m.is_card else None
     ident = identifiable(m, noise)
+    if not ident.any() and m.is_card:
+        raise InputError(
+            f"no band where S can be separated from K: the film reads the same over the card's "
+            f"black and white parts (within 3 x --noise {noise:g}: opaque), or as the card "
+            "alone, or inconsistently at every band; measure a thinner film (or a thicker one "
+            "if it cannot be seen)", m.path, m.header_line, m.columns[0])
     if not ident.any():
         raise InputError(
             f"no band where S can be separated from K: every thin layer is within 3 x --noise "
             f"{noise:g} of R_inf (opaque) or R_g is; measure a thinner layer or a background "
             "further from R_inf", m.path, m.header_line, m.columns[0],
         )
-    S_cf, K_cf = closed_form(m)
+    S_cf, K_cf = cards.closed_form(m, saunderson) if m.is_card else closed_form(m)
     wl = m.wavelength_nm
     # Start: the closed form where valid; elsewhere log S from valid neighbours, K/S from R∞.
     valid = np.isfinite(S_cf) & ident
@@ -408,7 +467,8 @@ def fit(m: Measurement, smooth: float = 0.0, noise: float = DEFAULT_NOISE,
         logS0 = np.interp(wl, wl[valid], np.log(S_cf[valid]))
     else:
         logS0 = np.full_like(wl, -np.log(np.mean(m.thickness_mm)))
-    ratio = np.asarray(km.ks_from_r_inf(np.clip(m.R_inf, 1e-4, 1 - 1e-6)))
+    R_inf0 = cards.r_inf_start(m, saunderson) if m.is_card else m.R_inf
+    ratio = np.asarray(km.ks_from_r_inf(np.clip(R_inf0, 1e-4, 1 - 1e-6)))
     logK0 = np.where(valid, np.log(np.where(valid, K_cf, 1.0)), logS0 + np.log(ratio))
     if solver == "dense":
         solve = _solve_dense
@@ -417,9 +477,11 @@ def fit(m: Measurement, smooth: float = 0.0, noise: float = DEFAULT_NOISE,
 
     with jax.enable_x64(True):
         f64 = functools.partial(jnp.asarray, dtype=jnp.float64)
-        data = (f64(m.thickness_mm), f64(m.R.T), f64(m.R_inf), f64(m.R_g), f64(smooth * noise),
-                jnp.asarray(ident))
-        y, ok, steps = solve(f64(np.stack([logS0, logK0], -1)), (*data, f64(logS0)))
+        Rg = cards.internal(m, saunderson)[1] if m.is_card else m.backgrounds
+        sd = None if saunderson is None else tuple(f64(k) for k in saunderson)
+        data = (f64(m.thickness_mm), f64(m.R.T), None if m.R_inf is None else f64(m.R_inf),
+                f64(Rg.T), f64(smooth * noise), jnp.asarray(ident))
+        y, ok, steps = solve(f64(np.stack([logS0, logK0], -1)), (*data, f64(logS0), sd))
         if not ident.all():
             # S where it is not identifiable: from the fitted neighbours (linear in log S
             # between two, the end value held beyond the first or last), K/S kept; then fit
@@ -427,12 +489,13 @@ def fit(m: Measurement, smooth: float = 0.0, noise: float = DEFAULT_NOISE,
             logS, logK = np.asarray(y).T
             logS_fill = np.interp(wl, wl[ident], logS[ident])
             y0 = np.stack([logS_fill, logS_fill + logK - logS], -1)
-            y, ok, more = solve(f64(y0), (*data, f64(logS_fill)))
+            y, ok, more = solve(f64(y0), (*data, f64(logS_fill), sd))
             steps = steps + more
         logS, logK = np.asarray(y).T
         R_fit, R_inf_fit = (np.asarray(a) for a in model_reflectance(f64(logS), f64(logK),
-                                                                      data[0], data[3]))
-    residual = np.concatenate([(R_fit - m.R).ravel(), R_inf_fit - m.R_inf])
+                                                                      data[0], data[3].T, sd))
+    residual = np.concatenate([(R_fit - m.R).ravel(),
+                               [] if m.R_inf is None else R_inf_fit - m.R_inf])
     S, K = np.exp(logS), np.exp(logK)
     bad = np.flatnonzero(~(np.isfinite(S) & np.isfinite(K) & (S > 0) & (K > 0)))
     if bad.size or not np.all(np.isfinite(residual)):
@@ -445,9 +508,38 @@ def fit(m: Measurement, smooth: float = 0.0, noise: float = DEFAULT_NOISE,
                        f"band(s) (first {wl[big[0]]:g} nm: S {S[big[0]]:.3g}, K "
                        f"{K[big[0]]:.3g}); cosmetics measure about 1e-3 to 1e5: check the "
                        "thickness and the units of the readings", m.path, m.header_line)
+    from .coverage import coverage
+
     return KMFit(
         name=m.name, wavelength_nm=wl, S_per_mm=S, K_per_mm=K,
         identifiable=ident, rmse=float(np.sqrt(np.mean(residual**2))), R_fit=R_fit,
         R_inf_fit=R_inf_fit, S_closed=S_cf, K_closed=K_cf, steps=int(steps),
         converged=bool(ok), smooth=float(smooth), noise=float(noise),
+        status=status, saunderson=None if saunderson is None else tuple(
+            float(k) for k in saunderson), thickness_known=m.thickness_known,
+        coverage=coverage(m, S, K, saunderson),
     )
+
+
+def check_saunderson(m: Measurement, saunderson) -> None:
+    """`InputError` unless `saunderson` is None or `(k1, k2)` with 0 <= k1 < 1, 0 <= k2 < 1,
+    and every reading of `m` at least k1 (a reading below the surface's own reflection has
+    no internal reflectance: specular-excluded readings want k1 = 0)."""
+    if saunderson is None:
+        return
+    k1, k2 = saunderson
+    if not (0 <= k1 < 1 and 0 <= k2 < 1):
+        raise InputError(f"--saunderson K1,K2 must each lie in [0, 1), got {k1:g},{k2:g}",
+                         m.path)
+    readings = [(c, r) for c, r in zip(m.columns, m.R, strict=True)]
+    readings += [("R_g_black" if m.is_card else "R_g", m.R_g)]
+    readings += [("R_g_white", m.R_g_white)] if m.is_card else []
+    readings += [] if m.R_inf is None else [("R_inf", m.R_inf)]
+    for column, values in readings:
+        low = np.flatnonzero(values < k1)
+        if low.size:
+            i = low[0]
+            raise InputError(f"reads {values[i]:g} at {m.wavelength_nm[i]:g} nm, below "
+                             f"--saunderson K1 = {k1:g} (the surface's own reflection): "
+                             "specular-excluded (SCE) readings want K1 = 0", m.path,
+                             m.header_line, column)

@@ -52,6 +52,37 @@ def far_extrapolation(m, result, how, grid) -> list[str]:
     return out
 
 
+def _labels(m: Measurement) -> list[str]:
+    """A legend label per row of `m.R`: its thickness, and on a contrast card the part."""
+    out = []
+    for i, X in enumerate(m.thickness_mm):
+        size = f"{X:g} mm" if m.thickness_known else "film"
+        out.append(f"R {size} over {m.over[i]}" if m.is_card else f"R {size}")
+    return out
+
+
+def coverage_line(r: KMFit) -> str:
+    """The coverage figures in one line (`coverage.coverage`): per film the contrast ratio
+    and ΔE2000 over ASTM D2805's black and white, the card's measured ones, the hiding
+    thickness."""
+    cov = r.coverage or {}
+    parts = []
+    for f in cov.get("films", []):
+        size = "film" if f["thickness_mm"] is None else f"{f['thickness_mm']:g} mm"
+        text = f"{size}: CR {f['contrast_ratio']:.3f}, ΔE00 {f['delta_E2000']:.1f}"
+        if "contrast_ratio_card" in f:
+            text += (f" (on the card, measured: CR {f['contrast_ratio_card']:.3f}, ΔE00 "
+                     f"{f['delta_E2000_card']:.1f})")
+        parts.append(text)
+    if "hiding_98_mm" in cov:
+        x = cov["hiding_98_mm"]
+        parts.append("98 % hiding at " + ("-" if x is None else f"{x:.3g} mm"))
+    elif "hiding_98_films" in cov:
+        x = cov["hiding_98_films"]
+        parts.append("98 % hiding at " + ("-" if x is None else f"{x:.3g} x the film"))
+    return ("; ".join(parts) + "  [ASTM D2805 black 0 / white 0.80, D65, 10°]") if parts else ""
+
+
 def write_report(m: Measurement, r: KMFit, path, extrapolate: str | None = None) -> None:
     """Write the report PNG for measurement `m` and its fit `r` to `path` (atomically).
     Where `m` does not cover the render grid (380–780 nm), the S and K panel shows how the
@@ -66,19 +97,31 @@ def write_report(m: Measurement, r: KMFit, path, extrapolate: str | None = None)
     from jaxskin.spectral import Grid
 
     wl = m.wavelength_nm
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2), constrained_layout=True)
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.6), constrained_layout=True)
+    fig.suptitle(coverage_line(r), fontsize=9)
     ax = axes[0]
     _shade(ax, wl, r.identifiable)
     colours = plt.cm.viridis(np.linspace(0.15, 0.85, len(m.thickness_mm)))
+    labels_of = _labels(m)
     handles, labels = [], []  # one entry a curve: its measured points and its fit together
-    for X, R, Rf, c in zip(m.thickness_mm, m.R, r.R_fit, colours, strict=True):
+    for label, R, Rf, c in zip(labels_of, m.R, r.R_fit, colours, strict=True):
         handles.append((ax.plot(wl, R, "o", ms=3, color=c)[0], ax.plot(wl, Rf, "-", color=c)[0]))
-        labels.append(f"R {X:g} mm")
-    handles.append((ax.plot(wl, m.R_inf, "s", ms=3, color="C3")[0],
-                    ax.plot(wl, r.R_inf_fit, "-", color="C3")[0]))
-    labels.append("R∞")
-    handles.append(ax.plot(wl, m.R_g, "--", color="k", lw=1)[0])
-    labels.append("R_g (background)")
+        labels.append(label)
+    if m.R_inf is not None:
+        handles.append((ax.plot(wl, m.R_inf, "s", ms=3, color="C3")[0],
+                        ax.plot(wl, r.R_inf_fit, "-", color="C3")[0]))
+        labels.append("R∞")
+    else:
+        handles.append(ax.plot(wl, r.R_inf_fit, "-", color="C3")[0])
+        labels.append("R∞ (fitted)")
+    if m.is_card:
+        handles.append(ax.plot(wl, m.R_g, "--", color="k", lw=1)[0])
+        labels.append("card, black part")
+        handles.append(ax.plot(wl, m.R_g_white, ":", color="k", lw=1)[0])
+        labels.append("card, white part")
+    else:
+        handles.append(ax.plot(wl, m.R_g, "--", color="k", lw=1)[0])
+        labels.append("R_g (background)")
     ax.set(xlabel="wavelength (nm)", ylabel="reflectance", ylim=(0, None),
            title=f"{m.name}: measured (marks), fit (lines); rmse {r.rmse:.2e}")
     # below the axes: inside, the entries covered the data (the lipstick around 600 nm)
@@ -89,10 +132,11 @@ def write_report(m: Measurement, r: KMFit, path, extrapolate: str | None = None)
     _shade(ax, wl, r.identifiable)
     ax.semilogy(wl, r.S_per_mm, "-", color="C0", label="S fitted")
     ax.semilogy(wl, r.K_per_mm, "-", color="C1", label="K fitted")
+    start = "one film over black and white" if m.is_card else "R∞ and one film"
     ax.semilogy(wl, r.S_closed, "x", ms=4, color="C0", alpha=0.6,
-                label="S from R∞ and one film (closed form)")
+                label=f"S from {start} (closed form)")
     ax.semilogy(wl, r.K_closed, "x", ms=4, color="C1", alpha=0.6,
-                label="K from R∞ and one film (closed form)")
+                label=f"K from {start} (closed form)")
     grid = Grid().wavelengths
     if wl[0] > grid[0] or wl[-1] < grid[-1]:  # the renderer's grid reaches beyond the data
         if extrapolate is None:
@@ -110,15 +154,17 @@ def write_report(m: Measurement, r: KMFit, path, extrapolate: str | None = None)
                 if hi > lo:
                     ax.axvspan(lo, hi, color="C1", alpha=0.08, lw=0, zorder=0, label=label)
                     label = None
-    ax.set(xlabel="wavelength (nm)", ylabel="per mm",
+    ax.set(xlabel="wavelength (nm)", ylabel="per mm" if r.thickness_known else
+           "per film (S·X, K·X: thickness not given)",
            title="S and K (grey: not identifiable, S from neighbours)")
     ax.legend(fontsize=7)
 
     ax = axes[2]
     _shade(ax, wl, r.identifiable)
-    for X, R, Rf, c in zip(m.thickness_mm, m.R, r.R_fit, colours, strict=True):
-        ax.plot(wl, Rf - R, ".-", ms=3, lw=0.7, color=c, label=f"{X:g} mm")
-    ax.plot(wl, r.R_inf_fit - m.R_inf, ".-", ms=3, lw=0.7, color="C3", label="R∞")
+    for label, R, Rf, c in zip(labels_of, m.R, r.R_fit, colours, strict=True):
+        ax.plot(wl, Rf - R, ".-", ms=3, lw=0.7, color=c, label=label.removeprefix("R "))
+    if m.R_inf is not None:
+        ax.plot(wl, r.R_inf_fit - m.R_inf, ".-", ms=3, lw=0.7, color="C3", label="R∞")
     ax.axhline(0, color="k", lw=0.5)
     for s, label in ((-3 * r.noise, "±3σ of the noise"), (3 * r.noise, None)):
         ax.axhline(s, color="k", lw=0.5, ls=":", label=label)

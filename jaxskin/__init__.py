@@ -61,6 +61,8 @@ Fitting (`jaxskin.fitting`, optimistix; the repository's `fitting/`):
 - `fitting`: the fits' package.
 - `fitting.measurements`: the spectroradiometer measurement CSV.
 - `fitting.km`: S(λ), K(λ) of a cosmetic from its measurements.
+- `fitting.cards`: contrast cards (drawdowns): a film over a black and a white background.
+- `fitting.coverage`: contrast ratio, 98 % hiding thickness, ΔE2000 over black vs white.
 - `fitting.brdf`: Lafortune lobes from BRDF samples.
 - `fitting.skin`: the biophysical skin from reflectance spectra.
 - `fitting.image`: scene values and texture maps from a target image.

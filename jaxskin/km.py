@@ -3,6 +3,10 @@
 Huang et al. 2013 eq. 1–2 (one layer) and the corrected eq. 3–4 (Kubelka's two-layer
 formula; the paper prints T1 R1 T1 where T1 R2 T1 is meant — see
 `shared/reference/constants.md`). S and K are per millimetre, thicknesses in millimetres.
+Inversions: K/S from R∞ (`ks_from_r_inf`), R∞ and S·X of a film from its reflectance over
+two backgrounds (Kubelka 1948, `two_backgrounds`); Saunderson's surface correction
+(`saunderson`, `saunderson_inverse`) between an instrument's reading and the internal
+reflectance the layer model describes.
 
 Every function is elementwise over broadcastable arrays of any shape, follows the dtype of
 its inputs (float32 at least: float16 and integers compute in float32), and is jit-, vmap-
@@ -19,7 +23,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 __all__ = ["Slab", "compose", "horner", "ks_from_r_inf", "layer", "layer_parts", "over",
-           "r_inf", "stack"]
+           "r_inf", "saunderson", "saunderson_inverse", "stack", "two_backgrounds"]
 
 # Below this value of z² = (βX)² the layer uses power series in z² (no square root, so the
 # branch point at K = 0 has finite derivatives); above it, tanh/sech of z.
@@ -132,6 +136,80 @@ def ks_from_r_inf(R_inf: Float[ArrayLike, "*shape"]) -> Float[Array, "*shape"]:
     """The inverse of `r_inf`: K/S = (1 − R∞)² / (2 R∞), for R∞ in (0, 1]."""
     (R,) = _promote(R_inf)
     return (1.0 - R) ** 2 / (2.0 * R)
+
+
+def two_backgrounds(
+    R_black: Float[ArrayLike, "*shape"],
+    R_white: Float[ArrayLike, "*shape"],
+    Rg_black: Float[ArrayLike, "*shape"],
+    Rg_white: Float[ArrayLike, "*shape"],
+) -> tuple[Float[Array, "*shape"], Float[Array, "*shape"]]:
+    """R∞ and S·X of a film from its reflectance over two backgrounds (Kubelka 1948).
+
+    A film over a background Rg reflects R with b coth(bSX) = (1 + R Rg − a (R + Rg)) /
+    (R − Rg), a = ½(R∞ + 1/R∞), b = √(a² − 1) (`constants.md`, Kubelka–Munk). The film is
+    the same over both parts of a contrast card, so equating the two right-hand sides, which
+    are linear in a, gives
+
+        a = ½ [(1 + R_w Rg_w)(R_b − Rg_b) − (1 + R_b Rg_b)(R_w − Rg_w)] / (R_b Rg_w − R_w Rg_b).
+
+    Then R∞ = 1 / (a + b) (= a − b without its cancellation at large a), and
+    bSX = L(R_b) − L(Rg_b), L(R) = ½ ln|(1/R∞ − R) / (R∞ − R)| (the logarithmic form of
+    Huang et al. eq. 6, no arcoth of an argument near 1); K·X = S·X (a − 1). Both
+    backgrounds give the same S·X, since a was chosen so.
+
+    Exact for readings the model produces; NaN where the readings lie outside its domain:
+    a < 1 (noise, or a film over black brighter than over white), a denominator of 0 (two
+    equal backgrounds, or a film that does not change either reading), or R_b not between
+    Rg_b and R∞. An opaque film (R_b = R_w = R∞) gives its R∞ and S·X = inf: only K/S is
+    known. Values and gradients are finite inside the domain (double-`where`).
+
+    **Arguments:** reflectances in [0, 1] of the film over the black and the white
+    background, and of the two backgrounds alone (Rg_black < Rg_white).
+
+    **Returns:** `(R_inf, SX)`: the film's R∞ and S·X (per film, not per mm: divide by its
+    thickness); its K·X is SX · `ks_from_r_inf(R_inf)`.
+    """
+    Rb, Rw, Gb, Gw = _promote(R_black, R_white, Rg_black, Rg_white)
+    den = Rb * Gw - Rw * Gb
+    num = (1.0 + Rw * Gw) * (Rb - Gb) - (1.0 + Rb * Gb) * (Rw - Gw)
+    ok = den != 0
+    a = 0.5 * num / jnp.where(ok, den, 1.0)
+    ok = ok & (a > 1.0)
+    a = jnp.where(ok, a, 2.0)
+    b = jnp.sqrt((a - 1.0) * (a + 1.0))
+    R_inf = 1.0 / (a + b)
+    inv = 1.0 / R_inf
+
+    def L(R):
+        return 0.5 * jnp.log(jnp.abs((inv - R) / (R_inf - R)))
+
+    # R_b strictly between Rg_b and R∞ (R_b = R∞: opaque, S·X = inf, left to the log)
+    inside = (Rb - Gb) * (R_inf - Rb) > 0
+    opaque = Rb == R_inf
+    Rb_safe = jnp.where(inside, Rb, 0.5 * (Gb + R_inf))
+    SX = jnp.where(opaque, jnp.inf, (L(Rb_safe) - L(Gb)) / b)
+    good = ok & (inside | opaque)
+    nan = jnp.full_like(SX, jnp.nan)
+    return jnp.where(good, R_inf, nan), jnp.where(good, SX, nan)
+
+
+def saunderson(R: Float[ArrayLike, "*shape"], k1, k2) -> Float[Array, "*shape"]:
+    """Saunderson's surface correction (Allen 1980): the reflectance an instrument reads
+    (specular included) from the body's internal reflectance R,
+    R_m = k1 + (1 − k1)(1 − k2) R / (1 − k2 R). k1: the surface's external reflection
+    (≈ 0.04 for n = 1.5 with the specular component included; 0 excluded), k2: its internal
+    reflection of diffuse light (≈ 0.4–0.6). k1 = k2 = 0 returns R exactly."""
+    R, k1, k2 = _promote(R, k1, k2)
+    return k1 + (1.0 - k1) * (1.0 - k2) * R / (1.0 - k2 * R)
+
+
+def saunderson_inverse(R_m: Float[ArrayLike, "*shape"], k1, k2) -> Float[Array, "*shape"]:
+    """The inverse of `saunderson`: R = (R_m − k1) / (1 − k1 − k2 + k2 R_m), the internal
+    reflectance KM describes from an instrument's reading R_m (below 0 where R_m < k1: a
+    reading darker than the surface alone, which the model cannot produce)."""
+    R, k1, k2 = _promote(R_m, k1, k2)
+    return (R - k1) / ((1.0 - k1) * (1.0 - k2) + k2 * (R - k1))
 
 
 class Slab(NamedTuple):

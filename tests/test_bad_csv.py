@@ -98,6 +98,39 @@ CASES = [
      "names files"),
 ]
 
+CARD = "wavelength_nm,R_over_black,R_over_white,R_g_black,R_g_white\n"
+CARD_ROWS = "400,0.30,0.50,0.03,0.85\n410,0.31,0.51,0.03,0.86\n420,0.32,0.52,0.03,0.86\n"
+# contrast cards (drawdowns): a column without its partner, a white part darker than the
+# black, a film brighter over black everywhere, two layouts in one file
+CARD_CASES = [
+    ("card: a film over black without over white",
+     "wavelength_nm,R_over_black,R_g_black,R_g_white\n400,0.3,0.03,0.85\n410,0.31,0.03,0.86\n",
+     1, "R_over_black", "without its partner: no R_over_white"),
+    ("card: the 0.05 mm film over white only",
+     "wavelength_nm,R_over_black_0.02mm,R_over_white_0.02mm,R_over_white_0.05mm,R_g_black,"
+     "R_g_white\n400,0.3,0.5,0.55,0.03,0.85\n410,0.31,0.51,0.55,0.03,0.86\n", 1,
+     "R_over_white_0.05mm", "no R_over_black column (the 0.05 mm film)"),
+    ("card: the black part without the white",
+     "wavelength_nm,R_over_black,R_over_white,R_g_black\n400,0.3,0.5,0.03\n410,0.31,0.51,0.03\n",
+     1, "R_g_black", "needs both R_g_black and R_g_white"),
+    ("card: films without the card alone",
+     "wavelength_nm,R_over_black,R_over_white\n400,0.3,0.5\n410,0.31,0.51\n", 1, None,
+     "missing columns R_g_black and R_g_white"),
+    ("card: the white part darker than the black",
+     CARD + CARD_ROWS.replace("0.03,0.86\n420", "0.90,0.86\n420"), 3, "R_g_white",
+     "not brighter than its black part"),
+    ("card: the film brighter over black everywhere",
+     "wavelength_nm,R_over_black,R_over_white,R_g_black,R_g_white\n400,0.5,0.3,0.03,0.85\n"
+     "410,0.51,0.31,0.03,0.86\n", 1, "R_over_black", "brighter over the card's black part"),
+    ("card: beside the one-background layout",
+     "wavelength_nm,R_over_black,R_over_white,R_g_black,R_g_white,R_g\n"
+     "400,0.3,0.5,0.03,0.85,0.03\n410,0.31,0.51,0.03,0.86,0.03\n", 1, "R_g", "one layout"),
+    ("card: two films, one of unknown thickness",
+     "wavelength_nm,R_over_black,R_over_white,R_over_black_0.1mm,R_over_white_0.1mm,"
+     "R_g_black,R_g_white\n400,0.3,0.5,0.4,0.45,0.03,0.85\n410,0.31,0.51,0.4,0.45,0.03,0.86\n",
+     1, "R_over_black", "unknown thickness beside films of known thickness"),
+]
+
 BRDF_CASES = [
     ("BRDF 1e308", BRDF + BRDF_ROW * 12 + "30,0,40,180,1e308,0.1,0.1\n", 14, "R", "[0, 1e+06]"),
     ("BRDF all zero", BRDF + "30,0,40,180,0,0,0\n" * 12, 1, "R", "every value is 0"),
@@ -153,8 +186,8 @@ def test_a_unicode_export_with_a_byte_order_mark_reads(tmp_path, encoding):
 
 
 @pytest.mark.parametrize("contents, line, column, words",
-                         [c[1:] for c in CASES] + [c[1:] for c in BRDF_CASES],
-                         ids=[c[0] for c in CASES] + [c[0] for c in BRDF_CASES])
+                         [c[1:] for c in CASES + CARD_CASES + BRDF_CASES],
+                         ids=[c[0] for c in CASES + CARD_CASES + BRDF_CASES])
 def test_bad_csv_is_one_line_exit_2_nothing_written(tmp_path, capsys, contents, line, column,
                                                      words):
     command = "fit-brdf" if isinstance(contents, str) and contents.count("phi_") else "calibrate"
@@ -174,6 +207,24 @@ def test_bad_csv_is_one_line_exit_2_nothing_written(tmp_path, capsys, contents, 
 
 def test_table_has_at_least_25_cases():
     assert len(CASES) + len(BRDF_CASES) >= 25
+
+
+@pytest.mark.parametrize("option, words", [
+    (["--saunderson", "0.04"], "expected K1,K2"),
+    (["--saunderson", "0.04,1.5"], "expected K1,K2"),
+    (["--saunderson", "0.05,0.6"], "below --saunderson K1 = 0.05"),  # the black part's 0.03
+])
+def test_bad_saunderson_is_one_line_exit_2_nothing_written(tmp_path, capsys, option, words):
+    path = tmp_path / "card.csv"
+    path.write_text(CARD + CARD_ROWS)
+    out = tmp_path / "out"
+    try:
+        rc = main(["calibrate", str(path), "-o", str(out), *option])
+    except SystemExit as e:  # argparse's own refusal of an option's value
+        rc = e.code
+    err = capsys.readouterr().err
+    assert rc == 2 and len(err.splitlines()) == 1 and words in err, err
+    assert not out.exists()
 
 
 def test_brdf_samples_given_to_calibrate_point_to_fit_brdf(tmp_path, capsys):

@@ -488,7 +488,8 @@ def test_gradient_and_stationarity_against_the_dense_residuals(smooth):
     with jax.enable_x64(True):
         fixed = jnp.asarray(np.log(r.S_per_mm))
         args = (jnp.asarray(m.thickness_mm), jnp.asarray(m.R.T), jnp.asarray(m.R_inf),
-                jnp.asarray(m.R_g), jnp.asarray(smooth * 0.001), jnp.asarray(ident), fixed)
+                jnp.asarray(m.backgrounds.T), jnp.asarray(smooth * 0.001), jnp.asarray(ident),
+                fixed, None)  # the background under each reading; no Saunderson
 
         def dense_cost(y):
             return 0.5 * sum(jnp.sum(p**2) for p in fkm._dense_residuals(y, args))

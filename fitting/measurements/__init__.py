@@ -11,6 +11,10 @@ The format (also in the documentation, docs/reference/formats.md):
 - `R_<X>mm`: reflectance of a thin layer X mm thick over the background (one or more).
 - `R`: a thin layer whose thickness comes from `--thickness` or `# thickness_mm:`.
 - `R_inf`: an opaque layer. `R_g`: the background alone (black or white card).
+- Or a contrast card (drawdown): `R_over_black`, `R_over_white` (a film over the card's
+  black and white parts; with `_<X>mm` for its thickness, or none: thickness from
+  `--thickness`, `# thickness_mm:`, or not known), `R_g_black`, `R_g_white` (the parts
+  alone); `R_inf` optional.
 - Reflectance factors in [0, 1] (or 0–100 with `percent=True`).
 - Raw radiance instead: the same columns with `E_` in place of `R_` (`E_0.15mm`, `E_inf`,
   `E_g`; `E_R_0.15mm` is accepted too) plus `E_white`, the barium sulfate standard; then
@@ -32,9 +36,10 @@ from jaxskin.formats import is_wavelength_column as is_wavelength_column
 
 from ._columns import MAX_THICKNESS_MM as MAX_THICKNESS_MM
 from ._columns import THIN_COLUMN as THIN_COLUMN
+from ._columns import takes_thickness as takes_thickness
 from ._read import USUAL_THICKNESS_MM as USUAL_THICKNESS_MM
 from ._read import Measurement as Measurement
 from ._read import read_measurement as read_measurement
 from ._readings import MAX_RADIANCE as MAX_RADIANCE
 
-__all__ = ["Measurement", "is_wavelength_column", "read_measurement"]
+__all__ = ["Measurement", "is_wavelength_column", "read_measurement", "takes_thickness"]

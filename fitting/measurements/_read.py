@@ -28,6 +28,7 @@ from ._columns import (
     is_radiance,
     is_reading,
     positive,
+    takes_thickness,
 )
 from ._readings import reflectances, wavelengths_nm
 
@@ -45,6 +46,12 @@ class Measurement:
     thin layers over the background, `R_inf (n,)`, `R_g (n,)`, `columns`: the CSV column
     each thin layer came from, `header_line`: the header's line number in the file, `notes`:
     what the reader inferred (µm wavelengths, percent reflectance), one line each.
+
+    A contrast card (drawdown; ASTM D2805, ISO 6504-3) has `R_g_white (n,)`, the card's white
+    part, and then `R_g` is its black part; `R` holds each film over the black part and over
+    the white one (`over` names which, per row; thinnest film first), `R_inf` may be None,
+    and `thickness_known` is False when the film's thickness was not given (its
+    `thickness_mm` is then 1: one film, S and K come out as S·X and K·X).
     """
 
     path: Path
@@ -57,6 +64,21 @@ class Measurement:
     columns: tuple[str, ...]
     header_line: int
     notes: tuple[str, ...] = ()
+    R_g_white: np.ndarray | None = None
+    over: tuple[str, ...] = ()
+    thickness_known: bool = True
+
+    @property
+    def is_card(self) -> bool:
+        """Whether this is a contrast card: films over a black and a white background."""
+        return self.R_g_white is not None
+
+    @property
+    def backgrounds(self) -> np.ndarray:
+        """`(m, n)`: the background under each row of `R`."""
+        if not self.is_card:
+            return np.broadcast_to(self.R_g, self.R.shape)
+        return np.stack([self.R_g if o == "black" else self.R_g_white for o in self.over])
 
 
 def read_measurement(path, thickness_mm: float | None = None, percent: bool = False,
@@ -123,6 +145,9 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
                      f"{'' if len(said) > 1 else 's'} %: read as percent (/ 100)")
     reflectance = reflectances(data, header, columns, path, numbers, percent, notes, white,
                                 marked=said)
+    name = _material_name(path, meta, notes)
+    if "g_black" in reflectance:
+        return _card(path, name, wl, columns, reflectance, header_line, numbers, notes)
     thin = sorted((x, name) for name, (kind, x) in columns.items() if kind == "thin")
     R = np.stack([reflectance[name] for _, name in thin])
     R_inf, R_g = reflectance["inf"], reflectance["g"]
@@ -131,11 +156,50 @@ def read_measurement(path, thickness_mm: float | None = None, percent: bool = Fa
             "R_g equals R_inf at every wavelength: the background must differ from the opaque "
             "layer (a black or white card)", path, header_line, column_of(columns, "g"),
         )
-    name = _material_name(path, meta, notes)
     return Measurement(
         path=path, name=name, wavelength_nm=wl, thickness_mm=np.array([x for x, _ in thin]),
         R=R, R_inf=R_inf, R_g=R_g, columns=tuple(n for _, n in thin), header_line=header_line,
         notes=tuple(notes),
+    )
+
+
+def _card(path, name, wl, columns, reflectance, header_line, numbers, notes) -> Measurement:
+    """A contrast card's `Measurement`, its readings checked: the white part brighter than
+    the black at every band, and no film brighter over black than over white everywhere."""
+    black, white = reflectance["g_black"], reflectance["g_white"]
+    bad = np.flatnonzero(white <= black)
+    if bad.size:
+        i = bad[0]
+        raise InputError(f"the card's white part ({white[i]:g}) is not brighter than its black "
+                         f"part ({black[i]:g}) at {wl[i]:g} nm: R_g_black and R_g_white "
+                         "swapped?", path, numbers[i], column_of(columns, "g_white"))
+    films = {}
+    for col, (kind, x) in columns.items():
+        if kind in ("over_black", "over_white"):
+            films.setdefault(x, {})[kind[5:]] = col
+    known = None not in films
+    rows, over, thickness, names = [], [], [], []
+    for x in sorted(films, key=lambda v: -1.0 if v is None else v):
+        on_black, on_white = (reflectance[films[x][p]] for p in ("black", "white"))
+        if np.all(on_black > on_white):
+            raise InputError("the film is brighter over the card's black part than over its "
+                             f"white part at every band ('{films[x]['white']}' is the other): "
+                             "the film's columns swapped?", path, header_line,
+                             films[x]["black"])
+        for part, values in (("black", on_black), ("white", on_white)):
+            rows.append(values)
+            over.append(part)
+            thickness.append(1.0 if x is None else x)
+            names.append(films[x][part])
+    if not known:
+        notes.append(f"{path}: the film's thickness is not given: S and K are fitted as S·X "
+                     "and K·X of the film as measured (S_film, K_film); give it (R_over_black_"
+                     "<X>mm, --thickness or '# thickness_mm:') for S and K per mm")
+    return Measurement(
+        path=path, name=name, wavelength_nm=wl, thickness_mm=np.array(thickness),
+        R=np.stack(rows), R_inf=reflectance.get("inf"), R_g=black, columns=tuple(names),
+        header_line=header_line, notes=tuple(notes), R_g_white=white, over=tuple(over),
+        thickness_known=known,
     )
 
 
@@ -188,14 +252,14 @@ def _thickness_notes(path, columns, meta, thickness_mm, comment_thickness) -> li
     notes = []
     lo, hi = USUAL_THICKNESS_MM
     for name, (kind, x) in columns.items():
-        if kind == "thin" and not lo <= x <= hi:
+        if kind in ("thin", "over_black", "over_white") and x is not None and not lo <= x <= hi:
             notes.append(f"{path}: column '{name}': a {x:g} mm film; cosmetic films are "
                          f"{lo * 1000:g} µm to {hi:g} mm thick, and S, K scale as 1 / "
                          f"thickness: {'µm (R_<X>um)' if x > hi else 'mm'} meant?")
     if comment_thickness is not None:  # said, so not dropped in silence
         value, number = meta["thickness_mm"]
         said = f"{path}:{number}: '# thickness_mm: {value}'"
-        if not {"R", "E"} & set(columns):
+        if not any(takes_thickness(n) for n in columns):
             notes.append(f"{said} is not used: no bare R (or E) column; the R_<X>mm columns "
                          "name their own thicknesses")
         elif thickness_mm is not None and thickness_mm != comment_thickness:

@@ -122,5 +122,5 @@ def reflectances(data, header, columns, path, numbers, percent, notes, white_R=1
                         "reflectances cannot be negative)")
             raise InputError(f"{what}, got {values[bad[0]] * scale:g}{hint}",
                              path, numbers[bad[0]], name)
-        out[name if kind == "thin" else kind] = values
+        out[name if kind in ("thin", "over_black", "over_white") else kind] = values
     return out

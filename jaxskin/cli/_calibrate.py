@@ -21,17 +21,29 @@ def add_parser(sub) -> None:
         "calibrate",
         help="fit Kubelka–Munk S(λ), K(λ) of cosmetics to spectroradiometer CSVs",
         description="Fit scattering S(λ) and absorption K(λ) (per mm) of each cosmetic from a "
-        "CSV of thin-layer (R_<X>mm), opaque (R_inf) and background (R_g) reflectances, or raw "
-        "radiances (E_… and E_white). Writes OUTDIR/<name>.json (the material file the "
-        "renderer reads) and OUTDIR/<name>.png (a report). Every file is checked before any "
+        "CSV of thin-layer (R_<X>mm), opaque (R_inf) and background (R_g) reflectances, or of "
+        "a film drawn down over a contrast card (R_over_black, R_over_white, R_g_black, "
+        "R_g_white; R_inf optional; without a thickness, S and K of the film as measured), "
+        "or raw radiances (E_… and E_white). Writes OUTDIR/<name>.json (the material file the "
+        "renderer reads) and OUTDIR/<name>.png (a report), and prints each material's "
+        "contrast ratio, thickness for 98%% hiding and ΔE2000 over black vs white (ASTM "
+        "D2805's backgrounds, D65, 10°). Every file is checked before any "
         "fit runs: one bad file writes nothing. The CSV format: docs/reference/formats.md.",
     )
     c.add_argument("files", nargs="+", metavar="FILE.csv", help="measurement CSVs")
     c.add_argument("-o", "--output", required=True, metavar="OUTDIR",
                    help="folder for <name>.json and <name>.png (created if missing)")
     c.add_argument("--thickness", type=number(above=0.0, hi=100.0), metavar="MM",
-                   help="thickness in mm of a bare 'R' column (overrides '# thickness_mm:'); "
+                   help="thickness in mm of a bare 'R' column or a contrast card's film "
+                   "without one (R_over_black, R_over_white; overrides '# thickness_mm:'); "
                    "warned of when no file has one")
+    c.add_argument("--saunderson", type=_saunderson, metavar="K1,K2",
+                   help="Saunderson's surface correction for readings that include the "
+                   "surface's reflection (specular included, SCI): R_m = K1 + (1-K1)(1-K2) R "
+                   "/ (1 - K2 R), K1 the external (about 0.04; 0 for SCE), K2 the internal "
+                   "reflection (about 0.4-0.6); the KM film and its backgrounds are then "
+                   "internal reflectances, the fit's residuals stay in the readings; recorded "
+                   "in the JSON. Default: none")
     c.add_argument("--percent", action="store_true",
                    help="reflectance columns are in percent (0–100) instead of 0–1 (without "
                    "it, a file whose reflectances have a median above 1.5 is read as percent, "
@@ -83,7 +95,8 @@ def run(args, record: Run) -> int:
     _warn_about_the_readings(args, measurements, grid, noise)
 
     rows, mismatched = [], []
-    fit = functools.partial(fit_km.fit, smooth=args.smooth, noise=noise)
+    fit = functools.partial(fit_km.fit, smooth=args.smooth, noise=noise,
+                            saunderson=args.saunderson)
     with cluster.pool(args.cluster) as pool:
         record.stage = f"fitting {measurements[0].name}"
         results = pool.map(fit, measurements, desc="calibrate", unit="file")
@@ -114,14 +127,51 @@ def run(args, record: Run) -> int:
     for line in mismatched:
         warn(line)
     wide = max([24, *(len(name) for name, _, _ in rows)])  # long names kept the columns
+    figures = [_coverage_cells(r) for _, r, _ in rows]
+    cr = max([8, *(len(f[0]) for f in figures)])
     print(f"{'material':<{wide}} {'bands':>5} {'identifiable':>12} {'rmse':>9} {'steps':>5} "
-          f"{'time s':>7}")
-    for name, r, dt in rows:
+          f"{'time s':>7} {'CR':>{cr}} {'hide 98%':>10} {'ΔE00 b/w':>{cr}}")
+    for (name, r, dt), (c, x98, de) in zip(rows, figures, strict=True):
         flag = "" if r.converged else "  (not converged: see report)"
         print(f"{name:<{wide}} {len(r.wavelength_nm):>5} {int(r.identifiable.sum()):>12} "
-              f"{r.rmse:>9.2e} {r.steps:>5} {dt:>7.2f}{flag}")
+              f"{r.rmse:>9.2e} {r.steps:>5} {dt:>7.2f} {c:>{cr}} {x98:>10} {de:>{cr}}{flag}")
+    print("CR: contrast ratio Y over black / Y over white of each film as measured, hide 98%: "
+          "the thickness where it is 0.98, ΔE00 b/w: CIEDE2000 over black vs white (ASTM "
+          "D2805's black 0 and white 0.80 under the film; D65, 10°; x film: in multiples of a "
+          "film of unknown thickness)")
     print_written(outputs)
     return 0
+
+
+def _coverage_cells(r) -> tuple[str, str, str]:
+    """The table's contrast ratios and ΔE2000 (one per film, '/' between) and the hiding
+    thickness, as text."""
+    cov = r.coverage
+    c = "/".join(f"{f['contrast_ratio']:.3f}" for f in cov["films"])
+    de = "/".join(f"{f['delta_E2000']:.1f}" for f in cov["films"])
+    if r.thickness_known:
+        x = cov["hiding_98_mm"]
+        x98 = "-" if x is None else f"{x:.3g} mm"
+    else:
+        x = cov["hiding_98_films"]
+        x98 = "-" if x is None else f"{x:.3g} x film"
+    return c, x98, de
+
+
+def _saunderson(text: str) -> tuple[float, float]:
+    """`--saunderson K1,K2`: two numbers in [0, 1)."""
+    import argparse
+    import math
+
+    parts = text.replace(" ", "").split(",")
+    try:
+        k = tuple(float(p) for p in parts)
+    except ValueError:
+        k = ()
+    if len(k) != 2 or not all(math.isfinite(v) and 0 <= v < 1 for v in k):
+        raise argparse.ArgumentTypeError(f"expected K1,K2: two numbers in [0, 1) such as "
+                                         f"0.04,0.6, got {text!r}")
+    return k
 
 
 def _read_all(args, outputs: Outputs, noise: float) -> tuple[list, list]:
@@ -137,6 +187,7 @@ def _read_all(args, outputs: Outputs, noise: float) -> tuple[list, list]:
         check_name(m.name, f, key="name")
         json_path = outputs.plan(f"{m.name}.json", f)
         png_path = None if args.no_report else outputs.plan(f"{m.name}.png", f)
+        fit_km.check_saunderson(m, args.saunderson)
         if not fit_km.identifiable(m, noise).any():
             fit_km.fit(m, noise=noise)  # raises the InputError that explains why
         measurements.append(m)
@@ -148,6 +199,7 @@ def _warn_about_the_readings(args, measurements, grid, noise: float) -> None:
     """Each file's notes, and warnings: wavelengths the renderer's grid needs but the file
     does not cover, gaps, suspect column labels, a `--thickness` no column uses."""
     from jaxskin.fitting import km as fit_km
+    from jaxskin.fitting.measurements import takes_thickness
     from jaxskin.formats import wavelength_gaps
 
     for m in measurements:
@@ -168,7 +220,27 @@ def _warn_about_the_readings(args, measurements, grid, noise: float) -> None:
             warn(f"{m.path}: {line}")
         for line in fit_km.suspect_labels(m, noise):
             warn(line)
-    if args.thickness is not None and not any({"R", "E"} & set(m.columns)
-                                              for m in measurements):
+        for line in _card_bands(m, noise):
+            warn(line)
+    if args.thickness is not None and not any(takes_thickness(c) for m in measurements
+                                              for c in m.columns):
         warn(f"--thickness {args.thickness:g} was ignored: no file has a bare "
              "R (or E) column; each gives its thicknesses in its column names (R_<X>mm)")
+
+
+def _card_bands(m, noise: float) -> list[str]:
+    """A contrast card's inconsistent bands (a film brighter over black than over white), in
+    one line naming them; none for another layout or a consistent card."""
+    from jaxskin.fitting import cards
+    from jaxskin.fitting import km as fit_km
+
+    if not m.is_card:
+        return []
+    wl = m.wavelength_nm[cards.band_status(m, noise, fit_km.MIN_RUN) == "inconsistent"]
+    if not wl.size:
+        return []
+    shown = ", ".join(f"{w:g}" for w in wl[:8]) + (", ..." if wl.size > 8 else "")
+    return [f"{m.path}: {wl.size} band(s) where a film is brighter over the card's black part "
+            f"than over its white part by over 3√2 x --noise {noise:g} ({shown} nm), which no "
+            "film does: fitted as opaque there (R∞ from both readings), marked "
+            "'inconsistent' in the JSON's band_status"]

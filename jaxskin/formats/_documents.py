@@ -123,6 +123,11 @@ def read_material(path) -> MaterialFile:
                          key="model")
     arrays = {}
     known = ("wavelength_nm", "S_per_mm", "K_per_mm")
+    if "S_per_mm" not in doc and "S_film" in doc:  # calibrated without the film's thickness
+        raise InputError("S and K of a film of unknown thickness (S_film, K_film: S*X and K*X, "
+                         "calibrated without the film's thickness): a scene needs them per mm; "
+                         "calibrate again with --thickness MM (or a '# thickness_mm:' line) "
+                         "to render it", path, key="S_film")
     for k in known:
         if k not in doc:  # a hand edit may have renamed it (S_per_mn): name both
             others = [o for o in doc if o not in known and o not in _MATERIAL_OTHER_KEYS]
