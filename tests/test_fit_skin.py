@@ -53,7 +53,9 @@ def test_fit_skin_on_nist_subjects(fitted):
         rows = list(csv.DictReader(fh))
     assert [r["name"] for r in rows] == names
     assert list(rows[0]) == ["name", *bp.PARAMS, "rms", "dE2000", "converged", "steps",
-                             *(f"{p}_sd" for p in bp.PARAMS), "corr_melanin_epidermis"]
+                             *(f"{p}_sd" for p in bp.PARAMS), "corr_melanin_epidermis",
+                             "specular"]
+    assert {r["specular"] for r in rows} == {"excluded"}  # the default: SCE
     dE = np.array([float(r["dE2000"]) for r in rows])
     rms = np.array([float(r["rms"]) for r in rows])
     # The full NIST run (benchmarks/RESULTS.md): ΔE2000 median 0.69, max 1.82 (subject 28);
@@ -198,8 +200,9 @@ BAD = [
     ("no spectra", "wavelength_nm\n" + "".join(f"{w}\n" for w in range(380, 790, 10)), [],
      "no spectra"),
     ("no header", "400,0.4\n500,0.5\n", [], "no header row"),
+    # an empty cell is a missing reading; here no spectrum is left covering 400-700 nm
     ("empty cell", "wavelength_nm,a,b\n400,0.4,\n500,0.4,0.3\n", [],
-     ":2: column 'b': empty cell"),
+     "no spectrum covers it with readings"),
     ("nan", "wavelength_nm,a\n400,nan\n" + _good_rows(), [], "finite"),
     ("fix unknown", "wavelength_nm,a\n" + _good_rows(), ["--fix", "melanine=0.1"],
      "--fix expects name=value"),

@@ -202,6 +202,8 @@ def _read_rows(path, lines, header, header_line, delimiter, kept, wavelength_fir
             raise InputError(f"not CSV ({e})", path, number) from None
         if all(c == "" for c in cells):  # a spreadsheet's empty row: ",,,,"
             continue
+        if missing and len(cells) < len(header):  # empty last cells, dropped by split_row
+            cells += [""] * (len(header) - len(cells))
         if len(cells) != len(header):
             raise _cell_count_error(path, number, line, cells, header, delimiter)
         if delimiter != ",":  # then 18,65 can only be a decimal comma (Excel in Europe)
