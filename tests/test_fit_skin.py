@@ -71,9 +71,12 @@ def test_fit_skin_on_nist_subjects(fitted):
 
 @pytest.mark.slow
 def test_synthetic_spectra_recover_their_parameters(fitted):
-    """Spectra made by the model itself (on the NIST wavelengths in the fit range) give back
-    the parameters: measured worst error 0.03 of the range for the eumelanin share (weakly
-    seen at low melanin), 1.2 % relative for the log-scaled ones."""
+    """Spectra made by the model itself (on the NIST wavelengths; the fit uses 400-700 nm)
+    give back the parameters: measured worst error 0.098 of the range for the eumelanin
+    share at melanin 0.01 (weakly seen there; 0.018 and 0.011 for the other two), 4.4 %
+    relative for the log-scaled ones (scattering of the second). Noise-free spectra leave
+    the weak prior on z to set the last few per cent (fitting 380-780 nm they were 0.03 and
+    1.2 %: the 380-400 nm readings see the eumelanin share best)."""
     truth = [bp.DEFAULT, bp.Skin(0.2, 0.6, 0.05, 0.8, 0.06, 1.5),
              bp.Skin(0.01, 0.9, 0.005, 0.4, 0.02, 4.0)]
     wl = np.arange(382.0, 780.0, 3.0)
@@ -86,10 +89,11 @@ def test_synthetic_spectra_recover_their_parameters(fitted):
         for p in bp.PARAMS:
             got, want = r.params[p][k], getattr(t, p)
             if p in skin.LOG_PARAMS:
-                assert got == pytest.approx(want, rel=0.05), (k, p)
+                assert got == pytest.approx(want, rel=0.06), (k, p)
             else:
                 lo, hi = bp.RANGES[p]
-                assert abs(got - want) < 0.06 * (hi - lo), (k, p)
+                assert abs(got - want) < (0.12 if p == "eumelanin" else 0.06) * (hi - lo), \
+                    (k, p)
     assert r.rms.max() < 2e-4 and r.dE2000.max() < 0.05
 
 
@@ -381,7 +385,7 @@ def test_a_spectrums_name_is_a_safe_csv_cell(name, cell):
     the name back, led by `'` where it started like a formula."""
     import io
 
-    from jaxskin.fitting.skin import _cell
+    from jaxskin.fitting._skin_files import _cell
 
     assert _cell(name) == cell
     formula = name[:1] in "=+-@"

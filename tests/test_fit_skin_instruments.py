@@ -6,8 +6,10 @@ readings checked another way."""
 import csv
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import check_grads_scaled
 
 from jaxskin import biophysical as bp
 from jaxskin import formats
@@ -76,6 +78,25 @@ def test_delta_e2000_uses_the_readings_a_spectrum_has():
 
 
 # --- SCI and SCE.
+
+@pytest.mark.parametrize("point", [bp.DEFAULT, bp.Skin(*(lo for lo, _ in bp.RANGES.values())),
+                                   bp.Skin(*(hi for _, hi in bp.RANGES.values()))])
+def test_sci_model_gradients_at_ordinary_points_and_the_range_ends(x64, point):
+    """The SCI model (the surface's k1 added) is differentiable like the SCE one, fwd and
+    rev in float64, at the default skin and every parameter at its lower or upper bound;
+    its values are the SCE ones + (0.4/2.4)² at each band (by hand: n = 1.4)."""
+    c = bp.Chromophores(*(jnp.asarray(a) for a in bp.chromophores(
+        np.array([400.0, 451.0, 542.0, 700.0]), formats.haemoglobin_table())))
+
+    def f(*values):
+        return bp.reflectance(c, bp.Skin(*values), specular=True)
+
+    scales = [0.05 * (hi - lo) for lo, hi in bp.RANGES.values()]
+    check_grads_scaled(f, list(point), scales, order=1, eps=1e-4)
+    sce = np.asarray(bp.reflectance(c, bp.Skin(*map(jnp.float64, point))))
+    np.testing.assert_allclose(np.asarray(f(*map(jnp.float64, point))) - sce,
+                               (0.4 / 2.4) ** 2, rtol=1e-12)
+
 
 @pytest.mark.slow
 def test_sci_spectra_give_the_sce_parameters_only_when_the_mode_is_said():
