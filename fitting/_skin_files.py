@@ -8,7 +8,10 @@ import numpy as np
 from jaxskin import biophysical as bp
 from jaxskin.io import atomic_write
 
-__all__ = ["specular_word", "write_csv", "write_report"]
+__all__ = ["LOG_PARAMS", "specular_word", "write_csv", "write_report"]
+
+# The parameters spanning decades: fitted in log space (`fitting.skin`), drawn on log axes.
+LOG_PARAMS = ("melanin", "haemoglobin", "epidermis_mm", "scattering")
 
 
 def write_csv(result, path) -> None:
@@ -54,8 +57,6 @@ def write_report(result, path, samples: int = 6) -> None:
     ranking (the best, the worst and between), and histograms of every parameter and of
     ΔE2000."""
     import matplotlib
-
-    from .skin import LOG_PARAMS  # here: skin imports this module
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -52,7 +52,7 @@ from jaxskin.formats import haemoglobin_table
 from jaxskin.io import FitError, InputError
 from jaxskin.spectral import Grid
 
-from ._skin_files import specular_word, write_csv, write_report
+from ._skin_files import LOG_PARAMS, specular_word, write_csv, write_report
 
 __all__ = ["FIT_RANGE", "LOG_PARAMS", "NEEDED", "SHOWN", "SkinFit", "coverage", "delta_e2000",
            "fit", "from_z", "point_weights", "specular_word", "to_z", "write_csv",
@@ -61,7 +61,6 @@ __all__ = ["FIT_RANGE", "LOG_PARAMS", "NEEDED", "SHOWN", "SkinFit", "coverage", 
 NEEDED = (400.0, 700.0)  # nm: a spectrum must cover at least this
 FIT_RANGE = NEEDED  # the points the fit uses: the same stretch of every accepted spectrum
 SHOWN = (380.0, 780.0)  # the points the colour (dE2000) and the report's plots use
-LOG_PARAMS = ("melanin", "haemoglobin", "epidermis_mm", "scattering")
 CHUNK = 10  # spectra per compiled solve (the progress bar's step)
 PRIOR = 1e-3  # weight of the prior on z (see `_residuals`)
 STEP_NM = 3.0  # a point standing for this many nm weighs 1 (the NIST file's step: its fits

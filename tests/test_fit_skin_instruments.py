@@ -101,9 +101,10 @@ def test_sci_model_gradients_at_ordinary_points_and_the_range_ends(x64, point):
 @pytest.mark.slow
 def test_sci_spectra_give_the_sce_parameters_only_when_the_mode_is_said():
     """Spectra of known skins made by the model with the surface reflection included (SCI):
-    fitted with `specular=True` they give the parameters back (log-scaled ones within 5 %);
-    fitted as SCE the fit is still close in colour but scattering comes out too high, the
-    flat 2.8 % read as a brighter dermis (measured: 1.3-1.4 × the truth)."""
+    fitted with `specular=True` they give the parameters back (log-scaled ones within 5 %;
+    measured 4.3 %); fitted as SCE the fit is still close in colour (ΔE2000 0.01, 0.05)
+    but scattering comes out too high, the flat 2.8 % read as a brighter dermis (measured
+    1.31 and 1.55 × the truth; blood 1.11 and 1.24 ×)."""
     truth = [bp.DEFAULT, bp.Skin(0.2, 0.6, 0.05, 0.8, 0.06, 1.5)]
     wl = np.arange(360.0, 741.0, 10.0)  # a 10 nm SCI instrument from 360 nm
     with jax.enable_x64(True):
@@ -119,7 +120,7 @@ def test_sci_spectra_give_the_sce_parameters_only_when_the_mode_is_said():
     sce = skin.fit(["a", "b"], wl, R, specular=False)
     assert not sce.specular
     ratio = sce.params["scattering"] / np.array([t.scattering for t in truth])
-    assert np.all(ratio > 1.15), ratio
+    assert np.all(ratio > 1.2), ratio
 
 
 # --- Other samplings and ranges of the NIST forearms: within the aim (ΔE2000 median ≤ 1,
@@ -128,8 +129,9 @@ def test_sci_spectra_give_the_sce_parameters_only_when_the_mode_is_said():
 @pytest.mark.slow
 @pytest.mark.parametrize("lo,hi,step", [(360, 780, 1), (400, 700, 10), (400, 720, 2)])
 def test_resampled_nist_fits_within_the_aim(lo, hi, step):
-    """Measured (five subjects, 2 starts): 1 nm 360-780 median 0.49, max 1.83; 10 nm
-    400-700 median 0.46, max 1.15; 2 nm 400-720 median 0.43, max 1.20."""
+    """Measured (five subjects, 2 starts): 1 nm 360-780 median 0.69, max 1.12; 10 nm
+    400-700 median 0.69, max 1.13; 2 nm 400-720 median 0.70, max 1.13 (the same fit:
+    every one is fitted over 400-700 nm, each reading weighing its stretch of spectrum)."""
     names, wl, R = _resampled(lo, hi, step)
     r = skin.fit(names, wl, R, starts=2)
     assert np.median(r.dE2000) <= 1.0 and r.dE2000.max() <= 3.0, r.dE2000
