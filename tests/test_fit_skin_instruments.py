@@ -139,6 +139,7 @@ def test_resampled_nist_fits_within_the_aim(lo, hi, step):
 
 # --- The command: the coverage rule, the mode in the outputs, bad input.
 
+@pytest.mark.slow  # one compile of the fit for its grid: ~25 s under load
 def test_fit_skin_skips_a_spectrum_that_does_not_cover_400_700_and_records_the_mode(
         tmp_path, capsys):
     """A table where spectrum 'short' has readings from 410 nm only (empty cells below):
