@@ -63,6 +63,19 @@ def test_coverage_and_the_spectra_skipped():
                      "b (410-780 nm), c (no readings)"]
 
 
+def test_empty_cells_are_missing_readings(tmp_path):
+    """Spectra of different ranges in one table: an empty cell, inside a row or at its end
+    (a spreadsheet drops trailing delimiters), reads as NaN; a written 'nan' stays an error
+    (test_fit_skin's bad inputs)."""
+    src = tmp_path / "mixed.csv"
+    src.write_text("wavelength_nm,a,b,c\n360,,0.2\n370,0.3,,0.25\n380,0.31,0.21,0.26\n")
+    names, wl, R = formats.read_spectra(src)
+    assert names == ["a", "b", "c"]
+    np.testing.assert_array_equal(np.isnan(R), [[True, False, False], [False, True, False],
+                                                [True, False, False]])
+    assert R[2, 1] == 0.25
+
+
 def test_delta_e2000_uses_the_readings_a_spectrum_has():
     """A spectrum with missing readings (NaN) gives the ΔE2000 of the same spectrum
     given only on the wavelengths it has: measured agreement exact (the same numbers)."""
