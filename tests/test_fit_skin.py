@@ -53,7 +53,9 @@ def test_fit_skin_on_nist_subjects(fitted):
         rows = list(csv.DictReader(fh))
     assert [r["name"] for r in rows] == names
     assert list(rows[0]) == ["name", *bp.PARAMS, "rms", "dE2000", "converged", "steps",
-                             *(f"{p}_sd" for p in bp.PARAMS), "corr_melanin_epidermis"]
+                             *(f"{p}_sd" for p in bp.PARAMS), "corr_melanin_epidermis",
+                             "specular"]
+    assert {r["specular"] for r in rows} == {"excluded"}  # the default: SCE
     dE = np.array([float(r["dE2000"]) for r in rows])
     rms = np.array([float(r["rms"]) for r in rows])
     # The full NIST run (benchmarks/RESULTS.md): ΔE2000 median 0.69, max 1.82 (subject 28);
@@ -69,9 +71,12 @@ def test_fit_skin_on_nist_subjects(fitted):
 
 @pytest.mark.slow
 def test_synthetic_spectra_recover_their_parameters(fitted):
-    """Spectra made by the model itself (on the NIST wavelengths in the fit range) give back
-    the parameters: measured worst error 0.03 of the range for the eumelanin share (weakly
-    seen at low melanin), 1.2 % relative for the log-scaled ones."""
+    """Spectra made by the model itself (on the NIST wavelengths; the fit uses 400-700 nm)
+    give back the parameters: measured worst error 0.098 of the range for the eumelanin
+    share at melanin 0.01 (weakly seen there; 0.018 and 0.011 for the other two), 4.4 %
+    relative for the log-scaled ones (scattering of the second). Noise-free spectra leave
+    the weak prior on z to set the last few per cent (fitting 380-780 nm they were 0.03 and
+    1.2 %: the 380-400 nm readings see the eumelanin share best)."""
     truth = [bp.DEFAULT, bp.Skin(0.2, 0.6, 0.05, 0.8, 0.06, 1.5),
              bp.Skin(0.01, 0.9, 0.005, 0.4, 0.02, 4.0)]
     wl = np.arange(382.0, 780.0, 3.0)
@@ -84,10 +89,11 @@ def test_synthetic_spectra_recover_their_parameters(fitted):
         for p in bp.PARAMS:
             got, want = r.params[p][k], getattr(t, p)
             if p in skin.LOG_PARAMS:
-                assert got == pytest.approx(want, rel=0.05), (k, p)
+                assert got == pytest.approx(want, rel=0.06), (k, p)
             else:
                 lo, hi = bp.RANGES[p]
-                assert abs(got - want) < 0.06 * (hi - lo), (k, p)
+                assert abs(got - want) < (0.12 if p == "eumelanin" else 0.06) * (hi - lo), \
+                    (k, p)
     assert r.rms.max() < 2e-4 and r.dE2000.max() < 0.05
 
 
@@ -198,8 +204,9 @@ BAD = [
     ("no spectra", "wavelength_nm\n" + "".join(f"{w}\n" for w in range(380, 790, 10)), [],
      "no spectra"),
     ("no header", "400,0.4\n500,0.5\n", [], "no header row"),
+    # an empty cell is a missing reading; here no spectrum is left covering 400-700 nm
     ("empty cell", "wavelength_nm,a,b\n400,0.4,\n500,0.4,0.3\n", [],
-     ":2: column 'b': empty cell"),
+     "no spectrum covers it with readings"),
     ("nan", "wavelength_nm,a\n400,nan\n" + _good_rows(), [], "finite"),
     ("fix unknown", "wavelength_nm,a\n" + _good_rows(), ["--fix", "melanine=0.1"],
      "--fix expects name=value"),
@@ -378,7 +385,7 @@ def test_a_spectrums_name_is_a_safe_csv_cell(name, cell):
     the name back, led by `'` where it started like a formula."""
     import io
 
-    from jaxskin.fitting.skin import _cell
+    from jaxskin.fitting._skin_files import _cell
 
     assert _cell(name) == cell
     formula = name[:1] in "=+-@"

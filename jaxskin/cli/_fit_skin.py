@@ -14,7 +14,7 @@ from ._options import no_report, number, seed
 from ._process import Run, print_written
 from ._terminal import note, warn
 
-__all__ = ["add_parser", "fixed_values", "run"]
+__all__ = ["add_parser", "covered", "fixed_values", "run"]
 
 
 def add_parser(sub) -> None:
@@ -26,9 +26,13 @@ def add_parser(sub) -> None:
         "oxygenation), epidermis thickness and scattering of the biophysical skin model "
         "(material.model = \"biophysical\") to each spectrum of a CSV: a wide table "
         "(wavelength_nm, then one column per spectrum, 0-1) or the NIST skin file's layout "
-        "(each subject's Average). Fits 380-780 nm (needs at least 400-700). Writes "
-        "DIR/<SPECTRA>_fit.csv (name, parameters, RMS reflectance error, dE2000 under D65 "
-        "between measured and fitted spectra) and DIR/<SPECTRA>_fit.png (a sample of fits, "
+        "(each subject's Average). Any sampling (1-10 nm steps are usual); fits the "
+        "readings in 400-700 nm, each weighted by the stretch of spectrum it stands for "
+        "(dE2000 compares all readings in 380-780 nm). "
+        "A spectrum must cover at least 400-700 nm: one that covers less (an empty cell is "
+        "a missing reading) is named and skipped. Writes DIR/<SPECTRA>_fit.csv (name, "
+        "parameters, RMS reflectance error, dE2000 under D65 between measured and fitted "
+        "spectra, the --specular mode) and DIR/<SPECTRA>_fit.png (a sample of fits, "
         "histograms), named by the CSV's stem.",
     )
     k.add_argument("file", metavar="SPECTRA.csv", help="reflectance spectra")
@@ -40,6 +44,11 @@ def add_parser(sub) -> None:
     k.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
                    help="hold a parameter at a value, e.g. --fix epidermis_mm=0.06 "
                    "(repeatable)")
+    k.add_argument("--specular", choices=("included", "excluded"), default="excluded",
+                   help="the instrument's mode: a d/8 sphere reports the specular component "
+                   "included (SCI) or excluded (SCE); with 'included' the model adds the "
+                   "skin surface's own reflection (k1 = 0.028 at every wavelength) "
+                   "(default: excluded)")
     k.add_argument("--percent", action="store_true",
                    help="reflectance is in percent (0-100) instead of 0-1 (without it, spectra "
                    "whose median is above 1.5 are read as percent, with a note)")
@@ -64,28 +73,30 @@ def run(args, record: Run) -> int:
         raise InputError("a cosmetic's measurement (columns R_<X>mm, R_inf, R_g), not skin "
                          f"spectra: calibrate it with 'jaxskin calibrate {args.file} -o DIR'",
                          args.file)
-    if wavelengths[0] > skin.NEEDED[0] or wavelengths[-1] < skin.NEEDED[1]:
-        raise InputError(f"the spectra cover {wavelengths[0]:g}-{wavelengths[-1]:g} nm; the "
-                         f"fit needs at least {skin.NEEDED[0]:g}-{skin.NEEDED[1]:g} nm", args.file)
+    names, R, skipped = covered(names, wavelengths, R, args.file)
     stem = f"{slug(Path(args.file).stem)}_fit"  # by the input: two fits in one folder
     csv_path = outputs.plan(f"{stem}.csv", "the fit")
     png_path = None if args.no_report else outputs.plan(f"{stem}.png", "the report")
     record.outputs.append(outputs)
     for line in notes:
         note(line)
+    for line in skipped:
+        warn(line)
     for line in wavelength_gaps(wavelengths):
         warn(f"{args.file}: {line}")
+    specular = args.specular == "included"
     record.stage = f"fitting {len(names)} spectra"
     t0 = time.perf_counter()
     if args.cluster:
         with cluster.pool(args.cluster) as pool:
             result = skin.fit(names, wavelengths, R, starts=args.starts, seed=args.seed,
-                         fixed=fixed, path=args.file,
-                         map_units=pool.mapper(desc="fit-skin", unit="chunk"))
+                              fixed=fixed, path=args.file, specular=specular,
+                              map_units=pool.mapper(desc="fit-skin", unit="chunk"))
     else:
         with tqdm(total=len(names), desc="fit-skin", unit="spectrum", disable=None) as bar:
             result = skin.fit(names, wavelengths, R, starts=args.starts, seed=args.seed,
-                         fixed=fixed, progress=bar.update, path=args.file)
+                              fixed=fixed, progress=bar.update, path=args.file,
+                              specular=specular)
     seconds = time.perf_counter() - t0
     skin.write_csv(result, csv_path)
     outputs.done(csv_path)
@@ -94,13 +105,42 @@ def run(args, record: Run) -> int:
         skin.write_report(result, png_path)
         outputs.done(png_path)
     de, rms = result.dE2000, result.rms
-    print(f"{len(names)} spectra, {args.starts} starts each, {seconds:.1f} s: ΔE2000 median "
+    print(f"{len(names)} spectra, specular {args.specular}, {args.starts} starts each, "
+          f"{seconds:.1f} s: ΔE2000 median "
           f"{np.median(de):.2f}, max {de.max():.2f} ({result.names[int(np.argmax(de))]}); RMS "
           f"reflectance error median {np.median(rms):.4f}, max {rms.max():.4f}")
     for line in skin.fit_warnings(result, fixed):
         warn(line)
     print_written(outputs)
     return 0
+
+
+def covered(names, wavelengths, R, path):
+    """`(names, R, lines)`: the spectra that cover `skin.NEEDED` (400-700 nm) with readings,
+    and one warning line naming those that do not (they are skipped); `InputError` when
+    none does."""
+    import numpy as np
+
+    from ..fitting import skin
+
+    lo, hi = skin.NEEDED
+    span = skin.coverage(wavelengths, R)
+    ok = (span[:, 0] <= lo) & (span[:, 1] >= hi)
+    if not ok.any():
+        what = (f"the spectra cover {wavelengths[0]:g}-{wavelengths[-1]:g} nm"
+                if np.isfinite(R).all() else "no spectrum covers it with readings")
+        raise InputError(f"{what}; the fit needs at least {lo:g}-{hi:g} nm", path)
+    if ok.all():
+        return list(names), R, []
+    short = [f"{n} ({_span(s)})" for n, s, k in zip(names, span, ok, strict=True) if not k]
+    more = f" and {len(short) - 5} more" if len(short) > 5 else ""
+    line = (f"{path}: {len(short)} of {len(names)} spectra skipped, not covering "
+            f"{lo:g}-{hi:g} nm: {', '.join(short[:5])}{more}")
+    return [n for n, k in zip(names, ok, strict=True) if k], R[ok], [line]
+
+
+def _span(span) -> str:
+    return "no readings" if not span[0] == span[0] else f"{span[0]:g}-{span[1]:g} nm"
 
 
 def fixed_values(items) -> dict[str, float]:

@@ -86,9 +86,11 @@ def read_spectra(path, percent: bool | None = False, notes: list | None = None
     Two layouts: a wide CSV (`wavelength_nm` — or `Wavelength (nm)` — then one column per
     spectrum, named by its header), and the NIST skin file's (`Wavelength (nm)` then groups
     `R1, R2, R3, Average` under a row naming `Subject k`: each subject's `Average` is read,
-    named `subject_k`). Reflectance in 0–1 (`percent`: 0–100; `None`: percent when the
-    median is above `PERCENT_MEDIAN`, as `calibrate` guesses, with a line appended to
-    `notes`); wavelengths increasing, or all decreasing (then reversed, with a note).
+    named `subject_k`). In the wide layout an empty cell is a missing reading (NaN in `R`:
+    spectra measured over different ranges in one table). Reflectance in 0–1 (`percent`:
+    0–100; `None`: percent when the median is above `PERCENT_MEDIAN`, as `calibrate`
+    guesses, with a line appended to `notes`); wavelengths increasing, or all decreasing
+    (then reversed, with a note).
     `InputError` names the file, line and column of anything else.
     """
     path = Path(path)
@@ -105,8 +107,8 @@ def read_spectra(path, percent: bool | None = False, notes: list | None = None
         names, wavelengths, R = _nist_layout(path, lines, header_at)
         header_line, line_of, wl_name = header_at + 1, None, split_row(lines[header_at], ",")[0]
     else:
-        t = read_table(path, _nm_column,
-                       "wavelength_nm,<spectrum name>,...", min_rows=2, wavelength_first=True)
+        t = read_table(path, _nm_column, "wavelength_nm,<spectrum name>,...", min_rows=2,
+                       wavelength_first=True, missing=True)
         if len(t.header) < 2:
             raise t.error("no spectra: expected wavelength_nm and one column per spectrum")
         data, line_of = drop_repeats(t.data, t.lines, path, notes)
@@ -184,9 +186,9 @@ def _percent_columns(path, names, R, header_line: int, notes: list):
         if not names[k]:
             raise InputError("a spectrum's name is its unit alone: name the column", path,
                              header_line, columns[k])
-        if np.max(R[k]) <= 1.0:  # no skin reflects under 1 % at every band
+        if np.nanmax(R[k], initial=0.0) <= 1.0:  # no skin reflects under 1 % at every band
             raise InputError(f"says %, but every reading is at most 1 (median "
-                             f"{np.median(R[k]):.3g}): these are fractions (0-1); remove the % "
+                             f"{np.nanmedian(R[k]):.3g}): these are fractions (0-1); remove the % "
                              "from the header", path, header_line, columns[k])
     if marked.any():
         said = [c for c, m in zip(columns, marked, strict=True) if m]
@@ -203,9 +205,10 @@ def _fractions(path, R, names, marked, percent, notes: list):
     divided by 100; readings just below 0 (`NEGATIVE_NOISE`) read as 0, with a note."""
     rest = R[~marked]
     if percent is None:
-        percent = bool(rest.size) and float(np.median(rest)) > PERCENT_MEDIAN
+        read = rest[np.isfinite(rest)]  # NaN: a missing reading
+        percent = bool(read.size) and float(np.median(read)) > PERCENT_MEDIAN
         if percent:
-            notes.append(f"{path}: reflectances have a median of {np.median(rest):.3g}: read "
+            notes.append(f"{path}: reflectances have a median of {np.median(read):.3g}: read "
                          "as percent (/ 100; --percent says so)")
     elif percent and rest.size:
         check_percent(rest, path)

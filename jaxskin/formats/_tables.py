@@ -79,7 +79,7 @@ def header_row(line: str, first_column, other_column=None):
 
 def read_table(path, first_column, expected_header: str, min_rows: int = 1,
                other_column=None, once: tuple[str, ...] = (), on_header=None,
-               wavelength_first: bool = False) -> Table:
+               wavelength_first: bool = False, missing: bool = False) -> Table:
     """Read a numeric CSV table.
 
     **Arguments:**
@@ -98,6 +98,8 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
       columns to skip (not parsed, not returned: standard deviations, counts, notes).
     - `wavelength_first`: the first column is wavelengths in nm: in a `;` or tab file,
       `1,050` (1050 nm, or 1.05 with a decimal comma?) is refused; `380,000` is 380 nm.
+    - `missing`: an empty cell after the first column is a missing reading (NaN), not an
+      error (spectra measured over different ranges in one table).
 
     **Returns:** a `Table`. **Raises:** `InputError` on anything malformed.
     """
@@ -116,7 +118,7 @@ def read_table(path, first_column, expected_header: str, min_rows: int = 1,
     skipped = set(on_header(header, meta, header_line)) if on_header is not None else set()
     kept = [c for c, name in enumerate(header) if name not in skipped]
     rows, numbers, decimal_comma = _read_rows(path, lines, header, header_line, delimiter,
-                                              kept, wavelength_first)
+                                              kept, wavelength_first, missing)
     if len(rows) < min_rows:
         rows_ = "row" if min_rows == 1 else "rows"
         raise InputError(f"needs at least {min_rows} data {rows_}, found {len(rows)}", path,
@@ -182,10 +184,12 @@ def _no_header(path, expected_header: str, first) -> InputError:
                       f"semicolon separated) after any preamble{seen}", path)
 
 
-def _read_rows(path, lines, header, header_line, delimiter, kept, wavelength_first):
+def _read_rows(path, lines, header, header_line, delimiter, kept, wavelength_first,
+               missing=False):
     """The data rows after the header line: `(rows, their line numbers, the first number
     written with a decimal comma or "")`, each row the floats of the `kept` columns. Blank,
-    `#` and all-empty rows are skipped; a row with another number of cells is an error."""
+    `#` and all-empty rows are skipped; a row with another number of cells is an error.
+    With `missing`, an empty cell after the first column reads as NaN."""
     rows, numbers = [], []
     decimal_comma = ""
     for number, raw in enumerate(lines[header_line:], start=header_line + 1):
@@ -198,12 +202,15 @@ def _read_rows(path, lines, header, header_line, delimiter, kept, wavelength_fir
             raise InputError(f"not CSV ({e})", path, number) from None
         if all(c == "" for c in cells):  # a spreadsheet's empty row: ",,,,"
             continue
+        if missing and len(cells) < len(header):  # empty last cells, dropped by split_row
+            cells += [""] * (len(header) - len(cells))
         if len(cells) != len(header):
             raise _cell_count_error(path, number, line, cells, header, delimiter)
         if delimiter != ",":  # then 18,65 can only be a decimal comma (Excel in Europe)
             found = _decimal_commas(path, number, cells, header, kept, wavelength_first)
             decimal_comma = decimal_comma or found
-        rows.append([read_number(cells[c], path, number, header[c]) for c in kept])
+        rows.append([math.nan if missing and c > 0 and cells[c] == ""
+                     else read_number(cells[c], path, number, header[c]) for c in kept])
         numbers.append(number)
     return rows, numbers, decimal_comma
 
@@ -291,8 +298,8 @@ def drop_repeats(data, lines, path, notes: list):
     refused as "must increase"), with a note naming them. A wavelength repeated with other readings
     is left for the caller's check to refuse."""
     data = np.asarray(data)
-    same = np.r_[False, np.all(data[1:] == data[:-1], axis=1)] if len(data) > 1 else \
-        np.zeros(len(data), bool)
+    equal = (data[1:] == data[:-1]) | (np.isnan(data[1:]) & np.isnan(data[:-1]))  # NaN: missing
+    same = np.r_[False, np.all(equal, axis=1)] if len(data) > 1 else np.zeros(len(data), bool)
     if not same.any():
         return data, lines
     lines = list(lines)
@@ -326,9 +333,9 @@ def check_percent(values, path) -> None:
     most 1: nothing measured (skin, a film, its background) is below 1 % at every band,
     so they are fractions."""
     values = np.asarray(values)
-    if values.size and np.max(values) <= 1.0:
+    if values.size and np.nanmax(values) <= 1.0:
         raise InputError(f"--percent, but every reflectance is at most 1 (median "
-                         f"{np.median(values):.3g}): these are fractions (0-1); leave "
+                         f"{np.nanmedian(values):.3g}): these are fractions (0-1); leave "
                          "--percent out", path)
 
 
