@@ -14,6 +14,11 @@ sweep) and the interpreter's teardown. Python's own handler would raise Keyboard
 there (a traceback from `cache.cache_clear()`, the exit code still 0); here a signal ends
 the process at once with the command's exit code (`os._exit`, the streams flushed), and
 during the teardown, where no Python handler runs any more, signals are ignored.
+
+A command a signal stopped (130 / 143) ends the same way, at once, without the exit
+handlers and the teardown: the user asked it to stop, its line is said, its files are
+complete or removed, and a compile interrupted inside XLA leaves objects whose teardown
+can crash (an exit code of 139 was seen now and then after a signal in the first compile).
 """
 
 import atexit
@@ -40,6 +45,8 @@ def main(argv=None) -> int:
             signal.signal(sig, handler)
         atexit.unregister(_ignore_signals)
         raise
+    if code in (130, 143):  # stopped by a signal: its line is said, nothing is left to do
+        _exit(code)
     for sig in SIGNALS:  # the command has ended: a signal now ends the process, with its code
         signal.signal(sig, lambda signum, frame, code=code: _exit(code))
     return code
