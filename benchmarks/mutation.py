@@ -48,6 +48,7 @@ RAD = "tests/test_radiometry.py"
 BUMP = "tests/test_bump_frames.py"
 SHADOW = "tests/test_shadow.py"
 VIEW = "tests/test_view.py"
+WRINKLES = "tests/test_wrinkles.py"
 
 
 def _k(path, expr):
@@ -278,6 +279,38 @@ MUTANTS = [
     Mutant("pad-seam-not-wrapped", "jaxskin/view.py",
            "src_filled = _shift(filled, dy, dx, wrap_x, False)",
            "src_filled = _shift(filled, dy, dx, False, False)", _k(VIEW, "pad_index")),
+    # ---- small formulas that were checked only against their own gradient or bounds
+    # (issue 37, item 11): each now has a value computed by hand
+    Mutant("small-noise-amplitude-halved", "jaxskin/wrinkles.py",
+           "h - k_noise * r, h)", "h - 0.5 * k_noise * r, h)", _k(WRINKLES, "noise")),
+    Mutant("small-noise-field-halved", "jaxskin/wrinkles.py",
+           "return jax.random.uniform(jax.random.fold_in(key, 3), shape, dtype)",
+           "return 0.5 * jax.random.uniform(jax.random.fold_in(key, 3), shape, dtype)",
+           _k(WRINKLES, "noise")),
+    # the same search found these already killed by a value test; kept so that stays so
+    Mutant("small-blinn-ambient-not-times-albedo", "jaxskin/shading/blinn.py",
+           "return (ambient * r + light * r", "return (ambient + light * r",
+           (f"{REF}::test_blinn_geometry_by_hand", "tests/test_render.py", "-k", "by_hand")),
+    Mutant("small-blinn-highlight-not-times-light", "jaxskin/shading/blinn.py",
+           "+ light * specular * spec[..., None])", "+ specular * spec[..., None])",
+           (f"{REF}::test_blinn_geometry_by_hand", "tests/test_render.py", "-k", "by_hand")),
+    Mutant("small-feather-ramp-not-centred-on-the-edge", "jaxskin/cosmetics.py",
+           "np.clip(0.5 + inside_distance / feather", "np.clip(inside_distance / feather",
+           _k("tests/test_cosmetics.py", "region_and_image_maps")),
+    Mutant("small-image-map-scale-dropped", "jaxskin/cosmetics.py",
+           "return scale_mm * img[rows", "return img[rows",
+           _k("tests/test_cosmetics.py", "region_and_image_maps")),
+    Mutant("small-ellipse-turned-the-other-way", "jaxskin/cosmetics.py",
+           "x = (math.cos(t) * du + math.sin(t) * dv)",
+           "x = (math.cos(t) * du - math.sin(t) * dv)",
+           _k("tests/test_cosmetics.py", "region_and_image_maps")),
+    Mutant("small-biophysical-mie-exponent-1.5-to-1", "jaxskin/biophysical.py",
+           "2e5 * wl ** -1.5", "2e5 * wl ** -1.0", ("tests/test_biophysical.py",)),
+    Mutant("small-biophysical-saunderson-k2-dropped-below", "jaxskin/biophysical.py",
+           "R / (1.0 - K2 * R)", "R / (1.0 - K2)", ("tests/test_biophysical.py",)),
+    Mutant("small-biophysical-S-three-quarters-to-one", "jaxskin/biophysical.py",
+           "S = 0.75 * _band(skin.scattering", "S = 1.0 * _band(skin.scattering",
+           ("tests/test_biophysical.py",)),
 ]
 
 

@@ -30,8 +30,8 @@ from jaxskin.formats import decimal_comma_note, is_measurement_table, read_table
 from jaxskin.io import FitError, InputError, atomic_write
 from jaxskin.shading import lafortune
 
-__all__ = ["BRDFFit", "BRDFSamples", "check_samples", "fit", "fit_warnings", "read_samples",
-           "write_report"]
+__all__ = ["BRDFFit", "BRDFSamples", "check_samples", "distinct_pairs", "fit", "fit_warnings",
+           "read_samples", "write_report"]
 
 ANGLES = ("theta_in_deg", "phi_in_deg", "theta_out_deg", "phi_out_deg")
 VECTORS = ("wi_x", "wi_y", "wi_z", "wo_x", "wo_y", "wo_z")
@@ -279,13 +279,35 @@ def _starts(rng, starts, lobes, f_c):
 
 
 def check_samples(samples, lobes: int) -> None:
-    """`InputError` when `samples` has fewer weighted samples than the `1 + 3 lobes`
-    parameters of a channel: checked before any work."""
+    """`InputError` when `samples` cannot determine the `1 + 3 lobes` parameters of a
+    channel: fewer weighted samples than that, or fewer distinct direction pairs as the
+    lobes see them (`distinct_pairs`: 50 copies of one pair fitted to 0.00 % with
+    arbitrary lobes). Checked before any work."""
     params_per_channel = 1 + 3 * lobes
-    if np.count_nonzero(samples.weight) < params_per_channel:
-        raise InputError(f"{np.count_nonzero(samples.weight)} weighted samples cannot determine "
+    weighted = np.count_nonzero(samples.weight)
+    if weighted < params_per_channel:
+        raise InputError(f"{weighted} weighted samples cannot determine "
                          f"{params_per_channel} parameters per channel ({lobes} lobes); give "
                          "more samples or ask for fewer --lobes", samples.path)
+    pairs = distinct_pairs(samples)
+    if pairs < params_per_channel:
+        raise InputError(f"{weighted} weighted samples but {pairs} distinct direction "
+                         f"pair{'s' * (pairs != 1)} cannot determine {params_per_channel} "
+                         f"parameters per channel ({lobes} lobes): the lobes see a pair "
+                         "through wi_x wo_x + wi_y wo_y and wi_z wo_z only, so repeated "
+                         "pairs, pairs turned about the normal and in/out swapped count "
+                         "once; give samples at more directions or ask for fewer --lobes",
+                         samples.path)
+
+
+def distinct_pairs(samples) -> int:
+    """How many weighted samples differ as the Lafortune model sees them: by
+    `(wi_x wo_x + wi_y wo_y, wi_z wo_z)` (the isotropic model, `lafortune.brdf`), each
+    rounded to 1e-9 (an angle's last printed digit moves them by far more)."""
+    w = samples.weight > 0
+    wi, wo = samples.wi[w], samples.wo[w]
+    seen = np.stack([wi[:, 0] * wo[:, 0] + wi[:, 1] * wo[:, 1], wi[:, 2] * wo[:, 2]], axis=1)
+    return len(np.unique(np.round(seen, 9) + 0.0, axis=0))  # + 0.0: -0.0 as 0.0
 
 
 def fit(samples: BRDFSamples, lobes: int = 3, starts: int = 8, seed: int = 0,

@@ -10,10 +10,11 @@ from __future__ import annotations
 import contextlib
 import importlib.resources
 import os
+import stat
 import tempfile
 from pathlib import Path
 
-__all__ = ["FitError", "InputError", "atomic_write", "data_dir"]
+__all__ = ["FitError", "InputError", "atomic_write", "check_regular", "data_dir"]
 
 
 class InputError(ValueError):
@@ -53,6 +54,24 @@ class FitError(RuntimeError):
                  key=None):
         self.path, self.line = path, line
         super().__init__(_located(message, path, line, column, key))
+
+
+# What `os.stat` says a path is when it is not a regular file, for `check_regular`.
+KINDS = ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
+         (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def check_regular(path, expected: str = "a file") -> None:
+    """`InputError` naming `path` unless it is a regular file (after links): a FIFO blocks
+    `open` until a writer comes (the command hung, Ctrl-C the only way out), a device or a
+    pipe has no end (/dev/zero). `os.stat` only, nothing opened. A missing file raises
+    `FileNotFoundError` as `open` would, for the caller's own message."""
+    mode = os.stat(path).st_mode
+    if stat.S_ISDIR(mode):
+        raise InputError(f"is a folder, expected {expected}", path)
+    if not stat.S_ISREG(mode):
+        kind = next((k for test, k in KINDS if test(mode)), "not a file")
+        raise InputError(f"not a regular file ({kind}): expected {expected}", path)
 
 
 @contextlib.contextmanager

@@ -16,9 +16,10 @@ import numpy as np
 
 from .io import InputError, atomic_write
 
-__all__ = ["FORMATS", "exr_available", "image_bytes", "png16_bytes", "png_bytes", "quantize",
-           "read_exr", "read_grey", "read_image", "write_exr", "write_field_plot", "write_grey16",
-           "write_height", "write_image", "write_normals", "write_render"]
+__all__ = ["CONVERTED_MODES", "FORMATS", "REFUSED_MODES", "exr_available", "image_bytes",
+           "png16_bytes", "png_bytes", "quantize", "read_exr", "read_grey", "read_image",
+           "write_exr", "write_field_plot", "write_grey16", "write_height", "write_image",
+           "write_normals", "write_render"]
 
 FORMATS = ("png", "png16", "exr")
 
@@ -158,23 +159,49 @@ def _max_pixels() -> str:
     return f"{Image.MAX_IMAGE_PIXELS * 2:,}" if Image.MAX_IMAGE_PIXELS else "unbounded"
 
 
-def read_image(path, what: str = "image", key=None):
-    """A PNG (or any image imageio reads) as display values in [0, 1]: `(rgb (H, W, 3),
-    alpha (H, W) or None)`; grey is repeated to RGB; integer samples at the full scale of
-    their type (a 16-bit file whose values all lie below 256 is still on the 65535 scale),
-    floating-point samples as they are. `InputError` naming the file if it is not a readable
-    2-D image of finite values; `what` names the image in that message, `key` the scene key
-    that gave the file (the editor marks that field)."""
+# Pillow modes whose channels are not grey or R, G, B (A): imageio hands over a CMYK JPEG's
+# C, M, Y, K as R, G, B and alpha. CMYK and YCbCr are converted to RGB as Pillow converts
+# them; LAB and HSV are refused (Pillow's conversion of LAB is not colour-managed).
+CONVERTED_MODES, REFUSED_MODES = ("CMYK", "YCbCr"), ("LAB", "HSV")
+
+def _decode(path, what: str, key) -> np.ndarray:
+    """The image's samples `(H, W, C)` float64 (integers at the full scale of their type),
+    checked: a regular, readable 2-D image of 1-4 channels of finite values, whose reading
+    fits in memory (checked from its header, before decoding)."""
     import imageio.v3 as iio
+    from PIL import Image
+
+    from . import resources
+    from .io import check_regular
 
     if not Path(path).exists():
         raise InputError(f"no such file (expected {_a(what)})", path, key=key)
     if Path(path).is_dir():
         raise InputError(f"is a folder (expected {_a(what)} file)", path, key=key)
+    try:  # a FIFO would block the open below; a device never ends
+        check_regular(path, f"{_a(what)} file")
+    except InputError as e:
+        raise InputError(e.message, path, key=key) from None
     try:
+        header = resources.image_header(path)
+        if header is not None:
+            w, h, channels, _ = header
+            resources.check_memory(resources.read_bytes(w, h, channels), f"reading {_a(what)} of "
+                                   f"{w}x{h} pixels", path, hint="save it at a smaller size")
+            if header[3] in REFUSED_MODES:
+                raise InputError(f"{_a(header[3])} image (its channels are not R, G, B): save "
+                                 f"it as RGB or greyscale (expected {_a(what)})", path)
         with open(path, "rb") as fh:
             img = png16_colour(fh.read())
-        img = np.asarray(iio.imread(path)) if img is None else img
+        if img is None and header is not None and header[3] in CONVERTED_MODES:
+            with Image.open(path) as im:
+                img = np.asarray(im.convert("RGB"))
+        if img is None:
+            with warnings.catch_warnings():  # counted above: not Pillow's own line
+                warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+                img = np.asarray(iio.imread(path))
+    except InputError as e:
+        raise InputError(e.message, e.path, key=key) from None
     except Exception as e:  # noqa: BLE001  (imageio raises many kinds; all mean unreadable)
         why = (e.strerror if isinstance(e, OSError) and e.strerror else
                f"larger than the {_max_pixels()} pixels an image may be"
@@ -186,12 +213,26 @@ def read_image(path, what: str = "image", key=None):
         raise InputError(f"expected {_a(what)} (H, W) or (H, W, 1-4 channels), got an array of "
                          f"shape {img.shape} and type {img.dtype}", path, key=key)
     if img.dtype.kind in "ui":
-        img = img.astype(np.float64) / float(np.iinfo(img.dtype).max)
-    img = np.asarray(img, np.float64)
-    if not np.all(np.isfinite(img)):
-        raise InputError(f"the {what} has non-finite values", path, key=key)
-    if img.ndim == 2:
-        img = img[..., None]
+        top = float(np.iinfo(img.dtype).max)
+        img = img.astype(np.float64)
+        img /= top  # in place: one float64 copy of the samples, not two
+    else:
+        img = np.asarray(img, np.float64)
+        if not np.all(np.isfinite(img)):
+            raise InputError(f"the {what} has non-finite values", path, key=key)
+    return img[..., None] if img.ndim == 2 else img
+
+
+def read_image(path, what: str = "image", key=None):
+    """A PNG (or any image imageio reads) as display values in [0, 1]: `(rgb (H, W, 3),
+    alpha (H, W) or None)`; grey is repeated to RGB; integer samples at the full scale of
+    their type (a 16-bit file whose values all lie below 256 is still on the 65535 scale),
+    floating-point samples as they are; CMYK, YCbCr, LAB and HSV images converted to RGB
+    as Pillow converts them. `InputError` naming the file if it is not a regular, readable
+    2-D image of finite values, or if reading it would not fit in memory (checked from its
+    header, before decoding); `what` names the image in that message, `key` the scene key
+    that gave the file (the editor marks that field)."""
+    img = _decode(path, what, key)
     alpha = img[..., -1] if img.shape[-1] in (2, 4) else None
     grey_or_rgb = img[..., :3] if img.shape[-1] >= 3 else img[..., :1]
     return np.broadcast_to(grey_or_rgb, (*img.shape[:2], 3)).copy(), alpha
@@ -204,8 +245,9 @@ def read_grey(path, what: str = "greyscale image", key=None) -> np.ndarray:
     """A greyscale map `(H, W)` float64 in [0, 1] (a layer's thickness map, the melanin
     map): `read_image`'s values, colour averaged over R, G, B, alpha ignored, clipped to
     [0, 1]. Row 0 is the image's top. `InputError` naming the file as `read_image`."""
-    rgb, _ = read_image(path, what, key)
-    if np.all(rgb[..., 1:] == rgb[..., :1]):
+    img = _decode(path, what, key)  # not through read_image: no RGB copy of a grey map
+    rgb = img[..., :3] if img.shape[-1] >= 3 else img[..., :1]
+    if all(np.array_equal(rgb[..., c], rgb[..., 0]) for c in range(1, rgb.shape[-1])):
         grey = rgb[..., 0]  # grey as read, not (g + g + g) / 3 rounded
     else:  # said, not done in silence (a pure red map gives a third of its value)
         grey = rgb.mean(axis=-1)

@@ -90,9 +90,16 @@ def check_ranges(params: dict, specs: dict) -> None:
         if not np.issubdtype(v.dtype, np.floating):
             v = v.astype(np.float64)
         if spec.kind == "vec3":
-            if not (np.all(np.isfinite(v)) and np.any(v != 0)):
-                raise ValueError(f"params[{key!r}]: expected a finite, non-zero 3-vector, got "
-                                 f"{v.tolist()}")
+            with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+                squares = np.sum(v * v, dtype=v.dtype)
+            # normalised in its own dtype, subnormals flushed (XLA): its squares' sum must
+            # be a normal number, or the direction is NaN ([0, 0, 1e-30] in float32)
+            if not (np.all(np.isfinite(v)) and np.isfinite(squares)
+                    and squares >= np.finfo(v.dtype).tiny):
+                raise ValueError(f"params[{key!r}]: expected a finite, non-zero 3-vector whose "
+                                 f"length {v.dtype} holds (between about "
+                                 f"{np.sqrt(np.finfo(v.dtype).tiny):.0e} and "
+                                 f"{np.sqrt(np.finfo(v.dtype).max):.0e}), got {v.tolist()}")
         # the ends rounded as the value is: float32(0.1) is above the float64 0.1, so a
         # scene at a range end would fail here otherwise; NaN fails too
         elif not (v.dtype.type(spec.lo) <= v <= v.dtype.type(spec.hi)):

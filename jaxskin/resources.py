@@ -25,6 +25,11 @@ batches of `cluster.SWEEP_BATCH` (8) values, so its variable part counts once pe
 one batch. The model errs high rather than low;
 it is a guard against runs that cannot fit, not a forecast.
 
+A scene's maps (layer images, skin maps) are read one at a time, before the render, at
+their own size: `read_bytes` of the largest is added (a 12000² grey PNG of 165 KB: 2.3 GB
+to read; 4.5 GB before the reader kept grey maps grey and converted in place).
+`maps.read_image` checks the same figure from the file's header before decoding any image.
+
 `fit_brdf_bytes` likewise, from `jaxskin fit-brdf` on the 4,000 shipped samples: 0.36 GB
 (3 lobes, 8 starts), 1.05 GB (3 lobes, 64 starts), 1.94 GB (6 lobes, 64 starts), about 100
 bytes per sample, channel, lobe parameter and start (the model takes 120: 1.08-1.28x).
@@ -33,10 +38,13 @@ bytes per sample, channel, lobe parameter and start (the model takes 120: 1.08-1
 from __future__ import annotations
 
 import os
+import stat
+import warnings
 
 from .io import InputError
 
-__all__ = ["available_bytes", "check_memory", "fit_brdf_bytes", "render_bytes"]
+__all__ = ["available_bytes", "check_memory", "fit_brdf_bytes", "image_header", "maps_bytes",
+           "read_bytes", "render_bytes"]
 
 BASE = 0.45e9
 PER_TEXEL = 280
@@ -44,6 +52,11 @@ COSMETICS_PER_TEXEL = (200, 1640)  # bare skin, with layers
 PER_SAMPLE = 220
 FIT_BASE = 0.35e9
 PER_BRDF_VALUE = 120
+# Reading an image, per pixel: per channel (the decoded samples and their float64 copy) and
+# beside them (the greyscale map and its clipped copy). Measured peaks of `maps.read_grey`
+# (/usr/bin/time -v): grey 8000² 1.04 GB, 12000² 2.29 GB, RGB 8000² 2.54 GB, against 20 and
+# 44 bytes a pixel here (1.1-1.3x).
+READ_PER_CHANNEL, READ_PER_PIXEL = 12, 8
 
 
 def render_bytes(config, count: int = 1) -> float:
@@ -55,7 +68,55 @@ def render_bytes(config, count: int = 1) -> float:
         per_texel += COSMETICS_PER_TEXEL[bool(sp.layers)]
     width = config.image * config.supersample
     height = (config.image_height or config.image) * config.supersample
-    return BASE + count * (texels * per_texel + width * height * PER_SAMPLE)
+    return (BASE + count * (texels * per_texel + width * height * PER_SAMPLE)
+            + maps_bytes(config))
+
+
+def maps_bytes(config) -> float:
+    """Peak bytes of reading the largest of the scene's image maps (0 without any; a file
+    whose header cannot be read counts 0: its reader says what is wrong with it)."""
+    from .scene import SKIN_MAPS
+
+    sp = config.spectral
+    if sp is None:
+        return 0.0
+    files = [layer.image for layer in sp.layers] + [sp.image_of(k) for k in SKIN_MAPS]
+    peaks = [0.0]
+    for file in files:
+        try:
+            header = None if file is None else image_header(file)
+        except Exception:  # noqa: BLE001  (too many pixels for Pillow: the reader says so)
+            header = None
+        if header is not None:
+            peaks.append(read_bytes(*header[:3]))
+    return max(peaks)
+
+
+def image_header(path) -> tuple[int, int, int, str] | None:
+    """`(width, height, channels, Pillow mode)` of an image file from its header, its pixels
+    not decoded; None for a file that is not regular (a FIFO would block) or that Pillow
+    cannot open (imageio may still read it). Pillow's warning of a large image
+    (`DecompressionBombWarning`) is not shown: the memory is checked from this instead;
+    its error above twice its limit (`DecompressionBombError`) is raised."""
+    from PIL import Image
+
+    try:
+        if not stat.S_ISREG(os.stat(path).st_mode):
+            return None
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(path) as im:
+                return im.width, im.height, len(im.getbands()), im.mode
+    except Image.DecompressionBombError:
+        raise
+    except Exception:  # noqa: BLE001  (Pillow raises many kinds; imageio has its turn)
+        return None
+
+
+def read_bytes(width: int, height: int, channels: int) -> float:
+    """Peak bytes of reading a `width` × `height` image of `channels` channels
+    (`maps.read_image`, `maps.read_grey`)."""
+    return float(width) * height * (READ_PER_CHANNEL * channels + READ_PER_PIXEL)
 
 
 def fit_brdf_bytes(samples: int, lobes: int, starts: int) -> float:

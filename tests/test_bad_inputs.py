@@ -125,6 +125,29 @@ def measurement(tmp):
                  (ROOT / "data" / "measurements" / "blush_rose.csv").read_text())
 
 
+def brdf_rows(tmp, rows):
+    """A BRDF samples CSV of `rows` (theta_in, phi_in, theta_out, phi_out), each R = G = B =
+    0.1 plus a little that differs from row to row."""
+    lines = ["theta_in_deg,phi_in_deg,theta_out_deg,phi_out_deg,R,G,B"]
+    lines += [f"{a},{b},{c},{d},{0.1 + 1e-3 * i},{0.1},{0.1}"
+              for i, (a, b, c, d) in enumerate(rows)]
+    return write(tmp, "pairs.csv", "\n".join(lines) + "\n")
+
+
+def fifo(tmp, name):
+    """A named pipe: opening it blocks until a writer comes (the commands hung on one)."""
+    os.mkfifo(tmp / name)
+    return str(tmp / name)
+
+
+def lab_image(tmp):
+    """A layer map saved as a CIELAB TIFF: its channels are L, a, b, not R, G, B."""
+    from PIL import Image
+
+    Image.new("LAB", (8, 8), (50, 128, 128)).save(tmp / "map.png", format="TIFF")
+    return layered(tmp, region='image = "map.png"')
+
+
 def read_only_folder(tmp):
     if os.geteuid() == 0:
         pytest.skip("root writes into a read-only folder; out-unwritable covers it (/proc)")
@@ -174,6 +197,10 @@ CASES = {
     "toml-utf16": lambda t: scene(t, 'name = "x"\n'.encode("utf-16")),
     "toml-binary": lambda t: scene(t, b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\x00\xff"),
     "toml-zero-light": lambda t: scene(t, "[light]\ndirection = [0.0, 0.0, 0.0]\n"),
+    # fine in float64, zero or infinite in the render's float32: exit 2, not 1
+    "toml-light-subnormal": lambda t: scene(t, "[light]\ndirection = [0.0, 0.0, 1e-320]\n"),
+    "toml-light-squares-underflow": lambda t: scene(t, "[light]\ndirection = [1e-30, 0, 0]\n"),
+    "D-light-float32-overflow": lambda t: hand(t, "-D", "light.direction=[1e200,0,1]"),
     "toml-edit-vertex-missing": lambda t: scene(
         t, "[[fields.edit]]\nvertex = 999999\nd1 = [1.0, 0.0, 0.0]\nd2 = [0.0, 1.0, 0.0]\n"),
     "toml-edit-too-long": lambda t: scene(
@@ -270,6 +297,20 @@ CASES = {
                                                 "skin.melanin_image=/dev/null"),
     "material-dev-zero": lambda t: layered(t, "blush_rose", "", "-D",
                                            "layer.blush.material=/dev/zero"),
+    "image-lab": lab_image,
+    # --- FIFOs: refused from os.stat, never opened (open blocks until a writer comes)
+    "calibrate-fifo": lambda t: ["calibrate", fifo(t, "m.csv"), "-o", str(t / "out")],
+    "melanin-image-fifo": lambda t: layered(t, "blush_rose", "", "-D",
+                                            f"skin.melanin_image={fifo(t, 'm.png')}"),
+    "fit-skin-fifo": lambda t: ["fit-skin", fifo(t, "m.csv"), "-o", str(t / "out")],
+    "fit-brdf-fifo": lambda t: ["fit-brdf", fifo(t, "s.csv"), "-o", str(t / "f.json")],
+    "fit-image-target-fifo": lambda t: ["fit-image", "hand", fifo(t, "t.png"), "--fit",
+                                        "light.intensity", "-o", str(t / "out")],
+    "scene-fifo": lambda t: ["render", fifo(t, "s.toml"), "-o", str(t / "out"), *SMALL],
+    "brdf-fifo": lambda t: hand(t, "-D", "material.model=lafortune", "-D",
+                                f"material.brdf={fifo(t, 'f.json')}"),
+    "layer-image-fifo": lambda t: layered(t, region=f'image = "{Path(fifo(t, "map.png")).name}"'),
+    "material-fifo": lambda t: layered(t, fifo(t, "mat.json")),
     # --- polygons
     "polygon-vertex-missing": lambda t: polygon(t, "vertices = [1, 2, 99999]"),
     "polygon-two-points": lambda t: polygon(t, "points = [[0.1, 0.1], [0.2, 0.2]]"),
@@ -345,6 +386,14 @@ CASES = {
     "fit-brdf-too-few-samples": lambda t: ["fit-brdf", few_brdf_samples(t), "-o",
                                            str(t / "f.json")],
     "out-link-to-input": symlinked_output,
+    # 50 samples, one direction pair (the issue's case: 0.00 % error, arbitrary lobes)
+    "fit-brdf-one-direction-pair": lambda t: ["fit-brdf", brdf_rows(t, [(30, 0, 40, 180)] * 50),
+                                              "-o", str(t / "f.json")],
+    # 50 pairs turned about the normal, in and out swapped: one pair to the lobes
+    "fit-brdf-pairs-turned-about-the-normal": lambda t: [
+        "fit-brdf", brdf_rows(t, [(30, 5 * i, 40, 5 * i - 180) if i % 2 else
+                                  (40, 5 * i - 180, 30, 5 * i) for i in range(50)]),
+        "-o", str(t / "f.json")],
     "fit-brdf-memory": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "f.json"), "--lobes",
                                   "16", "--starts", "1024"],
     "fit-brdf-out-folder": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t)],
@@ -394,7 +443,9 @@ CASES = {
     "cli-seed-negative": lambda t: ["fit-brdf", brdf_csv(t), "-o", str(t / "f.json"), "--seed",
                                     "-5"],
 }
-SUBPROCESS = {"toml-nested-tables", "D-name-parent", "cli-smooth-nan", "image-corrupt"}
+SUBPROCESS = {"toml-nested-tables", "D-name-parent", "cli-smooth-nan", "image-corrupt",
+              # these hung before: a subprocess's timeout ends them
+              "calibrate-fifo", "fit-skin-fifo", "fit-brdf-fifo", "fit-image-target-fifo"}
 
 
 def snapshot(folder: Path) -> dict:
@@ -486,6 +537,21 @@ def test_an_unexpected_failure_is_one_line_exit_1_naming_what_was_finished(
     ("melanin-image-missing", "key 'skin.melanin_image': no such file: "),
     ("out-a-file-name", "-o: expected the folder to write into, got a file name ('fit.json'"),
     ("material-dev-zero", "key 'layer.blush.material': not a regular file: /dev/zero"),
+    ("calibrate-fifo", "m.csv: not a regular file (a FIFO): expected a CSV table"),
+    ("fit-brdf-one-direction-pair", "pairs.csv: 50 weighted samples but 1 distinct direction "
+                                    "pair cannot determine 10 parameters per channel (3 "
+                                    "lobes)"),
+    ("fit-brdf-pairs-turned-about-the-normal", "50 weighted samples but 1 distinct direction "
+                                               "pair cannot"),
+    ("fit-image-target-fifo", "t.png: not a regular file (a FIFO): expected an image file"),
+    ("scene-fifo", "s.toml: not a regular file (a FIFO or a device)"),
+    ("brdf-fifo", "key 'material.brdf': expected 'skin' (the preset) or a Lafortune JSON file "
+                  "(as written by jaxskin fit-brdf); not a regular file "),
+    ("toml-light-subnormal", "s.toml: key 'light.direction': expected a direction whose "
+                             "length float32 holds, between 1e-19 and 1e19"),
+    ("D-light-float32-overflow", "-D light.direction=[1e200,0,1]: key 'light.direction': "),
+    ("image-lab", "map.png: key 'layer.blush.image': a LAB image (its channels are not R, G, "
+                  "B): save it as RGB or greyscale"),
     ("melanin-image-dev-null", "key 'skin.melanin_image': not a regular file: /dev/null"),  # not "expected
     # a greyscale image file, got ..."
     ("sweep-static-key", "static setting (each value compiles its own program): render each "
@@ -542,3 +608,23 @@ def test_what_the_line_says(case, words, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     code, err, _ = run(CASES[case](tmp_path), tmp_path, capsys, False)
     assert code == 2 and words in err, err
+
+
+@pytest.mark.parametrize("direction, dtype", [
+    ([0.0, 0.0, 1e-30], np.float32),  # normal in float32, its squares' sum 0: a NaN light
+    ([1e20, 0.0, 1.0], np.float32),  # finite in float32, its squares' sum infinite
+    ([0.0, 0.0, 1e-160], np.float64),  # the same in float64
+])
+def test_the_api_refuses_a_light_direction_its_dtype_cannot_normalise(direction, dtype):
+    """`render` (through `render_args.check_ranges`) refuses a light direction that its
+    own dtype cannot normalise, as the scene loader refuses one float32 cannot: the render
+    divides by `jnp.linalg.norm` in that dtype (subnormals flushed), so NaN or 0 light."""
+    from jaxskin.render_args import check_ranges
+    from jaxskin.scene import SCHEMA
+
+    params = {"light.direction": np.asarray(direction, dtype)}
+    with pytest.raises(ValueError, match=r"params\['light.direction'\]: expected a finite, "
+                                         r"non-zero 3-vector whose length"):
+        check_ranges(params, {"light.direction": SCHEMA["light.direction"]})
+    check_ranges({"light.direction": np.asarray([1e-15, 0, 1e15], dtype)},
+                 {"light.direction": SCHEMA["light.direction"]})

@@ -105,6 +105,31 @@ def test_too_few_samples_for_the_lobes(tmp_path):
         brdf.fit(samples, lobes=3)
 
 
+def test_distinct_pairs_count_what_the_lobes_can_tell_apart():
+    """By hand: a pair, its copy, the same pair turned 40° about the normal, in and out
+    swapped, and a mirror pair flipped through the normal's plane (x → −x for both) are one
+    pair to the isotropic lobes (wi_x wo_x + wi_y wo_y and wi_z wo_z are the same); another
+    elevation is a second one; a weight of 0 does not count."""
+    def d(theta, phi):
+        t, p = np.radians(theta), np.radians(phi)
+        return [np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)]
+
+    pairs = [((30, 0), (40, 180)), ((30, 0), (40, 180)), ((30, 40), (40, 220)),
+             ((40, 180), (30, 0)), ((30, 180), (40, 0)), ((30, 0), (50, 180)),
+             ((10, 0), (10, 10))]
+    wi = np.array([d(*a) for a, _ in pairs])
+    wo = np.array([d(*b) for _, b in pairs])
+    weight = np.array([1, 1, 1, 1, 1, 1, 0.0])
+    samples = brdf.BRDFSamples("s.csv", wi, wo, np.full((7, 3), 0.1), weight)
+    assert brdf.distinct_pairs(samples) == 2
+    with pytest.raises(InputError, match="6 weighted samples but 2 distinct direction pairs "
+                                         "cannot determine 4 parameters per channel"):
+        brdf.check_samples(samples, 1)
+    shipped = brdf.read_samples(SAMPLES)
+    assert brdf.distinct_pairs(shipped) == len(shipped.f) == 4000
+    brdf.check_samples(shipped, 16)
+
+
 def test_cli_writes_a_material_the_renderer_reads(tmp_path):
     out = tmp_path / "skin_fit.json"
     proc = subprocess.run([sys.executable, "-m", "jaxskin.cli", "fit-brdf", str(SAMPLES), "-o",

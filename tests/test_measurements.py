@@ -1,5 +1,7 @@
 """The measurement CSV reader: every accepted form, and one precise line for each bad input."""
 
+import os
+
 import numpy as np
 import pytest
 
@@ -667,15 +669,16 @@ def test_a_row_repeated_exactly_is_read_once(tmp_path):
                                "other.csv"))
 
 
-def test_a_device_or_pipe_is_read_no_further_than_the_limit(monkeypatch):
-    """`calibrate /dev/zero` must not grow to 24 GB and ignore Ctrl-C: a device or pipe
-    reports no size, so the limit is on what is read."""
-    from jaxskin.formats import _text
-
-    monkeypatch.setattr(_text, "MAX_BYTES", 4096)
-    with pytest.raises(InputError, match=r"/dev/zero: larger than the 0 MiB a table may be "
-                                         r"\(a device or a pipe\?\)"):
+def test_a_device_or_pipe_is_refused_before_it_is_opened(tmp_path):
+    """`calibrate /dev/zero` must not grow to 24 GB and ignore Ctrl-C, and a FIFO must not
+    block the command forever in `open`: both refused from `os.stat`, as render refuses
+    them."""
+    with pytest.raises(InputError, match=r"/dev/zero: not a regular file \(a character "
+                                         r"device\): expected a CSV table"):
         read_measurement("/dev/zero")
+    os.mkfifo(tmp_path / "m.csv")
+    with pytest.raises(InputError, match=r"m.csv: not a regular file \(a FIFO\)"):
+        read_measurement(tmp_path / "m.csv")
 
 
 def test_ignoring_the_wavelength_column_by_name_is_refused(tmp_path):

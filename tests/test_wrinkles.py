@@ -168,6 +168,28 @@ def test_noise_is_step_nine():
     assert np.all(out[0] == 0.9) and np.all((out[1:] <= 0.9) & (out[1:] > 0.9 - 0.3))
 
 
+def test_noise_values_by_hand_from_step_nine():
+    """Bando 2001 §3.3 step 9, h(s,t) ← h(s,t) − r·k_noise, on a 2×3 grid with a fixed r
+    written out: each value by hand (the bounds check above passes a halved amplitude)."""
+    h = jnp.asarray([[1.0, 0.8, 0.5], [1.0, 0.25, 0.9]], jnp.float32)
+    r = jnp.asarray([[0.5, 0.25, 1.0], [0.0, 0.75, 0.5]], jnp.float32)
+    mask = jnp.asarray([[True, True, True], [True, True, False]])
+    out = np.asarray(wrinkles.add_noise(h, mask, 0.4, r))
+    np.testing.assert_allclose(out, [[1.0 - 0.2, 0.8 - 0.1, 0.5 - 0.4],
+                                     [1.0 - 0.0, 0.25 - 0.3, 0.9]], atol=1e-7)
+
+
+def test_the_noise_field_is_uniform_on_zero_one():
+    """Step 9's r is "a random number between 0 and 1": 128² draws fill [0, 1) (a field
+    scaled by a half, or shifted, fails): their mean 1/2 and variance 1/12 (uniform's, by
+    hand) within 5 standard errors, the extremes within 1e-3 of the ends."""
+    r = np.asarray(wrinkles.noise_field((128, 128), jax.random.key(3)), np.float64)
+    n = r.size
+    assert 0.0 <= r.min() < 1e-3 and 1.0 - 1e-3 < r.max() < 1.0
+    assert abs(r.mean() - 0.5) < 5 * np.sqrt(1 / 12 / n)
+    assert abs(r.var() - 1 / 12) < 5 * np.sqrt(1 / 180 / n)  # var of (r − ½)² = 1/180
+
+
 # ------------------------------------------------------------------ bump normals
 
 

@@ -30,6 +30,7 @@ from ._process import (
     SIGNAL_ERRORS,
     Run,
     Terminated,
+    finish,
     handling_signals,
     pending,
     raise_pending,
@@ -102,6 +103,19 @@ def _main(argv, early: list) -> int:
         compile_cache.enable()
     # `list` too takes signals as a stage: it loads JAX and the spectral tables (1-4 s)
     record = Run("listing" if args.command == "list" else "checking the inputs")
+    try:
+        return _run(args, record, early)
+    except (KeyboardInterrupt, Terminated) as e:  # in the instant before an ending's `finish`
+        sig = signal.SIGINT if isinstance(e, KeyboardInterrupt) else signal.SIGTERM
+        word, code = signal_words(sig)
+        say(f"jaxskin: {word} ({sig.name}) while {record.stage}; {record.finished()}")
+        return code
+
+
+def _run(args, record: Run, early: list) -> int:
+    """The command inside the handling of signals: every ending calls `finish` first, so
+    that a signal after it (in the ending's line, or while the handlers are restored) is
+    noted, not raised as a traceback."""
     with handling_signals(), pipe_safe_stdout():
         try:
             pending.extend(early)  # what arrived before `handling_signals`: ends it here
@@ -109,20 +123,26 @@ def _main(argv, early: list) -> int:
             raise_pending()
             code = COMMANDS[args.command].run(args, record)
             raise_pending()
+            finish()  # the work is complete: a signal from here on changes nothing
             return code
         except InputError as e:
+            finish()
             say(f"jaxskin: error: {e}")
             return EXIT_INPUT
         except FitError as e:  # valid input, a fit that failed: says so, nothing written for it
+            finish()
             say(f"jaxskin: error: {e}; {record.finished()}")
             return EXIT_FAILURE
         except KeyboardInterrupt:
+            finish()
             say(f"jaxskin: interrupted (SIGINT) while {record.stage}; {record.finished()}")
             return EXIT_SIGINT
         except Terminated:
+            finish()
             say(f"jaxskin: terminated (SIGTERM) while {record.stage}; {record.finished()}")
             return EXIT_SIGTERM
         except Exception as e:  # noqa: BLE001  (anything else: a bug, memory, the disk)
+            finish()
             if args.debug:
                 raise
             what = " ".join(f"{e.__class__.__name__}: {e}".split())[:300]

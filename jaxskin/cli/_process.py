@@ -10,6 +10,10 @@ finaliser, where Python prints the exception and drops it; inside an import, whi
 libraries wrap in `except BaseException` (trimesh's optional imports); and while an
 asyncio event loop runs (`holding_signals`), which an exception raised anywhere in it can
 leave half made or half closed.
+
+Once the command has ended (`finish`: its work done or its last line chosen) a signal is
+only noted: raised in the few lines that follow (putting the terminal back, restoring the
+handlers) it would leave as a traceback, with the command's work complete.
 """
 
 from __future__ import annotations
@@ -29,9 +33,9 @@ if TYPE_CHECKING:
     from ..outputs import Outputs
 
 __all__ = ["EXIT_FAILURE", "EXIT_INPUT", "EXIT_SIGINT", "EXIT_SIGTERM", "SIGNAL_ERRORS", "Run",
-           "Terminated", "exit_now", "handling_signals", "holding_signals", "pending_signal",
-           "print_written", "raise_pending", "raise_received", "signal_words",
-           "signals_received"]
+           "Terminated", "exit_now", "finish", "handling_signals", "holding_signals",
+           "pending_signal", "print_written", "raise_pending", "raise_received",
+           "signal_words", "signals_received"]
 
 EXIT_FAILURE, EXIT_INPUT, EXIT_SIGINT, EXIT_SIGTERM = 1, 2, 130, 143
 
@@ -49,6 +53,7 @@ pending: list[int] = []  # a signal whose exception could not be raised where it
 received: list[int] = []  # every signal the command's handler took
 collecting = [False]  # the garbage collector is running (and calling JAX's callback)
 holding = [False]  # every signal is held (`holding_signals`)
+finished = [False]  # the command has ended: a signal is only noted (`finish`)
 
 
 class Run:
@@ -108,6 +113,8 @@ def _on_signal(signum, frame):
     lost there (the module's docstring): then it is kept, and raised at the next
     `raise_pending` or taken by `pending_signal`."""
     received.append(signum)
+    if finished[0]:  # the command has ended: its exit code and last line stand
+        return
     if collecting[0] or holding[0] or _held_back(frame):
         pending.append(signum)
         return
@@ -135,6 +142,12 @@ def holding_signals():
         yield
     finally:
         holding[0] = False
+
+
+def finish() -> None:
+    """The command has ended (its work done, or its last line about to be said): from here
+    to the end of `handling_signals` a signal is noted, not raised."""
+    finished[0] = True
 
 
 def signals_received() -> int:
@@ -196,6 +209,7 @@ def handling_signals():
     old = {sig: signal.getsignal(sig) for sig in SIGNAL_ERRORS}
     pending.clear()
     received.clear()
+    finished[0] = False
     # First and last of the collector's callbacks, so that JAX's (which runs Python code in
     # both phases) sits between them.
     gc.callbacks.insert(0, _gc_start)

@@ -8,7 +8,7 @@ import contextlib
 import csv
 from pathlib import Path
 
-from ..io import InputError
+from ..io import InputError, check_regular
 
 DELIMITERS = (",", "\t", ";")
 MAX_BYTES = 256 * 2**20  # a spectrum at 0.01 nm with 50 columns is ~40 MB
@@ -31,15 +31,15 @@ def read_text(path, fallback: str | None = None, expected: str = "a CSV table (e
     workbook is named as one (`BINARY_KINDS`), with `expected` saying what was wanted."""
     path = Path(path)
     try:
+        check_regular(path, expected)
         size = path.stat().st_size
         if size > MAX_BYTES:
             raise InputError(f"{size / 2**20:.0f} MiB is larger than the {MAX_BYTES >> 20} MiB "
                              "a table may be", path)
-        with open(path, "rb") as f:  # bounded: a device or a pipe has no size (/dev/zero
-            raw = f.read(MAX_BYTES + 1)  # would be read without end)
+        with open(path, "rb") as f:  # bounded: a regular file in /proc says size 0 and
+            raw = f.read(MAX_BYTES + 1)  # may grow while read
         if len(raw) > MAX_BYTES:
-            raise InputError(f"larger than the {MAX_BYTES >> 20} MiB a table may be (a "
-                             "device or a pipe?)", path)
+            raise InputError(f"larger than the {MAX_BYTES >> 20} MiB a table may be", path)
     except FileNotFoundError:
         raise InputError("no such file", path) from None
     except IsADirectoryError:

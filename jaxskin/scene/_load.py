@@ -45,6 +45,9 @@ def load_scene(name_or_path, overrides=(), *, flag: str = "override") -> Scene:
     if path.is_dir():
         raise InputError("is a folder; expected a TOML scene file or a built-in scene "
                          f"({', '.join(BUILTIN_SCENES)})", path)
+    if path.exists() and not path.is_file():  # a FIFO would block the read below
+        raise InputError("not a regular file (a FIFO or a device); expected a TOML scene "
+                         "file", path)
     if not path.is_file():  # named as given (`./hand`, not `hand`: the file looked for)
         hint = f"built-in scenes: {', '.join(BUILTIN_SCENES)}"
         if Path(key).name in BUILTIN_SCENES and key not in BUILTIN_SCENES:
@@ -248,7 +251,9 @@ def _resolve_files(values: dict, path: Path, from_command_line: dict, allow) -> 
         allow("material.brdf", brdf_path.resolve())
         if not brdf_path.is_file():
             raise InputError("expected 'skin' (the preset) or a Lafortune JSON file (as "
-                             f"written by jaxskin fit-brdf); no file {brdf_path}",
+                             "written by jaxskin fit-brdf); "
+                             + ("not a regular file" if brdf_path.exists() else "no file")
+                             + f" {brdf_path}",
                              source("material.brdf"), key="material.brdf")
         values["material.brdf"] = str(brdf_path)
     for _, image_key in SKIN_MAPS.values():

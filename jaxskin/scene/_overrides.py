@@ -95,6 +95,11 @@ def check_value(key: str, value, where, layers=()):
         value = vector(value, key, where)
         if spec.param and key == "light.direction" and not any(value):
             raise InputError("the light direction must not be zero", where, key=key)
+        if spec.param and not float32_direction(value):  # [0, 0, 1e-320], [1e200, 0, 1]
+            raise InputError("expected a direction whose length float32 holds, between 1e-19 "
+                             "and 1e19 (the render normalises it in float32, where this one "
+                             f"is {'0' if max(map(abs, value)) < 1 else 'infinite'}), got "
+                             f"{list(value)!r}", where, key=key)
         return value
     ok = isinstance(value, kind) and not (kind is not bool and isinstance(value, bool))
     if kind is float and isinstance(value, int) and not isinstance(value, bool):
@@ -110,6 +115,19 @@ def check_value(key: str, value, where, layers=()):
     if spec.lo is not None and not (spec.lo <= value <= spec.hi):
         raise InputError(f"must be in [{spec.lo:g}, {spec.hi:g}], got {value!r}", where, key=key)
     return value
+
+
+def float32_direction(value) -> bool:
+    """Whether the 3-vector `value` normalises in float32 as the render does it (`v / |v|`,
+    `jnp.linalg.norm`): every number finite in float32 and the sum of their squares a
+    finite normal float32 (XLA flushes subnormals to zero: a NaN direction otherwise)."""
+    import numpy as np
+
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        v = np.asarray(value, np.float64).astype(np.float32)
+        squares = np.sum(v * v, dtype=np.float32)
+    return bool(np.all(np.isfinite(v)) and np.isfinite(squares)
+                and squares >= np.finfo(np.float32).tiny)
 
 
 def finite_list(value, n: int, positive: bool = False) -> bool:
