@@ -18,6 +18,7 @@ from . import (
     _fit_skin,
     _list,
     _render,
+    _skin_maps,
 )
 from ._options import Parser
 from ._process import (
@@ -40,7 +41,8 @@ __all__ = ["COMMANDS", "main", "parser"]
 # Each command's module: `add_parser(sub)` and `run(args, record) -> exit code`, in the
 # order `jaxskin --help` lists them.
 COMMANDS = {"list": _list, "calibrate": _calibrate, "render": _render, "fit-image": _fit_image,
-            "fit-brdf": _fit_brdf, "fit-skin": _fit_skin, "edit": _edit}
+            "fit-brdf": _fit_brdf, "fit-skin": _fit_skin,
+            "skin-maps": _skin_maps, "edit": _edit}
 
 
 def parser() -> argparse.ArgumentParser:
