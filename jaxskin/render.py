@@ -430,7 +430,8 @@ def skin_reflectance(sp, params: dict, arrays: dict, texels=None):
     the `skin.*` parameters (`scene.BIOPHYSICAL_KEYS`). With `texels` (flat indices of the
     texels on the mesh) and a melanin map (`skin.melanin_map` in the params, or the scene's
     `skin.melanin_image`), the NIST skin's melanin varies per texel: `(P, n)`; so do the
-    biophysical skin's melanin fraction and haemoglobin with theirs (`scene.SKIN_MAPS`)."""
+    biophysical skin's melanin fraction, haemoglobin and brightness (a factor on its
+    reflectance) with theirs (`scene.SKIN_MAPS`)."""
     if sp.skin == "biophysical":
         c = biophysical.Chromophores(*arrays["chromophores"])
         values = {name: params[BIOPHYSICAL_KEYS[name]] for name in biophysical.PARAMS}
@@ -443,8 +444,13 @@ def skin_reflectance(sp, params: dict, arrays: dict, texels=None):
         if any(jnp.ndim(v) for v in values.values()):
             shape = jnp.broadcast_shapes(*(jnp.shape(v) for v in values.values()))
             values = {k: jnp.broadcast_to(v, shape) for k, v in values.items()}
-        return biophysical.reflectance(c, biophysical.Skin(
+        R = biophysical.reflectance(c, biophysical.Skin(
             *(values[name] for name in biophysical.PARAMS)))
+        # skin.brightness (× its map): a factor on the reflectance (`jaxskin.skin_maps`)
+        factor = None if texels is None else texel_map(
+            params, "skin.brightness_map", texels, arrays.get(map_cover("skin.brightness_map")))
+        brightness = params["skin.brightness"]
+        return R * (brightness if factor is None else brightness * factor)[..., None]
     melanin = params["skin.melanin"]
     factor = None if texels is None else texel_map(params, "skin.melanin_map", texels,
                                                    arrays.get(map_cover("skin.melanin_map")))

@@ -73,6 +73,9 @@ melanin_image = "melanin.png"      # optional: a greyscale map, melanin × its v
 melanin_fraction_image = "m.png"   # biophysical, optional: melanin_fraction × this greyscale
                                    #   map (0–1) per texel (as fit-image writes one)
 haemoglobin_image = "h.png"        # biophysical, optional: haemoglobin × this greyscale map
+brightness = 1.0                   # biophysical: a factor 0–2 on the skin's reflectance (a
+                                   #   photo texture's shading and exposure: skin-maps)
+brightness_image = "b.png"         # biophysical, optional: brightness × this greyscale map
 roughness = 0.3                    # Kelemen m of the skin's own highlight
 specular = 0.18                    # Kelemen rho_s of the skin's own highlight
 [spectral]

@@ -64,6 +64,7 @@ class SpectralConfig:
     melanin_image: str | None = None  # skin.melanin × this greyscale map, per texel
     melanin_fraction_image: str | None = None  # biophysical: the melanin fraction's map
     haemoglobin_image: str | None = None  # biophysical: the haemoglobin fraction's map
+    brightness_image: str | None = None  # biophysical: the brightness's map
 
     def image_of(self, map_key: str) -> str | None:
         """The greyscale image file of a skin map key (`SKIN_MAPS`), or None."""
@@ -207,7 +208,7 @@ def param_keys(model: str, skin: str, layers) -> list[str]:
     unused -= MODEL_PARAMS[model]
     if model in SPECTRAL_MODELS:  # one skin: the measured one's or the biophysical's
         unused |= ({"skin.melanin"} if skin == "biophysical" else
-                   set(BIOPHYSICAL_KEYS.values()))
+                   {*BIOPHYSICAL_KEYS.values(), "skin.brightness"})
     keys = [k for k, spec in SCHEMA.items() if spec.param and k not in unused]
     keys += [f"layer.{name}.{k}" for name in layers for k in LAYER_SCHEMA]
     return keys + (["material.lafortune"] if model == "lafortune" else [])
