@@ -66,8 +66,8 @@ class Fixed(NamedTuple):
 
 class Inversion(NamedTuple):
     """The maps of a texture `(H, W)` each: the fitted `melanin`, `haemoglobin`,
-    `brightness` (values in `biophysical.RANGES`, `BRIGHTNESS`), the reproduced colour `rgb (H, W, 3)`
-    (display sRGB, the texture's encoding), the CIEDE2000 `de` between texture and
+    `brightness` (values in `biophysical.RANGES`, `BRIGHTNESS`), the reproduced colour
+    `rgb (H, W, 3)` (display sRGB, the texture's encoding), the CIEDE2000 `de` between texture and
     reproduction, and `skin` (bool: the texels the skin model explains)."""
 
     melanin: np.ndarray
@@ -207,11 +207,10 @@ def table(c, grid: Grid, fixed: Fixed, colours=None):
     """The inverse on the CIELAB lattice: log-parameters `(*_LATTICE, 3)` (host float64)
     whose colour is nearest each lattice point's; with `colours (N, 3)` (CIELAB), only at
     the corners of the cells they lie in (the rest are 0: never read for them)."""
-    import jax.numpy as jnp
     from scipy.spatial import cKDTree
 
     lo, hi = _bounds()
-    axes = [np.linspace(a, b, _COARSE) for a, b in zip(lo, hi)]
+    axes = [np.linspace(a, b, _COARSE) for a, b in zip(lo, hi, strict=True)]
     coarse = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
     coarse_lab = _lab_np(np.asarray(_fit(c, _blocks(coarse, len(coarse)), _blocks(
         coarse, len(coarse)), grid, fixed, 0)[1]).reshape(-1, 3), _matrices(grid)[2])
@@ -243,7 +242,7 @@ def _lookup(inverse, lab_values):
                      for k in range(3)], -1)
 
 
-def invert(rgb, grid: Grid | None = None, fixed: Fixed = Fixed(), polish: int = 2,
+def invert(rgb, grid: Grid | None = None, fixed: Fixed | None = None, polish: int = 2,
            chromophores: biophysical.Chromophores | None = None) -> Inversion:
     """Invert a texture `rgb (H, W, 3)` (display sRGB in [0, 1]) into skin maps. Each
     distinct colour is fitted once (an 8-bit photo of 1024² has some 10⁵).
@@ -252,7 +251,7 @@ def invert(rgb, grid: Grid | None = None, fixed: Fixed = Fixed(), polish: int = 
 
     - `grid`: the spectral grid (its illuminant is the light the texture's colour is seen
       under); default 10 nm, D65 (the scene's default `spectral.step`).
-    - `fixed`: the parameters held over the texture.
+    - `fixed`: the parameters held over the texture (default `Fixed()`).
     - `polish`: corrections per colour after the lattice's interpolation (0–8).
     - `chromophores`: the absorbers on `grid` (default: `biophysical.chromophores` with
       Prahl's haemoglobin table).
@@ -264,6 +263,7 @@ def invert(rgb, grid: Grid | None = None, fixed: Fixed = Fixed(), polish: int = 
     from . import formats
 
     grid = grid or Grid(step=10)
+    fixed = fixed or Fixed()
     rgb = np.asarray(rgb, np.float64)
     if rgb.ndim != 3 or rgb.shape[-1] != 3:
         raise ValueError(f"expected an (H, W, 3) texture, got shape {rgb.shape}")
@@ -308,6 +308,8 @@ def skin_mask(de, threshold: float = SKIN_DE) -> np.ndarray:
     closed by a 3 × 3 square (a lone texel of either kind follows its neighbours)."""
     from scipy import ndimage
 
-    ok = np.asarray(de) <= threshold
+    # padded with the edge's own values: scipy's operations treat the outside as 0, and a
+    # closing would then drop the texture's border
+    ok = np.pad(np.asarray(de) <= threshold, 2, mode="edge")
     box = np.ones((3, 3), bool)
-    return ndimage.binary_closing(ndimage.binary_opening(ok, box), box)
+    return ndimage.binary_closing(ndimage.binary_opening(ok, box), box)[2:-2, 2:-2]

@@ -51,7 +51,7 @@ def read_texture(path, key=None) -> tuple[np.ndarray, np.ndarray | None, list[st
     return rgb, alpha, notes
 
 
-def invert_file(path, fixed: Fixed = Fixed(), threshold: float | None = None, key=None
+def invert_file(path, fixed: Fixed | None = None, threshold: float | None = None, key=None
                 ) -> tuple[np.ndarray, Inversion, list[str]]:
     """Read a texture (`read_texture`) and invert it (`skin_maps.invert`): `(rgb,
     inversion, notes)`; transparent texels are not skin; `threshold`: the mask's ΔE2000
@@ -139,7 +139,7 @@ def write_report(inv: Inversion, texture, path) -> None:
     panels = [("texture", texture, None), ("reproduced from the maps", inv.rgb, None),
               ("ΔE2000 texture - reproduction", inv.de, (0.0, 5.0)),
               (f"skin mask (white: {skin.mean():.0%} of texels)", skin, (0, 1))]
-    for ax, (title, img, lim) in zip(axes[0], panels):
+    for ax, (title, img, lim) in zip(axes[0], panels, strict=True):
         if lim is None:
             ax.imshow(np.clip(img, 0, 1), interpolation="nearest")
         else:
@@ -149,7 +149,7 @@ def write_report(inv: Inversion, texture, path) -> None:
                 fig.colorbar(im, ax=ax, shrink=0.8)
         ax.set_title(title, fontsize=10)
     ranges = {**biophysical.RANGES, "brightness": BRIGHTNESS}
-    for ax, name in zip(axes[1], ("melanin", "haemoglobin", "brightness")):
+    for ax, name in zip(axes[1, :3], ("melanin", "haemoglobin", "brightness"), strict=True):
         im = ax.imshow(getattr(inv, name), cmap="viridis", norm=LogNorm(*ranges[name]),
                        interpolation="nearest")
         fig.colorbar(im, ax=ax, shrink=0.8)
