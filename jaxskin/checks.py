@@ -126,6 +126,11 @@ def idle_maps(sc) -> list[str]:
     return [line for _, line in _idle_maps(sc)]
 
 
+def _listed(names) -> str:
+    """`a`, `a and b`, `a, b and c`."""
+    return " and ".join([", ".join(names[:-1]), names[-1]] if len(names) > 2 else names)
+
+
 def _idle_maps(sc) -> list[tuple[str, str]]:
     """`(image key, warning)` for skin maps that change nothing in scene `sc`: one its
     material model does not read (`skin.melanin_image` in a Blinn scene), or a
@@ -142,7 +147,7 @@ def _idle_maps(sc) -> list[tuple[str, str]]:
             reads = [] if sp is None else [SKIN_MAPS[m][1] for m in SKIN_MAPS_READ[sp.skin]]
             out.append((image, f"{image} changes nothing in scene {sc.name!r}: its material model "
                        f"({model}{'' if sp is None else f', {sp.skin} skin'}) reads "
-                       + (f"{' and '.join(reads)} instead" if reads else "no skin map")))
+                       + (f"{_listed(reads)} instead" if reads else "no skin map")))
         elif sc.values.get(image) and scalar in sc.params and float(sc.values[scalar]) == 0.0:
             out.append((image, f"{image} scales {scalar}, which is 0 in scene {sc.name!r}: "
                         f"the map changes nothing (set {scalar} above 0, e.g. to 1)"))
