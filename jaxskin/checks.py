@@ -93,6 +93,11 @@ def _check_scene(sc, count: int) -> list:
             _square(maps.read_grey(image, key=image_key), image, image_key)
         elif sc.values.get(image_key):  # set, but this model reads no such map (`idle_maps`)
             inputs.append(sc.values[image_key])  # still an input: never overwritten
+    for image in (sp.colour_image, sp.mask_image) if sp is not None else ():
+        if image is not None:  # skin.colour_image, skin.mask_image: read by `render.prepare`
+            inputs.append(image)
+            with reading(image):
+                maps.read_image(image)
     for layer in sp.layers if sp is not None else ():
         inputs.append(layer.material)
         with reading(layer.material):

@@ -55,7 +55,7 @@ from .view import (
 )
 
 __all__ = ["OUTPUTS", "Prepared", "albedo", "decode_srgb", "encode_srgb", "expose", "map_cover",
-           "prepare", "render", "render_prepared", "skin_reflectance", "texel_map",
+           "own_colour", "prepare", "render", "render_prepared", "skin_reflectance", "texel_map",
            "texture_colour", "texture_to_view"]
 
 OUTPUTS = ("display", "rgba", "linear_rgba")
@@ -167,9 +167,27 @@ def _prepare(config: SceneConfig) -> Prepared:
                                              s.tmap.height, s.tmap.width, 1.0)
                 arrays[map_cover(map_key)] = jnp.asarray(factor.reshape(-1)[texels],
                                                          jnp.float32)
+        if sp.mask_image is not None:  # the texture's own colour where the skin is not
+            arrays.update(own_colour(sp, s.tmap.height, s.tmap.width, texels))
     if config.shadow is not None and config.mode != "height":
         arrays["lit"] = _visibility(config, s, view)
     return Prepared(s, view, arrays, texel_mm)
+
+
+def own_colour(sp, height: int, width: int, texels) -> dict:
+    """`skin.colour_image` and `skin.mask_image` per texel on the mesh: `own_weight (P,)`
+    (1 − the mask: how much of the texel is the image's colour, not the skin) and `own_R
+    (P, n)` (that colour's smooth spectrum on the grid, `skin_maps.upsample`), both
+    resampled to the texture's size like the skin maps."""
+    from .skin_maps import upsample
+
+    rgb, _ = maps.read_image(sp.colour_image, "colour image", key="skin.colour_image")
+    colour = np.stack([cosmetics.image_map(rgb[..., k], height, width, 1.0)
+                       for k in range(3)], -1).reshape(-1, 3)[texels]
+    mask = cosmetics.image_map(maps.read_grey(sp.mask_image, key="skin.mask_image"),
+                               height, width, 1.0).reshape(-1)[texels]
+    return {"own_weight": jnp.asarray(1.0 - mask, jnp.float32),
+            "own_R": jnp.asarray(upsample(colour, sp.grid), jnp.float32)}
 
 
 def _visibility(config: SceneConfig, s: texture.TextureSetup, view: View):
@@ -450,7 +468,11 @@ def skin_reflectance(sp, params: dict, arrays: dict, texels=None):
         factor = None if texels is None else texel_map(
             params, "skin.brightness_map", texels, arrays.get(map_cover("skin.brightness_map")))
         brightness = params["skin.brightness"]
-        return R * (brightness if factor is None else brightness * factor)[..., None]
+        R = R * (brightness if factor is None else brightness * factor)[..., None]
+        if "own_R" in arrays and texels is not None:  # skin.mask_image: not skin there
+            w = arrays["own_weight"][:, None].astype(R.dtype)
+            R = (1.0 - w) * R + w * arrays["own_R"].astype(R.dtype)
+        return R
     melanin = params["skin.melanin"]
     factor = None if texels is None else texel_map(params, "skin.melanin_map", texels,
                                                    arrays.get(map_cover("skin.melanin_map")))

@@ -41,7 +41,8 @@ from . import biophysical
 from .spectral import Grid
 
 __all__ = ["FREE", "SKIN_DE", "Fixed", "Inversion", "decode_srgb", "delta_e2000",
-           "encode_srgb", "invert", "lab", "reflectance_of", "solve", "table"]
+           "encode_srgb", "invert", "lab", "reflectance_of", "skin_mask", "solve", "table",
+           "upsample"]
 
 FREE = ("melanin", "haemoglobin", "brightness")  # fitted per texel
 # The brightness's range: a photo's shading and exposure darken or lighten its skin by
@@ -313,3 +314,19 @@ def skin_mask(de, threshold: float = SKIN_DE) -> np.ndarray:
     ok = np.pad(np.asarray(de) <= threshold, 2, mode="edge")
     box = np.ones((3, 3), bool)
     return ndimage.binary_closing(ndimage.binary_opening(ok, box), box)[2:-2, 2:-2]
+
+
+def upsample(rgb, grid: Grid) -> np.ndarray:
+    """Reflectance spectra `(..., n)` of display sRGB colours `rgb (..., 3)`: the smoothest
+    spectrum (least squared second difference over the bands) whose linear sRGB under
+    `grid`'s light is the colour's, clipped to [0, 1] (a very saturated colour then
+    comes out a little duller). Linear in the linear colour, so one matrix; the
+    colour of what the skin cannot explain (`Inversion.skin` 0: eyes, hair, clothing)
+    under the same layers (Smits 1999 and Jakob & Hanika 2019 solve the same problem
+    with smoother, bounded spectra at more cost)."""
+    M = np.asarray(grid.rgb_matrix)  # (n, 3): linear sRGB = R @ M
+    n = len(M)
+    D = np.diff(np.eye(n), 2, axis=0)
+    Q = np.linalg.inv(D.T @ D + 1e-6 * np.eye(n))
+    A = Q @ M @ np.linalg.inv(M.T @ Q @ M)  # (n, 3): R = A @ c minimises |D R|², M'R = c
+    return np.clip(decode_srgb(rgb) @ A.T, 0.0, 1.0)

@@ -12,6 +12,8 @@ A map's PNG holds the value divided by its scene scalar, the top of its range
 from __future__ import annotations
 
 import hashlib
+import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -81,9 +83,10 @@ def cache_folder(output_folder, texture) -> Path:
     return Path(output_folder) / f"skin_maps_{texture_digest(texture)}"
 
 
-def scene_snippet(stem: str, fixed: Fixed) -> str:
+def scene_snippet(stem: str, fixed: Fixed, texture: str | None = None) -> str:
     """The TOML lines that render the maps `stem_*.png` (beside the snippet) as the
-    biophysical skin under a scene's layers."""
+    biophysical skin under a scene's layers; with `texture` (its path as the snippet
+    should name it), the texels outside the skin mask in the texture's own colour."""
     lines = ["# The biophysical skin of a texture, from `jaxskin skin-maps` (the maps are in",
              "# texture space: give the mesh whose UVs the texture was made for).",
              "[mesh]", '# file = "scan.obj"', 'projection = "uv"',
@@ -91,6 +94,9 @@ def scene_snippet(stem: str, fixed: Fixed) -> str:
     for name, (suffix, scalar, image) in MAP_FILES.items():
         lines += [f"{scalar} = {SCALES[name]:g}", f'{image} = "{stem}{suffix}"']
     lines += [f"{name} = {getattr(fixed, name):g}" for name in Fixed._fields]
+    if texture is not None:
+        lines += [f"colour_image = {json.dumps(texture)}  # the colour where the mask is 0",
+                  f'mask_image = "{stem}_skin_mask.png"']
     lines += ["[spectral]", 'illuminant = "D65"  # the light the texture\'s colour is seen under']
     return "\n".join(lines) + "\n"
 
@@ -106,10 +112,13 @@ def output_names(stem: str, report: bool = True) -> dict[str, str]:
 
 
 def write_all(inv: Inversion, texture, folder, stem: str, fixed: Fixed,
-              paths: dict | None = None, report: bool = True) -> dict[str, Path]:
+              paths: dict | None = None, report: bool = True,
+              texture_path=None) -> dict[str, Path]:
     """Write the maps, mask, reproduction, snippet (and the report, with `texture (H, W,
     3)`) of `inv` into `folder` as `stem_*` (`output_names`); `paths` may give each file's
-    path (a command's planned outputs). Returns `{what: path}`."""
+    path (a command's planned outputs); `texture_path`: the texture's file, which the
+    snippet names (relative to `folder`) as the colour of the texels that are not skin.
+    Returns `{what: path}`."""
     folder = Path(folder)
     paths = {k: Path(paths[k]) if paths and k in paths else folder / v
              for k, v in output_names(stem, report).items()}
@@ -118,7 +127,12 @@ def write_all(inv: Inversion, texture, folder, stem: str, fixed: Fixed,
     maps.write_grey16(inv.skin.astype(np.float64), paths["mask"])
     maps.write_image(inv.rgb, paths["reproduced"])
     with atomic_write(paths["scene"], "w") as fh:
-        fh.write(scene_snippet(stem, fixed))
+        name = None
+        if texture_path is not None:
+            name = os.path.relpath(Path(texture_path).resolve(), folder.resolve())
+            if name.startswith(os.path.join(os.pardir, os.pardir, os.pardir)):
+                name = str(Path(texture_path).resolve())  # far away: named in full
+        fh.write(scene_snippet(stem, fixed, name))
     if report:
         write_report(inv, texture, paths["report"])
     return paths

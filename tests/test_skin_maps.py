@@ -125,11 +125,9 @@ def test_clearly_non_skin_colours_are_masked():
         assert (got.all() if want else not got.any()), (k, inv.de[:, 8 * k:8 * k + 8].min())
 
 
-def test_the_command_writes_maps_a_scene_renders(tmp_path, capsys):
-    """`jaxskin skin-maps` on the photo writes the 16-bit maps, mask, reproduction (8-bit,
-    the texture's size), snippet and report; the snippet, given a UV mesh, loads, and a
-    flat render (ambient light only, no highlight, no SSS) of a texture of one skin colour
-    shows that colour (ΔE2000 under 1): the maps mean the texture's colour under D65."""
+def test_the_command_writes_maps_and_a_snippet(tmp_path, capsys):
+    """`jaxskin skin-maps` on the photo writes the 16-bit maps and mask, the reproduction
+    (8-bit RGB, the texture's size), the snippet and the report."""
     out = tmp_path / "out"
     assert main(["skin-maps", str(PHOTO), "-o", str(out)]) == 0
     said = capsys.readouterr().out
@@ -141,11 +139,22 @@ def test_the_command_writes_maps_a_scene_renders(tmp_path, capsys):
     with Image.open(out / f"{stem}_reproduced.png") as im:
         assert im.size == (180, 200) and im.mode == "RGB"
     assert (out / f"{stem}_skin_maps.png").stat().st_size > 10_000
+    assert f'mask_image = "{stem}_skin_mask.png"' in (out / f"{stem}_skin.toml").read_text()
 
-    texel = np.array([0.78, 0.6, 0.5])  # a light skin's sRGB
+
+@pytest.mark.parametrize("texel, skin", [((0.78, 0.6, 0.5), True), ((0.2, 0.3, 0.8), False)],
+                         ids=["skin", "blue"])
+def test_a_flat_render_of_the_snippet_shows_the_texture_colour(tmp_path, texel, skin):
+    """A texture of one colour through `jaxskin skin-maps`, its snippet given a UV mesh and
+    rendered flat (ambient light only, no highlight, no SSS, no furrows): a light skin's
+    colour is skin, rendered from the maps; a blue is not skin, rendered from its own
+    colour (`skin.colour_image`, `skin.mask_image`). Either way the picture shows the
+    texture's colour (ΔE2000 under 1): the maps mean the colour under D65."""
     src = tmp_path / "one.png"
     Image.fromarray(np.uint8(np.round(np.broadcast_to(texel, (16, 16, 3)) * 255))).save(src)
     assert main(["skin-maps", str(src), "-o", str(tmp_path), "--no-report"]) == 0
+    assert maps.read_grey(tmp_path / "one_skin_mask.png").all() == skin
+    assert (not maps.read_grey(tmp_path / "one_skin_mask.png").any()) == (not skin)
     snippet = (tmp_path / "one_skin.toml").read_text().replace('# file = "scan.obj"',
                                                                 'file = "face"')
     (tmp_path / "one_skin.toml").write_text(
@@ -158,6 +167,32 @@ def test_the_command_writes_maps_a_scene_renders(tmp_path, capsys):
     lab = colour.XYZ_to_Lab(colour.sRGB_to_XYZ(middle))
     de = colour.delta_E(lab, colour.XYZ_to_Lab(colour.sRGB_to_XYZ(texel)), method="CIE 2000")
     assert de.max() < 1.0, de
+
+
+def test_own_colour_is_a_stage_only_scenes_with_the_keys_have(tmp_path):
+    """Without skin.colour_image and skin.mask_image the prepared arrays have no own
+    colour (nothing traced for it); one of the two alone is an error naming the other;
+    `upsample`'s spectra give back their colour (colour-science's ΔE2000 under 0.01 for
+    colours a [0, 1] spectrum can have; the clipped green within 2) and lie in [0, 1]."""
+    from jaxskin.io import InputError
+
+    ov = ["texture.size=16", "camera.size=16", "material.model=biophysical"]
+    assert "own_R" not in render.prepare(load_scene("face", ov).config).arrays
+    Image.fromarray(np.full((4, 4, 3), 100, np.uint8)).save(tmp_path / "c.png")
+    maps.write_grey16(np.zeros((4, 4)), tmp_path / "m.png")
+    with pytest.raises(InputError, match="needs skin.mask_image too"):
+        load_scene("face", [*ov, f"skin.colour_image={tmp_path / 'c.png'}"])
+    both = load_scene("face", [*ov, f"skin.colour_image={tmp_path / 'c.png'}",
+                               f"skin.mask_image={tmp_path / 'm.png'}"])
+    arrays = render.prepare(both.config).arrays
+    assert arrays["own_R"].shape == (len(arrays["texels"]), len(both.config.spectral.grid))
+    c = np.array([[0.2, 0.3, 0.8], [0.45, 0.5, 0.6], [0.1, 0.08, 0.05], [0.55, 0.2, 0.6],
+                  [0.2, 0.65, 0.25]])
+    R = skin_maps.upsample(c, GRID)
+    assert R.min() >= 0 and R.max() <= 1
+    back = colour.XYZ_to_Lab(colour.sRGB_to_XYZ(skin_maps.encode_srgb(R @ GRID.rgb_matrix)))
+    de = colour.delta_E(back, colour.XYZ_to_Lab(colour.sRGB_to_XYZ(c)), method="CIE 2000")
+    assert (de[:4] < 0.01).all() and de[4] < 2.0, de
 
 
 def test_brightness_keys_render_and_differentiate(x64, tmp_path):

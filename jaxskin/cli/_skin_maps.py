@@ -29,7 +29,8 @@ def add_parser(sub) -> None:
         "<stem>_melanin.png, <stem>_haemoglobin.png, <stem>_brightness.png (16-bit grey, "
         "value / its scene scalar), <stem>_skin_mask.png (white where the skin model "
         "explains the colour), <stem>_reproduced.png (the texture made again from the "
-        "maps, 8-bit sRGB), <stem>_skin.toml (scene lines that load the maps) and "
+        "maps, 8-bit sRGB), <stem>_skin.toml (scene lines that load the maps, and the texture "
+        "as the colour of the texels outside the mask) and "
         "<stem>_skin_maps.png (the report).",
     )
     k.add_argument("file", metavar="TEXTURE.png", help="an RGB texture (8 or 16 bits; an "
@@ -73,7 +74,7 @@ def run(args, record: Run) -> int:
     seconds = time.perf_counter() - t0
     record.stage = "writing the maps"
     for path in skin_texture.write_all(inv, rgb, outputs.folder, stem, fixed, planned,
-                                       not args.no_report).values():
+                                       not args.no_report, args.file).values():
         outputs.done(path)
     de = inv.de[inv.skin]
     figures = (f"ΔE2000 over them median {np.median(de):.2f}, 95th percentile "

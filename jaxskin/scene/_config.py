@@ -16,6 +16,7 @@ from ._schema import (
     BIOPHYSICAL_KEYS,
     LAYER_SCHEMA,
     MODEL_PARAMS,
+    OWN_COLOUR_KEYS,
     SCHEMA,
     SKIN_MAPS,
     SKIN_MAPS_READ,
@@ -65,6 +66,8 @@ class SpectralConfig:
     melanin_fraction_image: str | None = None  # biophysical: the melanin fraction's map
     haemoglobin_image: str | None = None  # biophysical: the haemoglobin fraction's map
     brightness_image: str | None = None  # biophysical: the brightness's map
+    colour_image: str | None = None  # biophysical: the colour where the mask is below 1
+    mask_image: str | None = None  # biophysical: 1 where the skin is (skin.mask_image)
 
     def image_of(self, map_key: str) -> str | None:
         """The greyscale image file of a skin map key (`SKIN_MAPS`), or None."""
@@ -154,7 +157,9 @@ class Scene:
                                       v["sss.method"] if v["sss.enabled"] else None,
                                       v["sss.texel_mm"], self.layers, self.skin_model,
                                       *(v[image] if key in SKIN_MAPS_READ[self.skin_model]
-                                        else None for key, (_, image) in SKIN_MAPS.items()))
+                                        else None for key, (_, image) in SKIN_MAPS.items()),
+                                      *(v[key] if self.skin_model == "biophysical" else None
+                                        for key in OWN_COLOUR_KEYS))
         # The BRDF file only where the Lafortune model reads it: another model's config
         # (its jit key) does not change with it, and `-D material.brdf=...` on a Blinn
         # scene is reported as changing nothing (`checks.unused_overrides`).

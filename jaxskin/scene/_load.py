@@ -12,7 +12,7 @@ from ..io import InputError, data_dir
 from ..mesh import BUILTIN as BUILTIN_MESHES
 from ._config import Scene
 from ._overrides import check_value, material_overrides, parse_override
-from ._schema import SCHEMA, SKIN_MAPS, SPECTRAL_MODELS
+from ._schema import OWN_COLOUR_KEYS, SCHEMA, SKIN_MAPS, SPECTRAL_MODELS
 from ._tables import parse_edit, parse_layer
 
 BUILTIN_SCENES = ("hand", "foot", "arm", "face", "makeup")
@@ -251,7 +251,12 @@ def _resolve_files(values: dict, path: Path, from_command_line: dict, allow) -> 
                              f"written by jaxskin fit-brdf); no file {brdf_path}",
                              source("material.brdf"), key="material.brdf")
         values["material.brdf"] = str(brdf_path)
-    for _, image_key in SKIN_MAPS.values():
+    given = [key for key in OWN_COLOUR_KEYS if values[key] is not None]
+    if len(given) == 1:  # a colour without its mask (or the reverse) says nothing
+        other = [key for key in OWN_COLOUR_KEYS if key not in given][0]
+        raise InputError(f"{given[0]} needs {other} too (both or neither; jaxskin skin-maps "
+                         "writes the mask)", source(given[0]), key=given[0])
+    for image_key in [image for _, image in SKIN_MAPS.values()] + list(OWN_COLOUR_KEYS):
         image = values[image_key]
         if image is None:
             continue

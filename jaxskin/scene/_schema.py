@@ -36,6 +36,8 @@ SKIN_MAPS_READ = {"nist": ("skin.melanin_map",),
                   "biophysical": ("skin.melanin_fraction_map", "skin.haemoglobin_map",
                                   "skin.brightness_map")}
 # The biophysical skin's parameters (`biophysical.Skin` fields) as scene keys.
+# Images a biophysical skin reads besides its maps: a colour and its mask (both or neither).
+OWN_COLOUR_KEYS = ("skin.colour_image", "skin.mask_image")
 BIOPHYSICAL_KEYS = {"melanin": "skin.melanin_fraction", "eumelanin": "skin.eumelanin",
                     "haemoglobin": "skin.haemoglobin", "oxygenation": "skin.oxygenation",
                     "epidermis_mm": "skin.epidermis_mm", "scattering": "skin.scattering"}
@@ -85,6 +87,10 @@ SCHEMA: dict[str, Key] = {
     # exposure, `jaxskin.skin_maps`), and its map (× skin.brightness)
     "skin.brightness": Key(float, 1.0, 0.0, 2.0, param=True),
     "skin.brightness_image": Key(str, None),
+    # biophysical: where skin.mask_image is below 1, the skin's reflectance gives way to a
+    # smooth spectrum of skin.colour_image's colour (`skin_maps.upsample`): eyes, hair, lips
+    "skin.colour_image": Key(str, None),
+    "skin.mask_image": Key(str, None),
     # The biophysical skin (`jaxskin.biophysical`): its parameters, ranges and defaults.
     **{key: Key(float, float(getattr(biophysical.DEFAULT, name)),
                  *biophysical.RANGES[name], param=True)
