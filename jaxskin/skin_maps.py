@@ -182,10 +182,12 @@ def _fit(c, target, start, grid, fixed, steps):
     return jax.lax.map(block, (target, start))
 
 
-def _blocks(a, size: int = _CHUNK):
-    """`a (N, 3)` padded (with its last row) to whole blocks `(B, size, 3)` float32."""
+def _blocks(a, size: int | None = None):
+    """`a (N, 3)` padded (with its last row) to whole blocks `(B, size, 3)` float32; the
+    size by default a power of 2 from 4096 to `_CHUNK` (few shapes: few compilations)."""
     import jax.numpy as jnp
 
+    size = size or min(_CHUNK, max(4096, 1 << int(np.ceil(np.log2(max(len(a), 1))))))
     pad = -len(a) % size
     return jnp.asarray(np.pad(a, ((0, pad), (0, 0)), mode="edge").reshape(-1, size, 3),
                        jnp.float32)
@@ -213,21 +215,22 @@ def table(c, grid: Grid, fixed: Fixed, colours=None):
     lo, hi = _bounds()
     axes = [np.linspace(a, b, _COARSE) for a, b in zip(lo, hi, strict=True)]
     coarse = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-    coarse_lab = _lab_np(np.asarray(_fit(c, _blocks(coarse, len(coarse)), _blocks(
-        coarse, len(coarse)), grid, fixed, 0)[1]).reshape(-1, 3), _matrices(grid)[2])
+    coarse_lab = _lab_np(np.asarray(_fit(c, _blocks(coarse), _blocks(coarse), grid, fixed,
+                                         0)[1]).reshape(-1, 3)[:len(coarse)], _matrices(grid)[2])
     shape = np.array(_LATTICE)
     if colours is None:
         needed = np.arange(int(np.prod(shape)))
     else:  # the 8 corners of each colour's cell
         base = np.clip(np.floor(_lattice_index(colours)).astype(np.int64), 0, shape - 2)
         corners = np.array(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij")).reshape(3, -1).T
+        cells = np.unique(np.ravel_multi_index(base.T, _LATTICE))  # 1-D: fast
+        base = np.stack(np.unravel_index(cells, _LATTICE), -1)
         needed = np.unique(np.ravel_multi_index(
-            (np.unique(base, axis=0)[:, None, :] + corners).reshape(-1, 3).T, _LATTICE))
+            (base[:, None, :] + corners).reshape(-1, 3).T, _LATTICE))
     points = np.stack(np.unravel_index(needed, _LATTICE), -1)
     lattice = _LAB_LO + points / (shape - 1) * (_LAB_HI - _LAB_LO)
     start = coarse[cKDTree(coarse_lab).query(lattice)[1]]
-    size = min(_CHUNK, 1024 * -(-len(lattice) // 1024))  # few shapes: few compilations
-    q = np.asarray(_fit(c, _blocks(lattice, size), _blocks(start, size), grid, fixed,
+    q = np.asarray(_fit(c, _blocks(lattice), _blocks(start), grid, fixed,
                         10)[0], np.float64).reshape(-1, 3)[:len(lattice)]
     out = np.zeros((*_LATTICE, 3))
     out.reshape(-1, 3)[needed] = q

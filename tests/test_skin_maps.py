@@ -176,7 +176,8 @@ def test_own_colour_is_a_stage_only_scenes_with_the_keys_have(tmp_path):
     colours a [0, 1] spectrum can have; the clipped green within 2) and lie in [0, 1]."""
     from jaxskin.io import InputError
 
-    ov = ["texture.size=16", "camera.size=16", "material.model=biophysical"]
+    ov = ["texture.size=16", "camera.size=16", "material.model=biophysical",
+          "wrinkles.enabled=false", "sss.enabled=false"]
     assert "own_R" not in render.prepare(load_scene("face", ov).config).arrays
     Image.fromarray(np.full((4, 4, 3), 100, np.uint8)).save(tmp_path / "c.png")
     maps.write_grey16(np.zeros((4, 4)), tmp_path / "m.png")
@@ -195,7 +196,7 @@ def test_own_colour_is_a_stage_only_scenes_with_the_keys_have(tmp_path):
     assert (de[:4] < 0.01).all() and de[4] < 2.0, de
 
 
-def test_brightness_keys_render_and_differentiate(x64, tmp_path):
+def test_brightness_keys_render_and_differentiate(tmp_path):
     """skin.brightness scales the biophysical skin's reflectance (× its map, loaded from
     skin.brightness_image like the other skin maps); the NIST skin's params and a scene
     without the image leave it out (no map array prepared); gradients of the skin
@@ -203,7 +204,7 @@ def test_brightness_keys_render_and_differentiate(x64, tmp_path):
     reverse."""
     from jax.test_util import check_grads
 
-    ov = ["texture.size=16", "camera.size=16", "wrinkles.enabled=false"]
+    ov = ["texture.size=16", "camera.size=16", "wrinkles.enabled=false", "sss.enabled=false"]
     assert "skin.brightness" not in load_scene("makeup", ov).params
     sc = load_scene("face", [*ov, "material.model=biophysical"])
     assert "skin.brightness" in sc.params
@@ -219,16 +220,19 @@ def test_brightness_keys_render_and_differentiate(x64, tmp_path):
     R0 = render.skin_reflectance(sp, sc.params, arrays, texels)
     R1 = render.skin_reflectance(with_map.config.spectral, with_map.params, a_map, texels)
     assert np.allclose(np.asarray(R1), 0.5 * np.asarray(R0), rtol=1e-4)  # 16-bit 0.5
-    arrays64 = {**arrays, "chromophores": jnp.asarray(arrays["chromophores"], jnp.float64)}
-    base = {k: jnp.asarray(v, jnp.float64) for k, v in sc.params.items()}
+    with jax.enable_x64(True):
+        arrays64 = {**arrays, "chromophores": jnp.asarray(arrays["chromophores"],
+                                                          jnp.float64)}
+        base = {k: jnp.asarray(v, jnp.float64) for k, v in sc.params.items()}
 
-    def f(b, m):
-        return render.skin_reflectance(sp, {**base, "skin.brightness": b,
-                                            "skin.brightness_map": m}, arrays64, texels)
+        @jax.jit
+        def f(b, m):
+            return render.skin_reflectance(sp, {**base, "skin.brightness": b,
+                                                "skin.brightness_map": m}, arrays64, texels)
 
-    for b in (0.7, 2.0):  # ordinary, and the range's top
-        check_grads(f, (jnp.float64(b), jnp.asarray(half + 0.3)), order=1,
-                    modes=("fwd", "rev"), atol=1e-6, rtol=1e-6)
+        for b in (0.7, 2.0):  # ordinary, and the range's top
+            check_grads(f, (jnp.float64(b), jnp.asarray(half + 0.3)), order=1,
+                        modes=("fwd", "rev"), atol=1e-6, rtol=1e-6)
 
 
 def _grey(tmp):
