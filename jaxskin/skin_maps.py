@@ -7,21 +7,24 @@ biophysical reflectance (`biophysical.reflectance`, the specular k1 left out: th
 draws it as the highlight) on the scene's grid with `spectral.illuminant = "D65"`. So
 the maps, rendered flat under D65 with no layers, give back the texture.
 
-**What is fitted.** A colour has three numbers, so three of the skin's parameters are
-fitted per texel, in log space within `biophysical.RANGES`: the melanosome fraction
-(`melanin`: brown, darkness), the blood fraction (`haemoglobin`: red) and the scattering
-factor (`scattering`: brightness). The others (eumelanin share, oxygenation, epidermis
-thickness) are one value for the whole texture (`Fixed`, the model's `DEFAULT` unless
-given).
+**What is fitted.** A colour has three numbers, so three values are fitted per texel, in
+log space: the melanosome fraction (`melanin`: brown, darkness) and the blood fraction
+(`haemoglobin`: red) within `biophysical.RANGES`, and a `brightness` (`BRIGHTNESS`), a
+factor on the whole reflectance: a photo's shading and exposure, which the scattering
+factor in its place could not follow (on the astronaut photo of `data/textures` it left
+most of the face outside the model's colours). The others (eumelanin share, oxygenation,
+epidermis thickness, scattering) are one value for the whole texture (`Fixed`, the
+model's `DEFAULT` unless given).
 
 **How.** The colour difference is CIELAB (white: a perfect reflector under the grid's
 light). The inverse is tabulated once per call: the forward model on a coarse grid of
 the three log-parameters, then, per cell of a regular CIELAB lattice, the nearest of those
 as a start and damped Gauss–Newton steps (`solve`, vmapped) to the parameters whose colour
-is nearest the cell's. A texel's parameters are the lattice's, trilinearly interpolated at
-its colour, then polished by Gauss–Newton steps at the texel's own colour. Outside the
-skin's gamut the steps end on its boundary (the parameters clipped to their ranges): the
-nearest skin colour, and a large residual.
+is nearest the cell's (only the cells the texture's colours fall in). Each distinct colour's
+parameters are the lattice's, trilinearly interpolated at it, then corrected: looked up
+again at the colour moved by the residual left (`invert`'s `polish`). Outside the skin's
+gamut the parameters stop at their ranges: the nearest skin colour, and a large
+residual.
 
 **Skin or not.** A texel is skin where its fit's CIEDE2000 to the texture is at most
 `SKIN_DE` (2.0: over twice the just-noticeable difference, where the fit inside the gamut
