@@ -487,7 +487,7 @@ def test_the_modules_cosmetics_example_is_a_valid_scene(tmp_path):
 
     example = tomllib.loads(scene.__doc__.split("```toml")[2].split("```")[0])
     example["material"] = {"model": "spectral"}
-    for name in ("melanin.png", "m.png", "h.png", "b.png"):
+    for name in ("melanin.png", "m.png", "h.png", "b.png", "c.png", "s.png"):
         iio.imwrite(tmp_path / name, np.full((8, 8), 128, np.uint8))
     parsed = scene.parse_scene(example, tmp_path / "example.toml")
     (layer,) = example["layer"]
