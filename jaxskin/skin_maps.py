@@ -172,17 +172,24 @@ def solve(c, grid: Grid, fixed: Fixed, target, start, steps: int = 8):
     return jax.vmap(one)(target, start)
 
 
-@functools.partial(__import__("jax").jit, static_argnames=("grid", "fixed", "steps"))
 def _fit(c, target, start, grid, fixed, steps):
-    """`solve` then the fitted colour, block by block (`_CHUNK` texels): `(q, xyz)`."""
-    import jax
+    """`solve` (`steps` of it; 0: none) then the fitted colour, block by block: `(q, xyz)`,
+    jitted once per grid, fixed values, steps and block shape."""
+    return _fit_jit()(c, target, start, grid, fixed, steps)
+
+
+@functools.cache
+def _fit_jit():
+    import jax  # here: importing this module does not import JAX
     import jax.numpy as jnp
 
-    def block(ts):
-        q = solve(c, grid, fixed, ts[0], ts[1], steps=steps) if steps else ts[1]
-        R = reflectance_of(c, q, fixed)
-        return q, R @ jnp.asarray(_matrices(grid)[0], R.dtype)
-    return jax.lax.map(block, (target, start))
+    def fit(c, target, start, grid, fixed, steps):
+        def block(ts):
+            q = solve(c, grid, fixed, ts[0], ts[1], steps=steps) if steps else ts[1]
+            R = reflectance_of(c, q, fixed)
+            return q, R @ jnp.asarray(_matrices(grid)[0], R.dtype)
+        return jax.lax.map(block, (target, start))
+    return jax.jit(fit, static_argnums=(3, 4, 5))
 
 
 def _blocks(a, size: int | None = None):
