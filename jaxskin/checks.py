@@ -93,6 +93,11 @@ def _check_scene(sc, count: int) -> list:
             _square(maps.read_grey(image, key=image_key), image, image_key)
         elif sc.values.get(image_key):  # set, but this model reads no such map (`idle_maps`)
             inputs.append(sc.values[image_key])  # still an input: never overwritten
+    if sp is not None and sp.texture is not None:  # skin.texture: a colour texture
+        from .skin_texture import read_texture
+
+        inputs.append(sp.texture)
+        read_texture(sp.texture, key="skin.texture")
     for image in (sp.colour_image, sp.mask_image) if sp is not None else ():
         if image is not None:  # skin.colour_image, skin.mask_image: read by `render.prepare`
             inputs.append(image)

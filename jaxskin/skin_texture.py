@@ -11,6 +11,7 @@ A map's PNG holds the value divided by its scene scalar, the top of its range
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -22,8 +23,9 @@ from . import biophysical, maps
 from .io import InputError, atomic_write
 from .skin_maps import BRIGHTNESS, Fixed, Inversion
 
-__all__ = ["MAP_FILES", "SCALES", "cache_folder", "invert_file", "read_texture", "scene_snippet",
-           "output_names", "texture_digest", "write_all", "write_report"]
+__all__ = ["MAP_FILES", "SCALES", "cache_beside", "cache_folder", "invert_file",
+           "output_names", "read_texture", "scene_snippet", "texture_digest", "texture_maps",
+           "write_all", "write_report"]
 
 # Each fitted map: its file suffix, the scene keys of its scalar and its image.
 MAP_FILES = {"melanin": ("_melanin.png", "melanin_fraction", "melanin_fraction_image"),
@@ -182,3 +184,46 @@ def write_report(inv: Inversion, texture, path) -> None:
     with atomic_write(path, "wb") as fh:
         fig.savefig(fh, format="png", dpi=80)
     plt.close(fig)
+
+
+_MEMO: dict = {}  # (texture digest, held values) → maps: one inversion per process
+_CACHE: list = []  # the folder `cache_beside` names, while it is in force
+
+
+@contextlib.contextmanager
+def cache_beside(folder):
+    """While in force, `texture_maps` keeps each inversion in `cache_folder(folder, ...)`
+    (a command's output folder) and reads it from there on the next run."""
+    _CACHE.append(Path(folder))
+    try:
+        yield
+    finally:
+        _CACHE.pop()
+
+
+def texture_maps(path, held: tuple = ()) -> dict[str, np.ndarray]:
+    """The maps of the texture `path` (scene key `skin.texture`): `{"melanin",
+    "haemoglobin", "brightness": (H, W) values, "skin": (H, W) mask 0/1, "colour": (H, W, 3)
+    display sRGB}`; `held`: `Fixed`'s values. Inverted once per process and texture
+    content; under `cache_beside`, written to (and read again from) the output folder."""
+    fixed = Fixed(*held)
+    key = (texture_digest(path), fixed)
+    if key in _MEMO:
+        return _MEMO[key]
+    folder = cache_folder(_CACHE[-1], path) / f"{'_'.join(f'{v:g}' for v in fixed)}" if (
+        _CACHE) else None
+    names = output_names("texture", report=False)
+    rgb, _, _ = read_texture(path, key="skin.texture")
+    if folder is not None and all((folder / n).is_file() for n in names.values()):
+        out = {k: maps.read_grey(folder / names[k]) * SCALES[k] for k in MAP_FILES}
+        out["skin"] = maps.read_grey(folder / names["mask"])
+    else:
+        _, inv, _ = invert_file(path, fixed, key="skin.texture")
+        out = {k: getattr(inv, k) for k in MAP_FILES}
+        out["skin"] = inv.skin.astype(np.float64)
+        if folder is not None:
+            folder.mkdir(parents=True, exist_ok=True)
+            write_all(inv, rgb, folder, "texture", fixed, report=False)
+    out["colour"] = rgb
+    _MEMO[key] = out
+    return out

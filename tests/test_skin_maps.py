@@ -288,3 +288,47 @@ def test_16_bit_and_alpha_textures_are_handled_and_said(tmp_path, capsys):
     assert "more than 8 bits" in err and "32 transparent texels are not skin" in err
     mask = maps.read_grey(tmp_path / "out" / "deep_skin_mask.png")
     assert not mask[:, :4].any() and mask[:, 4:].all()
+
+
+def test_skin_texture_key_renders_the_texture_and_caches_it(tmp_path, monkeypatch, capsys):
+    """`skin.texture` on a biophysical scene: `jaxskin render` inverts the texture once,
+    keeps the maps in OUT/skin_maps_<hash>/, and a flat render shows the texture's colour
+    (ΔE2000 under 1; a blue, not skin, from its own colour); the next run reads the maps
+    back instead of inverting again. With a skin map image as well it is an error."""
+    from jaxskin import skin_texture
+    from jaxskin.io import InputError
+
+    texture = np.zeros((16, 16, 3))
+    texture[:, :8] = (0.78, 0.6, 0.5)
+    texture[:, 8:] = (0.2, 0.3, 0.8)
+    Image.fromarray(np.uint8(np.round(texture * 255))).save(tmp_path / "scan.png")
+    (tmp_path / "s.toml").write_text(
+        'name = "s"\n[mesh]\nfile = "face"\nprojection = "uv"\nunit_mm = 10.0\n'
+        '[material]\nmodel = "biophysical"\n[skin]\ntexture = "scan.png"\nspecular = 0.0\n'
+        "[light]\nambient = 1.0\nintensity = 0.0\n[sss]\nenabled = false\n"
+        "[wrinkles]\nenabled = false\n[camera]\nsize = 32\nsupersample = 1\n"
+        "[texture]\nsize = 32\n")
+    out = tmp_path / "out"
+    skin_texture._MEMO.clear()
+    assert main(["render", str(tmp_path / "s.toml"), "-o", str(out)]) == 0
+    cached = list(out.glob("skin_maps_*/*/texture_melanin.png"))
+    assert len(cached) == 1
+    sc = load_scene(tmp_path / "s.toml")
+    img = np.asarray(render.render(sc.config, sc.params))[..., :3]
+    arrays = render.prepare(sc.config).arrays
+    assert render.map_cover("skin.brightness_map") in arrays and "own_R" in arrays
+    for cols, texel in ((slice(9, 12), texture[0, 0]), (slice(20, 23), texture[0, -1])):
+        px = img[14:18, cols].reshape(-1, 3)  # the face's UVs: u left to right
+        de = colour.delta_E(colour.XYZ_to_Lab(colour.sRGB_to_XYZ(px)),
+                            colour.XYZ_to_Lab(colour.sRGB_to_XYZ(texel)), method="CIE 2000")
+        assert de.max() < 1.0, (texel, de)
+
+    def no_inversion(*a, **k):
+        raise AssertionError("inverted again")
+
+    skin_texture._MEMO.clear()
+    monkeypatch.setattr(skin_texture, "invert_file", no_inversion)
+    assert main(["render", str(tmp_path / "s.toml"), "-o", str(out)]) == 0
+    maps.write_grey16(np.ones((4, 4)), tmp_path / "h.png")
+    with pytest.raises(InputError, match="give one of the two"):
+        load_scene(tmp_path / "s.toml", [f"skin.haemoglobin_image={tmp_path / 'h.png'}"])

@@ -80,6 +80,10 @@ colour_image = "c.png"             # biophysical, optional, with mask_image: an 
                                    #   colour (a smooth spectrum of it) replaces the skin
 mask_image = "s.png"               #   where this greyscale mask is below 1 (skin-maps writes
                                    #   both: eyes, hair, lips keep the texture's colour)
+# texture = "scan.png"             # biophysical, optional: a colour texture inverted into
+                                   #   all of the above (jaxskin skin-maps' maps, at the
+                                   #   scalars' defaults; they scale them), kept by jaxskin
+                                   #   render in OUT/skin_maps_<hash>/ for the next run
 roughness = 0.3                    # Kelemen m of the skin's own highlight
 specular = 0.18                    # Kelemen rho_s of the skin's own highlight
 [spectral]

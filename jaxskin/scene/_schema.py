@@ -91,6 +91,8 @@ SCHEMA: dict[str, Key] = {
     # smooth spectrum of skin.colour_image's colour (`skin_maps.upsample`): eyes, hair, lips
     "skin.colour_image": Key(str, None),
     "skin.mask_image": Key(str, None),
+    # biophysical: a colour texture inverted into all of the above (`jaxskin.skin_maps`)
+    "skin.texture": Key(str, None),
     # The biophysical skin (`jaxskin.biophysical`): its parameters, ranges and defaults.
     **{key: Key(float, float(getattr(biophysical.DEFAULT, name)),
                  *biophysical.RANGES[name], param=True)
