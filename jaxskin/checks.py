@@ -161,6 +161,10 @@ def _idle_maps(sc) -> list[tuple[str, str]]:
         elif sc.values.get(image) and scalar in sc.params and float(sc.values[scalar]) == 0.0:
             out.append((image, f"{image} scales {scalar}, which is 0 in scene {sc.name!r}: "
                         f"the map changes nothing (set {scalar} above 0, e.g. to 1)"))
+    for key in ("skin.texture", "skin.colour_image", "skin.mask_image"):
+        if sc.values.get(key) and (sp is None or sp.skin != "biophysical"):
+            out.append((key, f"{key} changes nothing in scene {sc.name!r}: only the "
+                        "biophysical skin reads it (material.model = \"biophysical\")"))
     return out
 
 

@@ -294,7 +294,8 @@ def test_skin_texture_key_renders_the_texture_and_caches_it(tmp_path, monkeypatc
     """`skin.texture` on a biophysical scene: `jaxskin render` inverts the texture once,
     keeps the maps in OUT/skin_maps_<hash>/, and a flat render shows the texture's colour
     (ΔE2000 under 1; a blue, not skin, from its own colour); the next run reads the maps
-    back instead of inverting again. With a skin map image as well it is an error."""
+    back instead of inverting again. With a skin map image as well it is an error; on
+    another skin it is named as changing nothing."""
     from jaxskin import skin_texture
     from jaxskin.io import InputError
 
@@ -332,3 +333,8 @@ def test_skin_texture_key_renders_the_texture_and_caches_it(tmp_path, monkeypatc
     maps.write_grey16(np.ones((4, 4)), tmp_path / "h.png")
     with pytest.raises(InputError, match="give one of the two"):
         load_scene(tmp_path / "s.toml", [f"skin.haemoglobin_image={tmp_path / 'h.png'}"])
+    from jaxskin.checks import idle_maps
+
+    assert idle_maps(load_scene(tmp_path / "s.toml", ["material.model=spectral"])) == [
+        "skin.texture changes nothing in scene 's': only the biophysical skin reads it "
+        '(material.model = "biophysical")']
