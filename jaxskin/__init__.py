@@ -27,6 +27,7 @@ Optics (Bando 2001 §4.2; Huang et al. 2013):
 - `spectral`: wavelength grids, illuminants, spectra → colour.
 - `skin`: measured skin reflectance with a melanin control.
 - `biophysical`: the two-layer biophysical skin (melanin, haemoglobin).
+- `skin_maps`: an sRGB texture inverted into the biophysical skin's maps, and its mask.
 - `cosmetics`: cosmetic layers: measured materials and thickness maps.
 - `mixture`: pigments in a base: the two-constant Kubelka–Munk mixing rule.
 - `sss`: subsurface scattering, the six-Gaussian skin profile.
@@ -52,6 +53,7 @@ Files (read and written at the edge):
   files, spectra.
 - `maps`: images: renders as PNG or OpenEXR, height and normal maps, layer maps read.
 - `export`: the mesh and its textures as GLB.
+- `skin_texture`: a texture's skin maps as files: read, written, reported.
 - `io`: `InputError`, atomic writes, the shipped data folder.
 - `outputs`: output folders and safe file names.
 - `data`: the shipped meshes, scenes, spectra, materials, measurements and BRDF samples.

@@ -93,6 +93,16 @@ def _check_scene(sc, count: int) -> list:
             _square(maps.read_grey(image, key=image_key), image, image_key)
         elif sc.values.get(image_key):  # set, but this model reads no such map (`idle_maps`)
             inputs.append(sc.values[image_key])  # still an input: never overwritten
+    if sp is not None and sp.texture is not None:  # skin.texture: a colour texture
+        from .skin_texture import read_texture
+
+        inputs.append(sp.texture)
+        read_texture(sp.texture, key="skin.texture")
+    for image in (sp.colour_image, sp.mask_image) if sp is not None else ():
+        if image is not None:  # skin.colour_image, skin.mask_image: read by `render.prepare`
+            inputs.append(image)
+            with reading(image):
+                maps.read_image(image)
     for layer in sp.layers if sp is not None else ():
         inputs.append(layer.material)
         with reading(layer.material):
@@ -126,6 +136,11 @@ def idle_maps(sc) -> list[str]:
     return [line for _, line in _idle_maps(sc)]
 
 
+def _listed(names) -> str:
+    """`a`, `a and b`, `a, b and c`."""
+    return " and ".join([", ".join(names[:-1]), names[-1]] if len(names) > 2 else names)
+
+
 def _idle_maps(sc) -> list[tuple[str, str]]:
     """`(image key, warning)` for skin maps that change nothing in scene `sc`: one its
     material model does not read (`skin.melanin_image` in a Blinn scene), or a
@@ -142,10 +157,14 @@ def _idle_maps(sc) -> list[tuple[str, str]]:
             reads = [] if sp is None else [SKIN_MAPS[m][1] for m in SKIN_MAPS_READ[sp.skin]]
             out.append((image, f"{image} changes nothing in scene {sc.name!r}: its material model "
                        f"({model}{'' if sp is None else f', {sp.skin} skin'}) reads "
-                       + (f"{' and '.join(reads)} instead" if reads else "no skin map")))
+                       + (f"{_listed(reads)} instead" if reads else "no skin map")))
         elif sc.values.get(image) and scalar in sc.params and float(sc.values[scalar]) == 0.0:
             out.append((image, f"{image} scales {scalar}, which is 0 in scene {sc.name!r}: "
                         f"the map changes nothing (set {scalar} above 0, e.g. to 1)"))
+    for key in ("skin.texture", "skin.colour_image", "skin.mask_image"):
+        if sc.values.get(key) and (sp is None or sp.skin != "biophysical"):
+            out.append((key, f"{key} changes nothing in scene {sc.name!r}: only the "
+                        "biophysical skin reads it (material.model = \"biophysical\")"))
     return out
 
 

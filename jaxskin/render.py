@@ -55,8 +55,8 @@ from .view import (
 )
 
 __all__ = ["OUTPUTS", "Prepared", "albedo", "decode_srgb", "encode_srgb", "expose", "map_cover",
-           "prepare", "render", "render_prepared", "skin_reflectance", "texel_map",
-           "texture_colour", "texture_to_view"]
+           "own_colour", "prepare", "render", "render_prepared", "skin_reflectance", "texel_map",
+           "texture_arrays", "texture_colour", "texture_to_view"]
 
 OUTPUTS = ("display", "rgba", "linear_rgba")
 SHADOW_MAX = 2048  # texels across the shadow map, at most
@@ -167,9 +167,50 @@ def _prepare(config: SceneConfig) -> Prepared:
                                              s.tmap.height, s.tmap.width, 1.0)
                 arrays[map_cover(map_key)] = jnp.asarray(factor.reshape(-1)[texels],
                                                          jnp.float32)
+        if sp.mask_image is not None:  # the texture's own colour where the skin is not
+            arrays.update(own_colour(sp, s.tmap.height, s.tmap.width, texels))
+        if sp.texture is not None:  # skin.texture: its maps, mask and colour
+            arrays.update(texture_arrays(sp, s.tmap.height, s.tmap.width, texels))
     if config.shadow is not None and config.mode != "height":
         arrays["lit"] = _visibility(config, s, view)
     return Prepared(s, view, arrays, texel_mm)
+
+
+def own_colour(sp, height: int, width: int, texels, rgb=None, mask=None) -> dict:
+    """`skin.colour_image` and `skin.mask_image` (or the arrays `rgb (H', W', 3)`, `mask
+    (H', W')`) per texel on the mesh: `own_weight (P,)` (1 − the mask: how much of the
+    texel is the image's colour, not the skin) and `own_R (P, n)` (that colour's smooth
+    spectrum on the grid, `skin_maps.upsample`), both resampled to the texture's size like
+    the skin maps."""
+    from .skin_maps import upsample
+
+    if rgb is None:
+        rgb, _ = maps.read_image(sp.colour_image, "colour image", key="skin.colour_image")
+        mask = maps.read_grey(sp.mask_image, key="skin.mask_image")
+    colour = np.stack([cosmetics.image_map(rgb[..., k], height, width, 1.0)
+                       for k in range(3)], -1).reshape(-1, 3)[texels]
+    mask = cosmetics.image_map(mask, height, width, 1.0).reshape(-1)[texels]
+    return {"own_weight": jnp.asarray(1.0 - mask, jnp.float32),
+            "own_R": jnp.asarray(upsample(colour, sp.grid), jnp.float32)}
+
+
+def texture_arrays(sp, height: int, width: int, texels) -> dict:
+    """`skin.texture`'s maps (`skin_texture.texture_maps`) as the skin maps' arrays, each
+    the fitted value over its scalar's default (so that the scene's scalars, at their
+    defaults, give the fitted values, and scale them otherwise), and its mask and colour
+    as `own_colour`'s."""
+    from .scene import SCHEMA
+    from .skin_texture import texture_maps
+
+    t = texture_maps(sp.texture, sp.texture_fixed)
+    out = own_colour(sp, height, width, texels, t["colour"], t["skin"])
+    for name, map_key in (("melanin", "skin.melanin_fraction_map"),
+                          ("haemoglobin", "skin.haemoglobin_map"),
+                          ("brightness", "skin.brightness_map")):
+        scalar = SKIN_MAPS[map_key][0]
+        factor = cosmetics.image_map(t[name] / SCHEMA[scalar].default, height, width, 1.0)
+        out[map_cover(map_key)] = jnp.asarray(factor.reshape(-1)[texels], jnp.float32)
+    return out
 
 
 def _visibility(config: SceneConfig, s: texture.TextureSetup, view: View):
@@ -430,7 +471,8 @@ def skin_reflectance(sp, params: dict, arrays: dict, texels=None):
     the `skin.*` parameters (`scene.BIOPHYSICAL_KEYS`). With `texels` (flat indices of the
     texels on the mesh) and a melanin map (`skin.melanin_map` in the params, or the scene's
     `skin.melanin_image`), the NIST skin's melanin varies per texel: `(P, n)`; so do the
-    biophysical skin's melanin fraction and haemoglobin with theirs (`scene.SKIN_MAPS`)."""
+    biophysical skin's melanin fraction, haemoglobin and brightness (a factor on its
+    reflectance) with theirs (`scene.SKIN_MAPS`)."""
     if sp.skin == "biophysical":
         c = biophysical.Chromophores(*arrays["chromophores"])
         values = {name: params[BIOPHYSICAL_KEYS[name]] for name in biophysical.PARAMS}
@@ -443,8 +485,17 @@ def skin_reflectance(sp, params: dict, arrays: dict, texels=None):
         if any(jnp.ndim(v) for v in values.values()):
             shape = jnp.broadcast_shapes(*(jnp.shape(v) for v in values.values()))
             values = {k: jnp.broadcast_to(v, shape) for k, v in values.items()}
-        return biophysical.reflectance(c, biophysical.Skin(
+        R = biophysical.reflectance(c, biophysical.Skin(
             *(values[name] for name in biophysical.PARAMS)))
+        # skin.brightness (× its map): a factor on the reflectance (`jaxskin.skin_maps`)
+        factor = None if texels is None else texel_map(
+            params, "skin.brightness_map", texels, arrays.get(map_cover("skin.brightness_map")))
+        brightness = params["skin.brightness"]
+        R = R * (brightness if factor is None else brightness * factor)[..., None]
+        if "own_R" in arrays and texels is not None:  # skin.mask_image: not skin there
+            w = arrays["own_weight"][:, None].astype(R.dtype)
+            R = (1.0 - w) * R + w * arrays["own_R"].astype(R.dtype)
+        return R
     melanin = params["skin.melanin"]
     factor = None if texels is None else texel_map(params, "skin.melanin_map", texels,
                                                    arrays.get(map_cover("skin.melanin_map")))

@@ -92,6 +92,7 @@ def test_readme_shell_examples_run(tmp_path):
     shutil.copytree(ROOT / "data" / "measurements", tmp_path / "data" / "measurements")
     shutil.copytree(ROOT / "data" / "brdf", tmp_path / "data" / "brdf")
     shutil.copytree(ROOT / "data" / "spectra", tmp_path / "data" / "spectra")
+    shutil.copytree(ROOT / "data" / "textures", tmp_path / "data" / "textures")
     ran = 0
     for line in shell_examples():
         words = shlex.split(line, comments=True)

@@ -397,8 +397,8 @@ def test_a_skin_map_the_model_does_not_read_is_named_and_never_overwritten(tmp_p
                                              "skin.melanin_fraction=0.3"]).config
     assert idle_maps(bio) == [
         "skin.melanin_image changes nothing in scene 'face': its material model "
-        "(biophysical, biophysical skin) reads skin.melanin_fraction_image and "
-        "skin.haemoglobin_image instead"]
+        "(biophysical, biophysical skin) reads skin.melanin_fraction_image, "
+        "skin.haemoglobin_image and skin.brightness_image instead"]
     nist = load_scene("face", [f"skin.melanin_fraction_image={tmp_path / 'n.png'}"])
     assert idle_maps(nist) == [
         "skin.melanin_fraction_image changes nothing in scene 'face': its material model "
@@ -487,7 +487,7 @@ def test_the_modules_cosmetics_example_is_a_valid_scene(tmp_path):
 
     example = tomllib.loads(scene.__doc__.split("```toml")[2].split("```")[0])
     example["material"] = {"model": "spectral"}
-    for name in ("melanin.png", "m.png", "h.png"):
+    for name in ("melanin.png", "m.png", "h.png", "b.png", "c.png", "s.png"):
         iio.imwrite(tmp_path / name, np.full((8, 8), 128, np.uint8))
     parsed = scene.parse_scene(example, tmp_path / "example.toml")
     (layer,) = example["layer"]

@@ -202,7 +202,7 @@ def scene_page() -> tuple[str, list[str]]:
         for k in sorted(keys):
             model_of[k] = f"{model_of[k]}, {m}" if k in model_of else m
     # the spectral models' skin is one of two (Scene.skin_model), each with its own keys
-    for k in scene.BIOPHYSICAL_KEYS.values():
+    for k in [*scene.BIOPHYSICAL_KEYS.values(), "skin.brightness"]:
         model_of[k] = "the biophysical skin: biophysical, or spectral with skin.model biophysical"
     model_of["skin.melanin"] = "the measured skin: spectral with skin.model nist"
 

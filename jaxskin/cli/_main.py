@@ -20,6 +20,7 @@ from . import (
     _match,
     _mix,
     _render,
+    _skin_maps,
 )
 from ._options import Parser
 from ._process import (
@@ -42,10 +43,9 @@ __all__ = ["COMMANDS", "main", "parser"]
 
 # Each command's module: `add_parser(sub)` and `run(args, record) -> exit code`, in the
 # order `jaxskin --help` lists them.
-COMMANDS = {"list": _list, "calibrate": _calibrate,
-            "mix": _mix, "match": _match,
-            "render": _render, "fit-image": _fit_image,
-            "fit-brdf": _fit_brdf, "fit-skin": _fit_skin, "edit": _edit}
+COMMANDS = {"list": _list, "calibrate": _calibrate, "mix": _mix, "match": _match,
+            "render": _render, "fit-image": _fit_image, "fit-brdf": _fit_brdf,
+            "fit-skin": _fit_skin, "skin-maps": _skin_maps, "edit": _edit}
 
 
 def parser() -> argparse.ArgumentParser:

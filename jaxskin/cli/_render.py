@@ -110,7 +110,10 @@ def run(args, record: Run) -> int:
     plans = _plan(args, scenes, unswept, outputs)
     _warn_unused(args, scenes, unswept)
     record.outputs.append(outputs)
-    rows = _render_and_write(args, record, outputs, plans)
+    from ..skin_texture import cache_beside
+
+    with cache_beside(outputs.folder):  # skin.texture's inversion, kept beside the output
+        rows = _render_and_write(args, record, outputs, plans)
     print(f"{'scene':<16} {'image':>9} {'files':>6} {'time s':>7}")
     for name, size, n, dt in rows:
         print(f"{name:<16} {size:>9} {n:>6} {dt:>7.2f}")

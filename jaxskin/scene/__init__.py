@@ -73,6 +73,17 @@ melanin_image = "melanin.png"      # optional: a greyscale map, melanin × its v
 melanin_fraction_image = "m.png"   # biophysical, optional: melanin_fraction × this greyscale
                                    #   map (0–1) per texel (as fit-image writes one)
 haemoglobin_image = "h.png"        # biophysical, optional: haemoglobin × this greyscale map
+brightness = 1.0                   # biophysical: a factor 0–2 on the skin's reflectance (a
+                                   #   photo texture's shading and exposure: skin-maps)
+brightness_image = "b.png"         # biophysical, optional: brightness × this greyscale map
+colour_image = "c.png"             # biophysical, optional, with mask_image: an RGB image whose
+                                   #   colour (a smooth spectrum of it) replaces the skin
+mask_image = "s.png"               #   where this greyscale mask is below 1 (skin-maps writes
+                                   #   both: eyes, hair, lips keep the texture's colour)
+# texture = "scan.png"             # biophysical, optional: a colour texture inverted into
+                                   #   all of the above (jaxskin skin-maps' maps, at the
+                                   #   scalars' defaults; they scale them), kept by jaxskin
+                                   #   render in OUT/skin_maps_<hash>/ for the next run
 roughness = 0.3                    # Kelemen m of the skin's own highlight
 specular = 0.18                    # Kelemen rho_s of the skin's own highlight
 [spectral]

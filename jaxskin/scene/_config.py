@@ -16,6 +16,7 @@ from ._schema import (
     BIOPHYSICAL_KEYS,
     LAYER_SCHEMA,
     MODEL_PARAMS,
+    OWN_COLOUR_KEYS,
     SCHEMA,
     SKIN_MAPS,
     SKIN_MAPS_READ,
@@ -64,6 +65,11 @@ class SpectralConfig:
     melanin_image: str | None = None  # skin.melanin × this greyscale map, per texel
     melanin_fraction_image: str | None = None  # biophysical: the melanin fraction's map
     haemoglobin_image: str | None = None  # biophysical: the haemoglobin fraction's map
+    brightness_image: str | None = None  # biophysical: the brightness's map
+    colour_image: str | None = None  # biophysical: the colour where the mask is below 1
+    mask_image: str | None = None  # biophysical: 1 where the skin is (skin.mask_image)
+    texture: str | None = None  # biophysical: skin.texture, inverted into the maps above
+    texture_fixed: tuple = ()  # its inversion's held values (`skin_maps.Fixed`)
 
     def image_of(self, map_key: str) -> str | None:
         """The greyscale image file of a skin map key (`SKIN_MAPS`), or None."""
@@ -153,7 +159,10 @@ class Scene:
                                       v["sss.method"] if v["sss.enabled"] else None,
                                       v["sss.texel_mm"], self.layers, self.skin_model,
                                       *(v[image] if key in SKIN_MAPS_READ[self.skin_model]
-                                        else None for key, (_, image) in SKIN_MAPS.items()))
+                                        else None for key, (_, image) in SKIN_MAPS.items()),
+                                      *(v[key] if self.skin_model == "biophysical" else None
+                                        for key in OWN_COLOUR_KEYS),
+                                      *self._texture())
         # The BRDF file only where the Lafortune model reads it: another model's config
         # (its jit key) does not change with it, and `-D material.brdf=...` on a Blinn
         # scene is reported as changing nothing (`checks.unused_overrides`).
@@ -168,6 +177,15 @@ class Scene:
                            v["camera.height"],
                            tuple(v["light.direction"]) if v["light.shadows"] else None,
                            v["camera.zoom"], tuple(v["camera.center"]))
+
+    def _texture(self) -> tuple:
+        """`(skin.texture, the values its inversion holds)` for `SpectralConfig`: its
+        eumelanin, oxygenation, epidermis and scattering are the scene's."""
+        v = self.values
+        if self.skin_model != "biophysical" or v["skin.texture"] is None:
+            return None, ()
+        return v["skin.texture"], tuple(float(v[BIOPHYSICAL_KEYS[name]]) for name in (
+            "eumelanin", "oxygenation", "epidermis_mm", "scattering"))
 
     @property
     def skin_model(self) -> str:
@@ -207,7 +225,7 @@ def param_keys(model: str, skin: str, layers) -> list[str]:
     unused -= MODEL_PARAMS[model]
     if model in SPECTRAL_MODELS:  # one skin: the measured one's or the biophysical's
         unused |= ({"skin.melanin"} if skin == "biophysical" else
-                   set(BIOPHYSICAL_KEYS.values()))
+                   {*BIOPHYSICAL_KEYS.values(), "skin.brightness"})
     keys = [k for k, spec in SCHEMA.items() if spec.param and k not in unused]
     keys += [f"layer.{name}.{k}" for name in layers for k in LAYER_SCHEMA]
     return keys + (["material.lafortune"] if model == "lafortune" else [])

@@ -12,7 +12,7 @@ from ..io import InputError, data_dir
 from ..mesh import BUILTIN as BUILTIN_MESHES
 from ._config import Scene
 from ._overrides import check_value, material_overrides, parse_override
-from ._schema import SCHEMA, SKIN_MAPS, SPECTRAL_MODELS
+from ._schema import OWN_COLOUR_KEYS, SCHEMA, SKIN_MAPS, SPECTRAL_MODELS
 from ._tables import parse_edit, parse_layer
 
 BUILTIN_SCENES = ("hand", "foot", "arm", "face", "makeup")
@@ -256,7 +256,18 @@ def _resolve_files(values: dict, path: Path, from_command_line: dict, allow) -> 
                              + f" {brdf_path}",
                              source("material.brdf"), key="material.brdf")
         values["material.brdf"] = str(brdf_path)
-    for _, image_key in SKIN_MAPS.values():
+    given = [key for key in OWN_COLOUR_KEYS if values[key] is not None]
+    if len(given) == 1:  # a colour without its mask (or the reverse) says nothing
+        other = [key for key in OWN_COLOUR_KEYS if key not in given][0]
+        raise InputError(f"{given[0]} needs {other} too (both or neither; jaxskin skin-maps "
+                         "writes the mask)", source(given[0]), key=given[0])
+    if values["skin.texture"] is not None:  # its maps, or the images: not both
+        for key in [image for _, image in SKIN_MAPS.values()] + list(OWN_COLOUR_KEYS):
+            if values[key] is not None and key != "skin.melanin_image":
+                raise InputError(f"skin.texture gives the skin's maps; {key} gives one too: "
+                                 "give one of the two", source(key), key=key)
+    for image_key in [image for _, image in SKIN_MAPS.values()] + [*OWN_COLOUR_KEYS,
+                                                                    "skin.texture"]:
         image = values[image_key]
         if image is None:
             continue
@@ -266,7 +277,9 @@ def _resolve_files(values: dict, path: Path, from_command_line: dict, allow) -> 
         if not image_path.is_file():
             what = ("is a folder" if image_path.is_dir() else "not a regular file"
                     if image_path.exists() else "no such file")
-            raise InputError(f"{what}: {image_path} (expected a greyscale image file)",
+            kind = "a greyscale" if image_key.endswith("_image") and image_key not in (
+                OWN_COLOUR_KEYS[0],) else "a colour"
+            raise InputError(f"{what}: {image_path} (expected {kind} image file)",
                              source(image_key), key=image_key)
         values[image_key] = str(image_path)
 

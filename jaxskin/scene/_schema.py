@@ -28,12 +28,16 @@ class Key:
 SKIN_MAPS = {"skin.melanin_map": ("skin.melanin", "skin.melanin_image"),
              "skin.melanin_fraction_map": ("skin.melanin_fraction",
                                            "skin.melanin_fraction_image"),
-             "skin.haemoglobin_map": ("skin.haemoglobin", "skin.haemoglobin_image")}
+             "skin.haemoglobin_map": ("skin.haemoglobin", "skin.haemoglobin_image"),
+             "skin.brightness_map": ("skin.brightness", "skin.brightness_image")}
 # The skin maps each skin model reads (`SceneConfig.skin_model`): a map another model's
 # scene sets is left out of its config and warned about (`checks.idle_maps`).
 SKIN_MAPS_READ = {"nist": ("skin.melanin_map",),
-                  "biophysical": ("skin.melanin_fraction_map", "skin.haemoglobin_map")}
+                  "biophysical": ("skin.melanin_fraction_map", "skin.haemoglobin_map",
+                                  "skin.brightness_map")}
 # The biophysical skin's parameters (`biophysical.Skin` fields) as scene keys.
+# Images a biophysical skin reads besides its maps: a colour and its mask (both or neither).
+OWN_COLOUR_KEYS = ("skin.colour_image", "skin.mask_image")
 BIOPHYSICAL_KEYS = {"melanin": "skin.melanin_fraction", "eumelanin": "skin.eumelanin",
                     "haemoglobin": "skin.haemoglobin", "oxygenation": "skin.oxygenation",
                     "epidermis_mm": "skin.epidermis_mm", "scattering": "skin.scattering"}
@@ -79,6 +83,16 @@ SCHEMA: dict[str, Key] = {
     "skin.melanin_image": Key(str, None),  # a greyscale map (0–1 × skin.melanin) per texel
     "skin.melanin_fraction_image": Key(str, None),  # biophysical: × skin.melanin_fraction
     "skin.haemoglobin_image": Key(str, None),  # biophysical: × skin.haemoglobin
+    # biophysical: a factor on the skin's diffuse reflectance (a photo texture's shading and
+    # exposure, `jaxskin.skin_maps`), and its map (× skin.brightness)
+    "skin.brightness": Key(float, 1.0, 0.0, 2.0, param=True),
+    "skin.brightness_image": Key(str, None),
+    # biophysical: where skin.mask_image is below 1, the skin's reflectance gives way to a
+    # smooth spectrum of skin.colour_image's colour (`skin_maps.upsample`): eyes, hair, lips
+    "skin.colour_image": Key(str, None),
+    "skin.mask_image": Key(str, None),
+    # biophysical: a colour texture inverted into all of the above (`jaxskin.skin_maps`)
+    "skin.texture": Key(str, None),
     # The biophysical skin (`jaxskin.biophysical`): its parameters, ranges and defaults.
     **{key: Key(float, float(getattr(biophysical.DEFAULT, name)),
                  *biophysical.RANGES[name], param=True)
@@ -101,7 +115,7 @@ LAYER_KEYS = {"name", "material", "image", "ellipse", "polygon", *LAYER_SCHEMA}
 ELLIPSE_KEYS = {"center", "radii", "angle", "feather"}
 POLYGON_KEYS = {"points", "vertices", "feather"}
 # Parameters that only one material model uses: the other model's are left out.
-_SPECTRAL_PARAMS = {"skin.melanin", "skin.roughness", "skin.specular",
+_SPECTRAL_PARAMS = {"skin.melanin", "skin.roughness", "skin.specular", "skin.brightness",
                     *BIOPHYSICAL_KEYS.values()}
 MODEL_PARAMS = {"blinn": {"material.melanin", "material.blood", "material.specular",
                           "material.shininess"}, "lafortune": set(),
