@@ -52,6 +52,7 @@ Files (read and written at the edge):
 - `maps`: images: renders as PNG or OpenEXR, height and normal maps, layer maps read.
 - `export`: the mesh and its textures as GLB.
 - `io`: `InputError`, atomic writes, the shipped data folder.
+- `scan`: a user scan's texture image, checked (square 8-bit RGB; alpha and palette said).
 - `outputs`: output folders and safe file names.
 - `data`: the shipped meshes, scenes, spectra, materials, measurements and BRDF samples.
 
