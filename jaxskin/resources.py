@@ -25,6 +25,12 @@ batches of `cluster.SWEEP_BATCH` (8) values, so its variable part counts once pe
 one batch. The model errs high rather than low;
 it is a guard against runs that cannot fit, not a forecast.
 
+A user's mesh adds its own part: a 50k-vertex, 100k-face UV grid (face-sized) and a
+250k-vertex, 500k-face one, texture 1024², spectral skin with SSS, image 512²: 1.01 and
+1.16 GB, about 360 bytes per face (the model takes 500: 1.05x and 1.09x); at 4096²,
+500k faces: 6.44 GB against 8.56 GB estimated (1.33x; the texture-space rasterization's
+peak then was 6.3 GB alone, and is 3.3 GB since it tests its candidates in chunks).
+
 `fit_brdf_bytes` likewise, from `jaxskin fit-brdf` on the 4,000 shipped samples: 0.36 GB
 (3 lobes, 8 starts), 1.05 GB (3 lobes, 64 starts), 1.94 GB (6 lobes, 64 starts), about 100
 bytes per sample, channel, lobe parameter and start (the model takes 120: 1.08-1.28x).
@@ -36,12 +42,13 @@ import os
 
 from .io import InputError
 
-__all__ = ["available_bytes", "check_memory", "fit_brdf_bytes", "render_bytes"]
+__all__ = ["available_bytes", "check_memory", "fit_brdf_bytes", "mesh_faces", "render_bytes"]
 
 BASE = 0.45e9
 PER_TEXEL = 280
 COSMETICS_PER_TEXEL = (200, 1640)  # bare skin, with layers
 PER_SAMPLE = 220
+PER_FACE = 500
 FIT_BASE = 0.35e9
 PER_BRDF_VALUE = 120
 
@@ -55,7 +62,19 @@ def render_bytes(config, count: int = 1) -> float:
         per_texel += COSMETICS_PER_TEXEL[bool(sp.layers)]
     width = config.image * config.supersample
     height = (config.image_height or config.image) * config.supersample
-    return BASE + count * (texels * per_texel + width * height * PER_SAMPLE)
+    return (BASE + PER_FACE * mesh_faces(config.texture.mesh)
+            + count * (texels * per_texel + width * height * PER_SAMPLE))
+
+
+def mesh_faces(name_or_path) -> int:
+    """The triangles of a scene's mesh (loaded once per process: `mesh.load_mesh`); 0
+    where it cannot be read, which the scene's checks then say."""
+    from .mesh import load_mesh
+
+    try:
+        return len(load_mesh(name_or_path).faces)
+    except InputError:
+        return 0
 
 
 def fit_brdf_bytes(samples: int, lobes: int, starts: int) -> float:
