@@ -12,8 +12,8 @@ best thing honestly, the way a scan's texture is made: a photograph projected on
   copyright restrictions, released into the public domain", scikit-image's
   `skimage.data.astronaut` docstring), inside the scikit-image wheel at
   `skimage/data/astronaut.png` (`pip download scikit-image --no-deps`, unzip).
-- Alignment: 17 MediaPipe landmarks (eye corners, brows, nose, lip corners and middles,
-  chin, forehead, the face's sides) were placed by eye on the photograph (`LANDMARKS`,
+- Alignment: 22 MediaPipe landmarks (eye corners, brows, nose, the lips' outer and inner
+  corners and middles, chin, forehead, the face's sides and jaw) were placed by eye on the photograph (`LANDMARKS`,
   photo pixels, x right, y down, read off a 4x enlargement with a pixel grid); a thin-plate
   spline through them maps each vertex's (x, y), seen from the front, to the photo. Each
   texel of the mesh's UV layout then takes the photo's colour (bilinear) at the spline's
@@ -22,8 +22,9 @@ best thing honestly, the way a scan's texture is made: a photograph projected on
 
 The photo's face is about 80 pixels wide, so the texture (512²) is soft; its lighting is
 baked in (a studio portrait's soft front light), as in any scan's texture. The face is
-smiling, lips parted over teeth; the mesh's mouth is closed, so the teeth sit on the lips'
-inner rims. Hair covers the forehead down to the brows in the photo and so in the texture.
+smiling, lips parted over teeth; the mesh's mouth is closed, so the inner lip landmarks
+(13, 14) take the teeth's top and bottom edges: the teeth fill the narrow band between the
+mesh's inner lips (5 mm), and the lips keep the lips' colour, for lipstick to go on. Hair covers the forehead down to the brows in the photo and so in the texture.
 """
 
 from __future__ import annotations
@@ -51,10 +52,14 @@ LANDMARKS = {
     334: (246.0, 91.0),   # left brow, middle
     1: (224.0, 124.0),    # nose tip
     2: (224.0, 130.0),    # below the nose
-    61: (203.0, 140.5),   # mouth corner, right
-    291: (244.5, 141.0),  # mouth corner, left
-    0: (224.0, 139.5),    # upper lip, top middle
-    17: (224.0, 153.5),   # lower lip, bottom middle
+    61: (202.5, 139.5),   # mouth corner, right
+    291: (246.0, 139.0),  # mouth corner, left
+    0: (224.5, 137.5),    # upper lip, top middle
+    13: (224.5, 140.5),   # upper lip, inner edge (the teeth start below it)
+    14: (224.5, 148.5),   # lower lip, inner edge (the teeth end above it)
+    17: (224.5, 154.0),   # lower lip, bottom middle
+    78: (205.5, 140.0),   # the inner corners of the lips
+    308: (243.5, 140.0),
     152: (225.0, 176.0),  # chin
     10: (224.0, 66.0),    # forehead, top middle (under the fringe)
     234: (183.5, 113.0),  # the face's right side at the eyes (the photo's outline)
