@@ -152,7 +152,9 @@ def missing_uv(name_or_path) -> str:
     """The one line that says a mesh has no texture coordinates, naming the file and, for a
     file of several parts, how many of them lack UVs."""
     key = str(name_or_path)
-    path = data_dir() / "meshes" / BUILTIN[key] if key in BUILTIN else Path(key)
+    if key in BUILTIN:
+        return f"mesh '{key}' has no texture coordinates; use planar or cylindrical projection"
+    path = Path(key)
     with_uv, parts = uv_parts(path)
     which = (f" ({parts - with_uv} of its {parts} parts have none, and the parts are "
              "merged)" if parts > 1 and with_uv else "")
