@@ -13,18 +13,20 @@ best thing honestly, the way a scan's texture is made: a photograph projected on
   `skimage.data.astronaut` docstring), inside the scikit-image wheel at
   `skimage/data/astronaut.png` (`pip download scikit-image --no-deps`, unzip).
 - Alignment: 22 MediaPipe landmarks (eye corners, brows, nose, the lips' outer and inner
-  corners and middles, chin, forehead, the face's sides and jaw) were placed by eye on the photograph (`LANDMARKS`,
-  photo pixels, x right, y down, read off a 4x enlargement with a pixel grid); a thin-plate
-  spline through them maps each vertex's (x, y), seen from the front, to the photo. Each
-  texel of the mesh's UV layout then takes the photo's colour (bilinear) at the spline's
-  image of its point on the mesh. Texels that no triangle covers take their nearest
-  covered texel's colour, so that filtering at the UV borders never reads black.
+  corners and middles, chin, forehead, the face's sides and jaw) were placed by eye on the
+  photograph (`LANDMARKS`, photo pixels, x right, y down, read off a 4x enlargement with a
+  pixel grid); a thin-plate spline through them maps each vertex's (x, y), seen from the
+  front, to the photo. Each texel of the mesh's UV layout then takes the photo's colour
+  (bilinear) at the spline's image of its point on the mesh. Texels that no triangle
+  covers take their nearest covered texel's colour, so that filtering at the UV borders
+  never reads black.
 
 The photo's face is about 80 pixels wide, so the texture (512²) is soft; its lighting is
 baked in (a studio portrait's soft front light), as in any scan's texture. The face is
 smiling, lips parted over teeth; the mesh's mouth is closed, so the inner lip landmarks
 (13, 14) take the teeth's top and bottom edges: the teeth fill the narrow band between the
-mesh's inner lips (5 mm), and the lips keep the lips' colour, for lipstick to go on. Hair covers the forehead down to the brows in the photo and so in the texture.
+mesh's inner lips (5 mm), and the lips keep the lips' colour, for lipstick to go on.
+Her fringe covers the top of the forehead in the photo, and so in the texture.
 """
 
 from __future__ import annotations

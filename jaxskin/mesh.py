@@ -28,13 +28,14 @@ BUILTIN = {
     "face": "canonical_face_model.obj",
 }
 
-# The most triangles a scene's mesh may have. Measured (2-core CPU, `jaxskin render`, spectral
-# skin with SSS, 512² image, jaxskin.resources): 500k faces load in 7 s and add no
-# peak memory over the texture's; the texture-space rasterization costs what its texels
-# cost, whatever the face count. The limit keeps a mistaken export (a 20M-face raw scan)
-# from parsing for minutes: decimate it first (Blender's Decimate, MeshLab's quadric edge
-# collapse: both keep the UVs; trimesh's `simplify_quadric_decimation` (fast-simplification)
-# drops them, so the loader does not decimate by itself).
+# The most triangles a scene's mesh may have. Measured (2-core CPU, `jaxskin render`,
+# spectral skin with SSS, 512² image; `jaxskin.resources`): a 500k-face OBJ reads in 7 s
+# and adds about 360 bytes a face to the peak; the texture-space rasterization costs what
+# its texels cost, whatever the face count. The limit keeps a mistaken export (a 20M-face
+# raw scan) from reading for minutes: decimate it first, keeping the UVs (Blender's
+# Decimate, MeshLab's quadric edge collapse with texture). trimesh's
+# `simplify_quadric_decimation` (fast-simplification) drops the UVs, so the loader does
+# not decimate by itself.
 MAX_FACES = 2_000_000
 
 
