@@ -328,3 +328,25 @@ def test_the_memory_estimate_counts_the_meshs_faces(tmp_path):
     one = resources.render_bytes(load_scene(tmp_path / "s.toml", [f"mesh.file={tmp_path / 'n.obj'}",
                                                                   "mesh.projection=uv"]).config)
     assert with_mesh - one == pytest.approx(127 * resources.PER_FACE)
+
+
+def test_painting_in_the_editor_works_on_the_scan(tmp_path):
+    """A brush stroke across the middle of the view of a user OBJ (the shipped textured
+    face, referenced by path) paints its blush layer's map in the scan's texture space."""
+    from jaxskin.editor import Session
+
+    for ext in ("obj", "mtl", "png"):
+        shutil.copy(MESHES / f"astronaut_face.{ext}", tmp_path / f"astronaut_face.{ext}")
+    (tmp_path / "s.toml").write_text(
+        'name = "scan"\n[mesh]\nfile = "astronaut_face.obj"\nunit_mm = 10.0\n[texture]\n'
+        'size = 64\n[wrinkles]\nenabled = false\n[material]\nmodel = "spectral"\n[camera]\n'
+        'size = 64\n[[layer]]\nname = "blush"\nmaterial = "blush_rose"\nthickness_mm = 0.02\n'
+        '[[layer.ellipse]]\ncenter = [0.05, 0.95]\nradii = [0.02, 0.02]\n')  # a corner
+    s = Session(str(tmp_path / "s.toml"), tmp_path / "out")
+    assert s.scene.values["mesh.projection"] == "uv"
+    s.paint_stroke("a", "blush", [[20.0, 32.0], [44.0, 32.0]], 3.0, 1.0)
+    painted = np.asarray(s.paint["blush"]) > 0
+    painted[:16, :16] = False  # the ellipse's corner
+    assert painted.sum() > 20
+    rows, cols = np.nonzero(painted)  # across the face's middle: the UVs' middle rows
+    assert 0.3 < 1 - rows.mean() / 64 < 0.7 and 0.3 < cols.mean() / 64 < 0.7
