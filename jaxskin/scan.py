@@ -21,10 +21,6 @@ __all__ = ["MAX_TEXTURE", "TextureInfo", "check_texture"]
 # schema's). A larger scan texture is resampled to the scene's size, and the caller says so.
 MAX_TEXTURE = 8192
 
-# PNG colour types: (name, channels).
-_PNG_TYPES = {0: ("grey", 1), 2: ("RGB", 3), 3: ("palette", 1), 4: ("grey+alpha", 2),
-              6: ("RGBA", 4)}
-
 
 @dataclasses.dataclass(frozen=True)
 class TextureInfo:
