@@ -55,6 +55,7 @@ Files (read and written at the edge):
 - `export`: the mesh and its textures as GLB.
 - `skin_texture`: a texture's skin maps as files: read, written, reported.
 - `io`: `InputError`, atomic writes, the shipped data folder.
+- `scan`: a user scan's texture image, checked (square 8-bit RGB; alpha and palette said).
 - `outputs`: output folders and safe file names.
 - `data`: the shipped meshes, scenes, spectra, materials, measurements and BRDF samples.
 

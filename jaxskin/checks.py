@@ -49,7 +49,7 @@ def _check_scene(sc, count: int) -> list:
 
     from . import cosmetics, maps, resources
     from .mesh import BUILTIN as MESHES
-    from .mesh import load_mesh
+    from .mesh import load_mesh, missing_uv
     from .scene import SKIN_MAPS
 
     config = sc.config
@@ -66,8 +66,7 @@ def _check_scene(sc, count: int) -> list:
     if mesh_name not in MESHES:
         inputs.append(mesh_name)
     if config.texture.projection == "uv" and mesh.uv is None:
-        raise InputError(f"mesh '{mesh.name}' has no texture coordinates; use planar or "
-                         "cylindrical projection", sc.source, key="mesh.projection")
+        raise InputError(missing_uv(mesh_name), sc.source, key="mesh.projection")
     for i, e in enumerate(config.texture.edits):
         if e.vertex is not None and e.vertex >= len(mesh.vertices):
             raise InputError(f"vertex {e.vertex} does not exist; the mesh has "

@@ -70,22 +70,17 @@ def rasterize(xy, faces, height: int, width: int, depth=None, wrap_x: bool = Fal
 
     tri = np.full((height, width), -1, np.int32)
     bary = np.zeros((height, width, 3), np.float32)
-    total = int(count.sum())
-    if total == 0:
+    if int(count.sum()) == 0:
         return Raster(tri, bary)
-    f = np.repeat(np.arange(len(faces)), count)
-    k = np.arange(total) - np.repeat(np.cumsum(count) - count, count)
-    px = x0[f] + k % nx[f]
-    py = y0[f] + k // nx[f]
-    cx, cy = px + 0.5, py + 0.5
-    # Barycentrics from signed areas; inside when all three are >= 0.
-    ax, ay, bx, by, qx, qy = a[f, 0], a[f, 1], b[f, 0], b[f, 1], c[f, 0], c[f, 1]
-    inv = 1.0 / area[f]
-    w0 = ((bx - cx) * (qy - cy) - (by - cy) * (qx - cx)) * inv
-    w1 = ((qx - cx) * (ay - cy) - (qy - cy) * (ax - cx)) * inv
-    w2 = 1.0 - w0 - w1
-    inside = (w0 >= 0) & (w1 >= 0) & (w2 >= 0)
-    f, px, py, w = f[inside], px[inside] % width, py[inside], np.stack([w0, w1, w2], 1)[inside]
+    # The (triangle, pixel) candidates are made and tested CHUNK at a time, and only those
+    # inside kept: a 4096² texture of a mesh covering it has ~2 × 4096² candidates, whose
+    # dozen float64 temporaries took 6.3 GB at once (measured, a 500k-face UV grid).
+    kept = []
+    ends = np.searchsorted(np.cumsum(count), np.arange(CHUNK, int(count.sum()), CHUNK))
+    for faces_chunk in np.split(np.arange(len(faces)), np.unique(ends)):
+        if len(faces_chunk):
+            kept.append(_inside(faces_chunk, count, x0, y0, nx, a, b, c, area, width))
+    f, px, py, w = (np.concatenate(parts) for parts in zip(*kept, strict=True))
     pixel = py * width + px
     if depth is not None:
         z = (w * np.asarray(depth, np.float64)[faces[f]]).sum(axis=1)
@@ -98,6 +93,28 @@ def rasterize(xy, faces, height: int, width: int, depth=None, wrap_x: bool = Fal
     tri.reshape(-1)[pixel[first]] = f[first]
     bary.reshape(-1, 3)[pixel[first]] = w[first]
     return Raster(tri, bary)
+
+
+# Candidates tested at once: about 100 bytes each of temporaries (0.2 GB).
+CHUNK = 2_000_000
+
+
+def _inside(chunk, count, x0, y0, nx, a, b, c, area, width):
+    """For the triangles `chunk`, the candidates inside them: triangle, pixel x (wrapped),
+    pixel y and barycentrics `(N, 3)`."""
+    f = np.repeat(chunk, count[chunk])
+    k = np.arange(len(f)) - np.repeat(np.cumsum(count[chunk]) - count[chunk], count[chunk])
+    px = x0[f] + k % nx[f]
+    py = y0[f] + k // nx[f]
+    cx, cy = px + 0.5, py + 0.5
+    # Barycentrics from signed areas; inside when all three are >= 0.
+    ax, ay, bx, by, qx, qy = a[f, 0], a[f, 1], b[f, 0], b[f, 1], c[f, 0], c[f, 1]
+    inv = 1.0 / area[f]
+    w0 = ((bx - cx) * (qy - cy) - (by - cy) * (qx - cx)) * inv
+    w1 = ((qx - cx) * (ay - cy) - (qy - cy) * (ax - cx)) * inv
+    w2 = 1.0 - w0 - w1
+    inside = (w0 >= 0) & (w1 >= 0) & (w2 >= 0)
+    return f[inside], px[inside] % width, py[inside], np.stack([w0, w1, w2], 1)[inside]
 
 
 def unwrap_seam(corners, width: int, seam=None) -> np.ndarray:

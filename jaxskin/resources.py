@@ -30,6 +30,21 @@ their own size: `read_bytes` of the largest is added (a 12000² grey PNG of 165 
 to read; 4.5 GB before the reader kept grey maps grey and converted in place).
 `maps.read_image` checks the same figure from the file's header before decoding any image.
 
+Shadows (`light.shadows`) with the spectral models test k × k points per texel on the host
+before the render (`shadow.texture_visibility`: k = 2 up to 1024², else 1), with a dozen
+float64 arrays per point: measured again on 2026-12-07 (the rows above for the face and
+makeup predate their shadows), face 1024² 2.57 GB (0.98 GB with `light.shadows = false`),
+makeup 512² 1.08 GB and 1024² 2.58 GB: about 480 bytes a point over 0.58 GB. That step
+and the render do not overlap, so the model takes the larger of the two: 0.15 GB + 520
+bytes a point, or the texels' part (1.03-1.11x of those four).
+
+A user's mesh adds its own part: a 50k-vertex, 100k-face UV grid (face-sized) and a
+250k-vertex, 500k-face one, texture 1024², spectral skin with SSS, image 512² (supersample
+2): 1.01 and 1.16 GB, about 360 bytes per face (the model takes 500: 1.22x and 1.24x); the
+500k one with shadows 2.74 GB (1.19x); at 4096² 4.73 GB (1.90x: the texture-space
+rasterization tests its candidates in chunks, and its peak no longer counts; before, 6.44
+GB).
+
 `fit_brdf_bytes` likewise, from `jaxskin fit-brdf` on the 4,000 shipped samples: 0.36 GB
 (3 lobes, 8 starts), 1.05 GB (3 lobes, 64 starts), 1.94 GB (6 lobes, 64 starts), about 100
 bytes per sample, channel, lobe parameter and start (the model takes 120: 1.08-1.28x).
@@ -44,12 +59,15 @@ import warnings
 from .io import InputError
 
 __all__ = ["available_bytes", "check_memory", "fit_brdf_bytes", "image_header", "maps_bytes",
-           "read_bytes", "render_bytes"]
+           "mesh_faces", "read_bytes", "render_bytes"]
 
 BASE = 0.45e9
 PER_TEXEL = 280
 COSMETICS_PER_TEXEL = (200, 1640)  # bare skin, with layers
 PER_SAMPLE = 220
+PER_FACE = 500
+SHADOW_BASE = 0.15e9
+PER_SHADOW_POINT = 520
 FIT_BASE = 0.35e9
 PER_BRDF_VALUE = 120
 # Reading an image, per pixel: per channel (the decoded samples and their float64 copy) and
@@ -68,8 +86,23 @@ def render_bytes(config, count: int = 1) -> float:
         per_texel += COSMETICS_PER_TEXEL[bool(sp.layers)]
     width = config.image * config.supersample
     height = (config.image_height or config.image) * config.supersample
-    return (BASE + count * (texels * per_texel + width * height * PER_SAMPLE)
-            + maps_bytes(config))
+    texture_part = count * texels * per_texel
+    if sp is not None and config.shadow is not None:
+        k = 2 if texels <= 1024 * 1024 else 1  # shadow.texture_visibility's test points
+        texture_part = max(texture_part, SHADOW_BASE + PER_SHADOW_POINT * k * k * texels)
+    return (BASE + PER_FACE * mesh_faces(config.texture.mesh) + texture_part
+            + count * width * height * PER_SAMPLE + maps_bytes(config))
+
+
+def mesh_faces(name_or_path) -> int:
+    """The triangles of a scene's mesh (loaded once per process: `mesh.load_mesh`); 0
+    where it cannot be read, which the scene's checks then say."""
+    from .mesh import load_mesh
+
+    try:
+        return len(load_mesh(name_or_path).faces)
+    except InputError:
+        return 0
 
 
 def maps_bytes(config) -> float:

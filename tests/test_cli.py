@@ -382,9 +382,10 @@ MEASURED_PEAKS = [
     ("hand", ["texture.size=1024", "camera.size=256"], 0.636e9),
     ("hand", ["texture.size=2048", "camera.size=256"], 1.228e9),
     ("hand", ["texture.size=4096", "camera.size=256"], 4.275e9),
-    ("makeup", ["texture.size=512", "camera.size=256"], 0.683e9),  # 4 layers
-    ("makeup", ["texture.size=1024", "camera.size=256"], 1.776e9),
-    ("face", ["texture.size=1024", "camera.size=256"], 0.826e9),
+    ("makeup", ["texture.size=512", "camera.size=256"], 1.081e9),  # 4 layers, shadows
+    ("makeup", ["texture.size=1024", "camera.size=256"], 2.580e9),
+    ("face", ["texture.size=1024", "camera.size=256"], 2.569e9),  # shadows
+    ("face", ["texture.size=1024", "camera.size=256", "light.shadows=false"], 0.980e9),
     ("hand", ["texture.size=256", "camera.size=1024", "camera.supersample=4"], 4.194e9),
 ]
 

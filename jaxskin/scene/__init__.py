@@ -4,7 +4,7 @@
 name = "hand"                      # default: the file's stem
 [mesh]
 file = "hand"                      # a built-in mesh name, or a path relative to this file
-projection = "planar"              # planar | cylindrical | uv
+projection = "planar"              # planar | cylindrical | uv (unset: uv if the mesh has UVs)
 [texture]
 size = 512                         # texels across
 [wrinkles]

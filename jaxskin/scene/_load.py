@@ -10,6 +10,7 @@ from pathlib import Path
 
 from ..io import InputError, data_dir
 from ..mesh import BUILTIN as BUILTIN_MESHES
+from ..mesh import default_projection
 from ._config import Scene
 from ._overrides import check_value, material_overrides, parse_override
 from ._schema import OWN_COLOUR_KEYS, SCHEMA, SKIN_MAPS, SPECTRAL_MODELS
@@ -139,6 +140,8 @@ def parse_scene(doc: dict, path, overrides=(), allow=None, *, flag: str = "overr
     if values["name"] is None:
         values["name"] = path.stem
     _resolve_files(values, path, from_command_line, allow)
+    if "mesh.projection" not in flat and "mesh.projection" not in from_command_line:
+        values["mesh.projection"] = default_projection(values["mesh.file"])
     edits = tuple(parse_edit(i, e, path) for i, e in enumerate(edits_raw))
     return Scene(values["name"], str(path), values, edits, layers)
 
@@ -240,10 +243,15 @@ def _resolve_files(values: dict, path: Path, from_command_line: dict, allow) -> 
         if not Path(mesh).is_absolute():
             values["mesh.file"] = str((base("mesh.file") / mesh).resolve())
         allow("mesh.file", Path(values["mesh.file"]).resolve())
-        if not Path(values["mesh.file"]).is_file():  # named with the file and key
+        mesh_path = Path(values["mesh.file"])
+        if not mesh_path.is_file():  # named with the file and key; a FIFO would hang trimesh
+            what = ("is a folder" if mesh_path.is_dir() else "not a regular file"
+                    if mesh_path.exists() else "no file")
             raise InputError(f"expected a built-in mesh ({', '.join(BUILTIN_MESHES)}) or a mesh "
-                             f"file; no file {values['mesh.file']}", source("mesh.file"),
-                             key="mesh.file")
+                             f"file; {what} {mesh_path}" if what == "no file" else
+                             f"{what}: {mesh_path} (expected a built-in mesh "
+                             f"({', '.join(BUILTIN_MESHES)}) or a mesh file)",
+                             source("mesh.file"), key="mesh.file")
     brdf = values["material.brdf"]
     if brdf != "skin":
         brdf_path = Path(brdf) if Path(brdf).is_absolute() else (
