@@ -93,10 +93,14 @@ def _check_scene(sc, count: int) -> list:
         elif sc.values.get(image_key):  # set, but this model reads no such map (`idle_maps`)
             inputs.append(sc.values[image_key])  # still an input: never overwritten
     if sp is not None and sp.texture is not None:  # skin.texture: a colour texture
+        import warnings
+
         from .skin_texture import read_texture
 
         inputs.append(sp.texture)
-        read_texture(sp.texture, key="skin.texture")
+        for line in read_texture(sp.texture, key="skin.texture", size=config.texture.size,
+                                 square=True)[2]:
+            warnings.warn(line, stacklevel=2)
     for image in (sp.colour_image, sp.mask_image) if sp is not None else ():
         if image is not None:  # skin.colour_image, skin.mask_image: read by `render.prepare`
             inputs.append(image)

@@ -2,10 +2,11 @@
 
 `check_texture(path)` reads only what it must (the header, and the alpha channel where there
 is one) and says in one line what is wrong with a texture that cannot be a skin's colour:
-not a regular file, not an image, not square, greyscale, CMYK, 16 bits per channel. What it
-can handle it returns in `TextureInfo.notes` for the caller to warn (a palette image, an
-alpha channel, a texture larger than the render's). `jaxskin skin-maps` and a scene's
-`skin.texture` call it. (The mesh's own checks, its size included, are `jaxskin.mesh`'s.)
+not a regular file, not an image, greyscale, CMYK, not square (where the texture is a UV
+map's). What it can handle it returns in `TextureInfo.notes` for the caller to warn (16 bits
+per channel, a palette image, an alpha channel, a texture resampled to the render's size).
+`jaxskin skin-maps` and a scene's `skin.texture` call it (`skin_texture.read_texture`).
+(The mesh's own checks, its size included, are `jaxskin.mesh`'s.)
 """
 
 from __future__ import annotations
@@ -48,11 +49,13 @@ def _png_header(path: Path) -> tuple[int, int] | None:
     return head[24], head[25]
 
 
-def check_texture(path, key: str | None = None, size: int | None = None) -> TextureInfo:
-    """Check that `path` is a texture a skin's colour can be read from: a square 8-bit RGB
-    image (RGBA and palette images are handled and noted). `key` names the scene key or
-    option in the error; `size` is the render's `texture.size`, for a note when the image
-    is resampled to it.
+def check_texture(path, key: str | None = None, size: int | None = None,
+                  square: bool = True) -> TextureInfo:
+    """Check that `path` is a texture a skin's colour can be read from: an RGB image, square
+    unless `square` is False (a photo given to `jaxskin skin-maps`; a UV map's texture is
+    square as `texture.size` is); 16-bit, RGBA and palette images are handled and noted.
+    `key` names the scene key or option in the error; `size` is the render's
+    `texture.size`, for a note when the image is resampled to it.
 
     **Returns:** a `TextureInfo`. **Raises:** `InputError`, one line naming the file."""
     from PIL import Image
@@ -77,9 +80,6 @@ def check_texture(path, key: str | None = None, size: int | None = None) -> Text
     except Exception as e:  # noqa: BLE001  (PIL raises many kinds; all mean "not an image")
         raise InputError(f"cannot read as an image ({e.__class__.__name__}: {e}); expected "
                          "a PNG, JPEG or TIFF texture", path, key=key) from None
-    if bits > 8:
-        raise InputError(f"{bits} bits per channel; expected an 8-bit sRGB texture (save "
-                         "it as 8-bit PNG or JPEG)", path, key=key)
     if mode == "CMYK":
         raise InputError("a CMYK image; expected an RGB (sRGB) texture: CMYK has no "
                          "single RGB without its printer's profile", path, key=key)
@@ -88,18 +88,20 @@ def check_texture(path, key: str | None = None, size: int | None = None) -> Text
                          "the skin's colour is read from it", path, key=key)
     if mode not in ("RGB", "RGBA", "P"):
         raise InputError(f"image mode {mode}; expected an RGB texture", path, key=key)
-    if width != height:
+    if square and width != height:
         raise InputError(f"{width}x{height} pixels; expected a square texture (UVs span "
                          "it whole, and texture.size is square): pad or resample it to "
                          f"{max(width, height)}x{max(width, height)}", path, key=key)
     notes = []
+    if bits > 8:
+        notes.append(f"{path}: {bits} bits per channel: read at full depth")
     transparent = 0.0
     if alpha is not None:
         import numpy as np
 
         transparent = float(np.mean(np.asarray(alpha) < 255))
-        notes.append(f"{path}: the alpha channel is ignored ({transparent:.0%} of the "
-                     "texels are not opaque): the colour under it is read")
+        notes.append(f"{path}: has an alpha channel: its transparent texels "
+                     f"({transparent:.0%}) are not skin; the colour is read as it is elsewhere")
     if mode == "P":
         notes.append(f"{path}: a palette image; its colours are read as RGB")
     if size is not None and width != size:

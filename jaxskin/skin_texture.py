@@ -24,8 +24,8 @@ from .io import InputError, atomic_write
 from .skin_maps import BRIGHTNESS, Fixed, Inversion
 
 __all__ = ["MAP_FILES", "SCALES", "cache_beside", "cache_folder", "invert_file",
-           "output_names", "read_texture", "scene_snippet", "texture_digest", "texture_maps",
-           "write_all", "write_report"]
+           "invert_texture", "output_names", "read_texture", "scene_snippet", "texture_digest",
+           "texture_maps", "write_all", "write_report"]
 
 # Each fitted map: its file suffix, the scene keys of its scalar and its image.
 MAP_FILES = {"melanin": ("_melanin.png", "melanin_fraction", "melanin_fraction_image"),
@@ -35,40 +35,46 @@ SCALES = {"melanin": biophysical.RANGES["melanin"][1],
           "haemoglobin": biophysical.RANGES["haemoglobin"][1], "brightness": BRIGHTNESS[1]}
 
 
-def read_texture(path, key=None) -> tuple[np.ndarray, np.ndarray | None, list[str]]:
-    """A colour texture: `(rgb (H, W, 3) display sRGB, alpha (H, W) or None, notes)`.
-    A greyscale image (no colour to invert) is an `InputError`; 16-bit samples are kept
-    (a note says so), and an alpha channel marks its transparent texels as not skin."""
+def read_texture(path, key=None, size: int | None = None, square: bool = False
+                 ) -> tuple[np.ndarray, np.ndarray | None, list[str]]:
+    """A colour texture: `(rgb (H, W, 3) display sRGB, alpha (H, W) or None, notes)`,
+    checked first by `scan.check_texture` (`size`, `square`: its arguments; its notes are
+    returned). An image whose pixels are all grey (no colour to invert) is an `InputError`;
+    16-bit samples are kept, and an alpha channel marks its transparent texels as not
+    skin."""
+    from .scan import check_texture
+
+    notes = list(check_texture(path, key=key, size=size, square=square).notes)
     rgb, alpha = maps.read_image(path, "colour texture", key=key)
     if np.all(rgb == rgb[..., :1]):
         raise InputError("expected a colour (RGB) texture; this one is grey: a skin's colour "
                          "is what the maps are fitted to", path, key=key)
-    notes = []
-    if np.any(np.abs(rgb * 255 - np.round(rgb * 255)) > 1e-6):
-        notes.append(f"{path}: more than 8 bits per sample: fitted at full depth (the "
-                     "reproduction is written with 8)")
-    if alpha is not None:
-        clear = alpha <= 0.0
-        notes.append(f"{path}: has an alpha channel: its {int(clear.sum())} transparent "
-                     "texels are not skin; the colour is read as it is elsewhere")
-        alpha = None if not clear.any() else alpha
+    if alpha is not None and not (alpha <= 0.0).any():
+        alpha = None
     return rgb, alpha, notes
 
 
 def invert_file(path, fixed: Fixed | None = None, threshold: float | None = None, key=None
                 ) -> tuple[np.ndarray, Inversion, list[str]]:
-    """Read a texture (`read_texture`) and invert it (`skin_maps.invert`): `(rgb,
-    inversion, notes)`; transparent texels are not skin; `threshold`: the mask's ΔE2000
-    (default `skin_maps.SKIN_DE`)."""
+    """Read a texture (`read_texture`) and invert it (`invert_texture`): `(rgb, inversion,
+    notes)`."""
+    rgb, alpha, notes = read_texture(path, key=key)
+    return rgb, invert_texture(rgb, alpha, fixed, threshold), notes
+
+
+def invert_texture(rgb, alpha=None, fixed: Fixed | None = None,
+                   threshold: float | None = None) -> Inversion:
+    """`skin_maps.invert` of a texture read by `read_texture`: its transparent texels
+    (`alpha` 0) are not skin; `threshold`: the mask's ΔE2000 (default
+    `skin_maps.SKIN_DE`)."""
     from . import skin_maps
 
-    rgb, alpha, notes = read_texture(path, key=key)
     inv = skin_maps.invert(rgb, fixed=fixed)
     if threshold is not None:
         inv = inv._replace(skin=skin_maps.skin_mask(inv.de, threshold))
     if alpha is not None:
         inv = inv._replace(skin=inv.skin & (alpha > 0))
-    return rgb, inv, notes
+    return inv
 
 
 def texture_digest(path) -> str:
@@ -213,12 +219,12 @@ def texture_maps(path, held: tuple = ()) -> dict[str, np.ndarray]:
     folder = cache_folder(_CACHE[-1], path) / f"{'_'.join(f'{v:g}' for v in fixed)}" if (
         _CACHE) else None
     names = output_names("texture", report=False)
-    rgb, _, _ = read_texture(path, key="skin.texture")
+    rgb, alpha, _ = read_texture(path, key="skin.texture", square=True)
     if folder is not None and all((folder / n).is_file() for n in names.values()):
         out = {k: maps.read_grey(folder / names[k]) * SCALES[k] for k in MAP_FILES}
         out["skin"] = maps.read_grey(folder / names["mask"])
     else:
-        _, inv, _ = invert_file(path, fixed, key="skin.texture")
+        inv = invert_texture(rgb, alpha, fixed)
         out = {k: getattr(inv, k) for k in MAP_FILES}
         out["skin"] = inv.skin.astype(np.float64)
         if folder is not None:

@@ -286,8 +286,7 @@ def _texture(tmp, case):
 
 @pytest.mark.parametrize("case, words", [
     ("wide", "16x8 pixels; expected a square texture"),
-    ("rgb16", "16 bits per channel; expected an 8-bit sRGB texture"),
-    ("grey16", "16 bits per channel"),
+    ("grey16", "a greyscale image (I;16"),
     ("grey", "a greyscale image (L); expected a colour (RGB) texture"),
     ("cmyk", "a CMYK image; expected an RGB (sRGB) texture"),
     ("text", "cannot read as an image (UnidentifiedImageError"),
@@ -303,6 +302,21 @@ def test_a_bad_texture_is_refused_in_one_line(tmp_path, case, words):
     assert "skin.texture" in str(e.value)
 
 
+def test_a_16_bit_texture_is_read_at_full_depth_and_said(tmp_path):
+    """PIL reads a 16-bit RGB PNG as 8-bit without a word: the header says 16, and so does
+    the note (the inversion reads all 16 bits: `maps.read_image`)."""
+    _png16_rgb(tmp_path / "t.png")
+    info = check_texture(tmp_path / "t.png")
+    assert info.bits == 16 and info.notes == (f"{tmp_path / 't.png'}: 16 bits per channel: "
+                                              "read at full depth",)
+
+
+def test_a_photo_need_not_be_square_for_skin_maps(tmp_path):
+    """`square=False` (a photo given to `jaxskin skin-maps`): any aspect."""
+    Image.new("RGB", (16, 8), (200, 150, 120)).save(tmp_path / "w.png")
+    assert check_texture(tmp_path / "w.png", square=False).width == 16
+
+
 def test_alpha_and_palette_textures_are_read_and_said(tmp_path):
     """RGBA (a quarter transparent) and a palette image: accepted, each with a note."""
     rgba = np.full((8, 8, 4), 255, np.uint8)
@@ -311,8 +325,8 @@ def test_alpha_and_palette_textures_are_read_and_said(tmp_path):
     info = check_texture(tmp_path / "a.png", size=16)
     assert info.mode == "RGBA" and info.transparent == 0.25
     assert [n.split(": ", 1)[1] for n in info.notes] == [
-        "the alpha channel is ignored (25% of the texels are not opaque): the colour under "
-        "it is read", "8x8 resampled to texture.size 16"]
+        "has an alpha channel: its transparent texels (25%) are not skin; the colour is read "
+        "as it is elsewhere", "8x8 resampled to texture.size 16"]
     Image.new("RGB", (8, 8), (200, 150, 120)).convert("P").save(tmp_path / "p.png")
     assert check_texture(tmp_path / "p.png").notes[-1].endswith("its colours are read as RGB")
 

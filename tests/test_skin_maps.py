@@ -249,7 +249,7 @@ def _text(tmp):
 
 @pytest.mark.parametrize("make, extra, message", [
     (_grey, [], "expected a colour (RGB) texture"),
-    (_text, [], "cannot read as a colour texture"),
+    (_text, [], "cannot read as an image"),
     (lambda tmp: tmp / "none.png", [], "no such file"),
     (lambda tmp: PHOTO, ["--fix", "melanin=0.1"], "fitted per texel"),
     (lambda tmp: PHOTO, ["--fix", "eumelanin=2"], "expected a number in [0, 1]"),
@@ -285,7 +285,8 @@ def test_16_bit_and_alpha_textures_are_handled_and_said(tmp_path, capsys):
     src.write_bytes(maps.png16_bytes(np.round(rgba * 65535).astype(np.uint16)))
     assert main(["skin-maps", str(src), "-o", str(tmp_path / "out"), "--no-report"]) == 0
     err = capsys.readouterr().err
-    assert "more than 8 bits" in err and "32 transparent texels are not skin" in err
+    assert "16 bits per channel: read at full depth" in err
+    assert "its transparent texels (50%) are not skin" in err
     mask = maps.read_grey(tmp_path / "out" / "deep_skin_mask.png")
     assert not mask[:, :4].any() and mask[:, 4:].all()
 

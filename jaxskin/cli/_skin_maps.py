@@ -62,7 +62,7 @@ def run(args, record: Run) -> int:
     fixed = skin_maps.Fixed(**fixed)
     outputs = Outputs(args.output, [args.file])
     stem = slug(Path(args.file).stem)
-    rgb, _, notes = skin_texture.read_texture(args.file)  # checked before any work
+    rgb, alpha, notes = skin_texture.read_texture(args.file)  # checked before any work
     planned = {what: outputs.plan(name, what) for what, name in
                skin_texture.output_names(stem, not args.no_report).items()}
     record.outputs.append(outputs)
@@ -70,7 +70,7 @@ def run(args, record: Run) -> int:
         note(line)
     record.stage = f"inverting {rgb.shape[1]}x{rgb.shape[0]} texels"
     t0 = time.perf_counter()
-    _, inv, _ = skin_texture.invert_file(args.file, fixed, args.threshold)
+    inv = skin_texture.invert_texture(rgb, alpha, fixed, args.threshold)
     seconds = time.perf_counter() - t0
     record.stage = "writing the maps"
     for path in skin_texture.write_all(inv, rgb, outputs.folder, stem, fixed, planned,
