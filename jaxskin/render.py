@@ -455,6 +455,8 @@ def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: d
 
         cover = jnp.stack([texel_map(params, f"layer.{layer.name}.map", texels,
                                      arrays["cover"][i]) for i, layer in enumerate(sp.layers)])
+        if "own_weight" in arrays:  # cosmetics lie on the skin only: the eyes, hair and
+            cover = cover * (1.0 - arrays["own_weight"])  # teeth outside the mask take none
         layers = {"S": arrays["S"] * per_layer("s_scale")[:, None],
                   "K": arrays["K"] * per_layer("k_scale")[:, None],
                   "X": cover * per_layer("thickness_mm")[:, None],

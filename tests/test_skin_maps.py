@@ -169,6 +169,29 @@ def test_a_flat_render_of_the_snippet_shows_the_texture_colour(tmp_path, texel, 
     assert de.max() < 1.0, de
 
 
+@pytest.mark.parametrize("texel, skin", [((0.78, 0.6, 0.5), True), ((0.2, 0.3, 0.8), False)],
+                         ids=["skin", "blue"])
+def test_cosmetics_lie_on_the_skin_only(tmp_path, texel, skin):
+    """The same flat scenes as above under a thick lipstick over the whole face: on a texel
+    the mask calls skin the lipstick shows (ΔE2000 from the texture over 10); on one it
+    does not (the blue: an eye, hair), the texture's own colour stays as it was (under 1)."""
+    src = tmp_path / "one.png"
+    Image.fromarray(np.uint8(np.round(np.broadcast_to(texel, (16, 16, 3)) * 255))).save(src)
+    assert main(["skin-maps", str(src), "-o", str(tmp_path), "--no-report"]) == 0
+    snippet = (tmp_path / "one_skin.toml").read_text().replace('# file = "scan.obj"',
+                                                                'file = "face"')
+    (tmp_path / "one_skin.toml").write_text(
+        snippet + "[light]\nambient = 1.0\nintensity = 0.0\n[sss]\nenabled = false\n"
+        "[wrinkles]\nenabled = false\n[camera]\nsize = 32\nsupersample = 1\n"
+        "[texture]\nsize = 32\n[[layer]]\nname = \"lips\"\nmaterial = \"lipstick_red\"\n"
+        "thickness_mm = 0.05\nspecular = 0.0\n")
+    sc = load_scene(tmp_path / "one_skin.toml", ["skin.specular=0", "mesh.unit_mm=10"])
+    img = np.asarray(render.render(sc.config, sc.params))[..., :3]
+    lab = colour.XYZ_to_Lab(colour.sRGB_to_XYZ(img[14:18, 14:18].reshape(-1, 3)))
+    de = colour.delta_E(lab, colour.XYZ_to_Lab(colour.sRGB_to_XYZ(texel)), method="CIE 2000")
+    assert (de.min() > 10.0) if skin else (de.max() < 1.0), de
+
+
 def test_own_colour_is_a_stage_only_scenes_with_the_keys_have(tmp_path):
     """Without skin.colour_image and skin.mask_image the prepared arrays have no own
     colour (nothing traced for it); one of the two alone is an error naming the other;
