@@ -14,7 +14,7 @@ import stat
 import tempfile
 from pathlib import Path
 
-__all__ = ["FitError", "InputError", "atomic_write", "check_regular", "data_dir"]
+__all__ = ["FitError", "InputError", "atomic_write", "check_regular", "data_dir", "real_path"]
 
 
 class InputError(ValueError):
@@ -72,6 +72,12 @@ def check_regular(path, expected: str = "a file") -> None:
     if not stat.S_ISREG(mode):
         kind = next((k for test, k in KINDS if test(mode)), "not a file")
         raise InputError(f"not a regular file ({kind}): expected {expected}", path)
+
+
+def real_path(path) -> Path:
+    """`path` absolute, its links followed (`os.path.realpath`): unlike `Path.resolve`,
+    a link loop is no exception here; the file's own check then says what it is."""
+    return Path(os.path.realpath(path))
 
 
 @contextlib.contextmanager

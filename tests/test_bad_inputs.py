@@ -310,6 +310,12 @@ CASES = {
     "brdf-fifo": lambda t: hand(t, "-D", "material.model=lafortune", "-D",
                                 f"material.brdf={fifo(t, 'f.json')}"),
     "layer-image-fifo": lambda t: layered(t, region=f'image = "{Path(fifo(t, "map.png")).name}"'),
+    # --- a link to itself (a loop): "no such file", not "failed unexpectedly" (Path.resolve
+    # raised on it)
+    "layer-image-loop": lambda t: layered(t, region=f'image = "{Path(_link(t / "l.png", "l.png")).name}"'),
+    "mesh-loop": lambda t: (_link(t / "l.obj", "l.obj"), scene(t, '[mesh]\nfile = "l.obj"\n'))[1],
+    "brdf-loop": lambda t: hand(t, "-D", "material.model=lafortune", "-D",
+                                f"material.brdf={_link(t / 'l.json', 'l.json')}"),
     "material-fifo": lambda t: layered(t, fifo(t, "mat.json")),
     # --- polygons
     "polygon-vertex-missing": lambda t: polygon(t, "vertices = [1, 2, 99999]"),

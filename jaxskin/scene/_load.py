@@ -8,7 +8,7 @@ import re
 import tomllib
 from pathlib import Path
 
-from ..io import InputError, data_dir
+from ..io import InputError, data_dir, real_path
 from ..mesh import BUILTIN as BUILTIN_MESHES
 from ..mesh import default_projection
 from ._config import Scene
@@ -241,8 +241,8 @@ def _resolve_files(values: dict, path: Path, from_command_line: dict, allow) -> 
     mesh = values["mesh.file"]
     if mesh not in BUILTIN_MESHES:
         if not Path(mesh).is_absolute():
-            values["mesh.file"] = str((base("mesh.file") / mesh).resolve())
-        allow("mesh.file", Path(values["mesh.file"]).resolve())
+            values["mesh.file"] = str(real_path(base("mesh.file") / mesh))
+        allow("mesh.file", real_path(values["mesh.file"]))
         mesh_path = Path(values["mesh.file"])
         if not mesh_path.is_file():  # named with the file and key; a FIFO would hang trimesh
             what = ("is a folder" if mesh_path.is_dir() else "not a regular file"
@@ -254,9 +254,9 @@ def _resolve_files(values: dict, path: Path, from_command_line: dict, allow) -> 
                              source("mesh.file"), key="mesh.file")
     brdf = values["material.brdf"]
     if brdf != "skin":
-        brdf_path = Path(brdf) if Path(brdf).is_absolute() else (
-            base("material.brdf") / brdf).resolve()
-        allow("material.brdf", brdf_path.resolve())
+        brdf_path = Path(brdf) if Path(brdf).is_absolute() else real_path(
+            base("material.brdf") / brdf)
+        allow("material.brdf", real_path(brdf_path))
         if not brdf_path.is_file():
             raise InputError("expected 'skin' (the preset) or a Lafortune JSON file (as "
                              "written by jaxskin fit-brdf); "
@@ -279,9 +279,9 @@ def _resolve_files(values: dict, path: Path, from_command_line: dict, allow) -> 
         image = values[image_key]
         if image is None:
             continue
-        image_path = Path(image) if Path(image).is_absolute() else (
-            base(image_key) / image).resolve()
-        allow(image_key, image_path.resolve())
+        image_path = Path(image) if Path(image).is_absolute() else real_path(
+            base(image_key) / image)
+        allow(image_key, real_path(image_path))
         if not image_path.is_file():
             what = ("is a folder" if image_path.is_dir() else "not a regular file"
                     if image_path.exists() else "no such file")

@@ -7,7 +7,7 @@ import difflib
 from pathlib import Path
 
 from .. import cosmetics
-from ..io import InputError
+from ..io import InputError, real_path
 from ..texture import EditSpec
 from ._config import LayerSpec
 from ._overrides import check_value, number, numbers, vector
@@ -94,7 +94,7 @@ def _material_file(material, source, base: Path, where: str, allow) -> str:
         raise InputError("expected a material: a shipped one's name or a JSON file written "
                          "by jaxskin calibrate", source, key=f"{where}.material")
     file = cosmetics.material_path(material, base)
-    allow(f"{where}.material", file.resolve())
+    allow(f"{where}.material", real_path(file))
     if file.exists() and not file.is_file():  # /dev/zero: not "no material file"
         raise InputError(f"not a regular file: {file} (expected a material JSON written by "
                          "jaxskin calibrate)", source, key=f"{where}.material")
@@ -116,12 +116,12 @@ def _layer_image(image, path, where: str, allow) -> str | None:
     if not isinstance(image, str):
         raise InputError(f"expected a greyscale image file, got {image!r}", path,
                          key=f"{where}.image")
-    allow(f"{where}.image", (path.parent / image).resolve())
+    allow(f"{where}.image", real_path(path.parent / image))
     if not (path.parent / image).is_file():
-        raise InputError(f"no such file {(path.parent / image).resolve()} (expected a "
+        raise InputError(f"no such file {real_path(path.parent / image)} (expected a "
                          "greyscale image file, taken from the scene file's folder)", path,
                          key=f"{where}.image")
-    return str((path.parent / image).resolve())
+    return str(real_path(path.parent / image))
 
 
 def _ellipses(tables, path, where: str) -> list:
