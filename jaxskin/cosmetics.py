@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import formats, km
-from .io import InputError, data_dir
+from .io import InputError, data_dir, real_path
 from .spectral import Grid
 
 __all__ = ["Material", "check_material", "coverage", "ellipse_map", "extend", "image_map", "layers",
@@ -52,7 +52,7 @@ def material_path(name_or_path, base=None) -> Path:
     shipped = data_dir() / "materials" / f"{key}.json"
     if not Path(key).suffix and Path(key).name == key and shipped.is_file():  # a bare name
         return shipped
-    return Path(key) if base is None else (Path(base) / key).resolve()
+    return Path(key) if base is None else real_path(Path(base) / key)
 
 
 def load_material(name_or_path, grid: Grid) -> Material:

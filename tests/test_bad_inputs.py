@@ -316,6 +316,7 @@ CASES = {
     "mesh-loop": lambda t: (_link(t / "l.obj", "l.obj"), scene(t, '[mesh]\nfile = "l.obj"\n'))[1],
     "brdf-loop": lambda t: hand(t, "-D", "material.model=lafortune", "-D",
                                 f"material.brdf={_link(t / 'l.json', 'l.json')}"),
+    "material-loop": lambda t: layered(t, Path(_link(t / "l.json", "l.json")).name),
     "material-fifo": lambda t: layered(t, fifo(t, "mat.json")),
     # --- polygons
     "polygon-vertex-missing": lambda t: polygon(t, "vertices = [1, 2, 99999]"),
