@@ -42,8 +42,8 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
-from jaxskin import mixture
-from jaxskin.formats import read_json, read_material
+from jaxskin import km, mixture
+from jaxskin.formats import read_material
 from jaxskin.io import FitError, InputError
 
 __all__ = ["GAMUT_DE", "NEEDED", "OBSERVERS", "THICKNESS_MM", "Components", "Match",
@@ -83,12 +83,10 @@ def read_component(path):
     try:
         return read_material(path)
     except InputError as e:
-        if e.key in ("S_per_mm", "K_per_mm"):
-            doc = read_json(path, "material file")
-            if isinstance(doc, dict) and {"S_film", "K_film"} & set(doc):
-                raise InputError("a material of unknown thickness (S_film, K_film): mixing "
-                                 "adds S and K per mm of each pure component; calibrate it "
-                                 "from layers of known thickness", path, key="S_per_mm") from None
+        if e.key == "S_film":  # `read_material`'s words are for a scene
+            raise InputError("a material of unknown thickness (S_film, K_film): mixing adds "
+                             "S and K per mm of each pure component; calibrate it with "
+                             "--thickness MM", path, key="S_film") from None
         raise
 
 
@@ -225,6 +223,7 @@ class Match:
     observer: int = 10
     metamerism: dict | None = None
     hides_background: bool = False
+    saunderson: tuple[float, float] | None = None  # (k1, k2) where the target has a surface
 
     @property
     def in_gamut(self) -> bool:
@@ -241,11 +240,12 @@ def _unpack(p, m, film):
 
 
 def _residuals(p, args, film, fit_x):
-    S, K, W, lab_t, R_t, w, X_fixed, background = args
+    S, K, W, lab_t, R_t, w, X_fixed, background, surface = args
     m = S.shape[0]
     c, X = _unpack(p, m, fit_x)
     X = X if fit_x else X_fixed
-    R = mixture.reflectance(S, K, c, X if film else None, background if film else None)
+    R = km.saunderson(mixture.reflectance(S, K, c, X if film else None,
+                                          background if film else None), *surface)
     out = [lab(R, W) - lab_t, PRIOR * p[:m]]
     if R_t is not None:
         out.append(w * 100.0 * (R - R_t) / math.sqrt(R.shape[-1]))
@@ -253,12 +253,13 @@ def _residuals(p, args, film, fit_x):
 
 
 @functools.partial(jax.jit, static_argnames=("film", "fit_x", "max_steps"))
-def _solve(p0, S, K, W, lab_t, R_t, w, X_fixed, background, film, fit_x, max_steps=400):
+def _solve(p0, S, K, W, lab_t, R_t, w, X_fixed, background, surface, film, fit_x,
+           max_steps=400):
     # The damped step by Cholesky of the small normal equations (as fitting.skin): less to
     # compile than the default QR.
     solver = optx.LevenbergMarquardt(rtol=1e-10, atol=1e-12,
                                      linear_solver=lx.Normal(lx.Cholesky()))
-    args = (S, K, W, lab_t, R_t, w, X_fixed, background)
+    args = (S, K, W, lab_t, R_t, w, X_fixed, background, surface)
     residuals = functools.partial(_residuals, film=film, fit_x=fit_x)
 
     def one(p):
@@ -289,7 +290,7 @@ def _starts(m, starts, fit_x, seed):
 
 def fit(components: Components, target_wavelengths=None, target_R=None, target_lab=None,
         thickness_mm=None, background=None, spectral_weight: float = 0.05, starts: int = 12,
-        seed: int = 0, observer: int = 10) -> Match:
+        seed: int = 0, observer: int = 10, saunderson=(0.0, 0.0)) -> Match:
     """Match a target with a mixture of `components`.
 
     **Arguments:**
@@ -302,6 +303,10 @@ def fit(components: Components, target_wavelengths=None, target_R=None, target_l
     - `spectral_weight`: w of the loss (module docstring); unused for a CIELAB target.
     - `starts`, `seed`: the number of starts and the seed of the random ones.
     - `observer`: 10 (default, the colour-matching industry's) or 2 (the renderer's) degrees.
+    - `saunderson`: `(k1, k2)` of a target measured with the surface (specular included):
+      the mixture's body reflectance is compared after `km.saunderson`, as
+      `jaxskin calibrate --saunderson` reads such readings; (0, 0) (default) compares it
+      as it is.
 
     **Returns:** a `Match`. **Raises:** `InputError` if the target and components share
     less than 400–700 nm; `FitError` if every start failed.
@@ -337,16 +342,17 @@ def fit(components: Components, target_wavelengths=None, target_R=None, target_l
         X_fixed = f64(thickness_mm if film and not fit_x else 1.0)
         p, loss, ok, steps = (np.asarray(a) for a in _solve(
             f64(p0), f64(S), f64(K), f64(W), f64(lab_t), None if R_t is None else f64(R_t),
-            f64(spectral_weight), X_fixed, f64(Rg), film, fit_x))
+            f64(spectral_weight), X_fixed, f64(Rg), f64(saunderson), film, fit_x))
         good = np.isfinite(loss) & np.all(np.isfinite(p), axis=1)
         if not good.any():
             raise FitError("the match failed: every start ended with a non-finite loss")
         best = int(np.argmin(np.where(good, loss, np.inf)))
         c, X = _unpack(f64(p[best]), m, fit_x)
         X = X if fit_x else (float(thickness_mm) if film else None)
-        R = np.asarray(mixture.reflectance(f64(S), f64(K), c, X, f64(Rg) if film else None))
-        hides = film and float(np.max(np.abs(R - np.asarray(mixture.reflectance(
-            f64(S), f64(K), c))))) < 1e-3
+        R = np.asarray(km.saunderson(mixture.reflectance(f64(S), f64(K), c, X, f64(Rg) if film
+                                                         else None), *saunderson))
+        hides = film and float(np.max(np.abs(R - np.asarray(km.saunderson(mixture.reflectance(
+            f64(S), f64(K), c), *saunderson))))) < 1e-3
         c = np.asarray(c)
     lab_m = _lab_np(R, W)
     lab_t = _lab_np(R_t, W) if R_t is not None else lab_t
@@ -365,7 +371,8 @@ def fit(components: Components, target_wavelengths=None, target_R=None, target_l
         dE2000=float(delta_e2000(lab_t, lab_m)),
         rms=None if R_t is None else float(np.sqrt(np.mean((R - R_t) ** 2))),
         converged=bool(ok[best]), steps=int(steps[best]), loss=float(loss[best]),
-        observer=observer, metamerism=metamerism, hides_background=hides)
+        observer=observer, metamerism=metamerism, hides_background=hides,
+        saunderson=tuple(float(k) for k in saunderson) if any(saunderson) else None)
 
 
 def _lab_np(R, W) -> np.ndarray:

@@ -43,6 +43,7 @@ def match_json(result: Match, comps: Components, target=None, spectrum=None, bac
         "dE2000": result.dE2000,
         "in_gamut": bool(result.in_gamut),
         "colour": colour_name(result.observer),
+        **({"saunderson": list(result.saunderson)} if result.saunderson else {}),
         **({"metamerism": result.metamerism} if result.metamerism else {}),
         "Lab_target": floats(result.lab_target),
         "Lab_match": floats(result.lab_match),

@@ -192,6 +192,27 @@ def test_match_recovers_known_concentrations(tmp_path, capsys):
     assert "to make it: jaxskin mix" in out and "warning" not in err
 
 
+def test_match_of_a_target_measured_with_its_surface(x64):
+    """A target read specular included (Saunderson's R_m = k1 + (1-k1)(1-k2) R / (1-k2 R),
+    written out here, k1 0.04, k2 0.6): `saunderson=(k1, k2)` recovers the recipe (within
+    0.01, dE2000 <= 0.1); compared as it is, the surface's light is read as white pigment
+    (off by more than 0.03)."""
+    from jaxskin.fitting import match
+
+    c = np.array([0.62, 0.07, 0.25, 0.06])
+    wl = np.arange(380.0, 781.0, 5.0)
+    comps = match.read_components([MATERIALS / f"{n}.json" for n in PIGMENTS])
+    R = np.asarray(mixture.reflectance(comps.S, comps.K, c))
+    k1, k2 = 0.04, 0.6
+    R_m = k1 + (1 - k1) * (1 - k2) * R / (1 - k2 * R)
+    r = match.fit(comps, wl, R_m, starts=6, saunderson=(k1, k2))
+    assert np.max(np.abs(r.concentrations - c)) < 0.01 and r.dE2000 <= 0.1, r.concentrations
+    assert r.saunderson == (k1, k2)
+    plain = match.fit(comps, wl, R_m, starts=6)
+    assert np.max(np.abs(plain.concentrations - c)) > 0.03, plain.concentrations
+    assert plain.saunderson is None
+
+
 def test_match_recovers_a_film_and_its_thickness(x64):
     """Concentrations within 0.01 and the thickness within 2 % (compiles the film's LM,
     km.layer inside, twice: 14-21 s on two shared cores)."""
@@ -390,7 +411,7 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(case, tmp_path, capsys,
 
 def test_what_the_lines_say(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    for case, words in (("mix-film-material", "film.json: key 'S_per_mm': a material of "
+    for case, words in (("mix-film-material", "film.json: key 'S_film': a material of "
                          "unknown thickness"),
                         ("mix-sum-not-one", "sum to 0.9"),
                         ("mix-negative", "must be a volume fraction in [0, 1]"),

@@ -8,7 +8,7 @@ import time
 
 from .. import cluster
 from ..outputs import Outputs, check_name
-from ._options import no_report, number
+from ._options import no_report, number, saunderson
 from ._process import Run, print_written
 from ._terminal import note, warn
 
@@ -37,13 +37,8 @@ def add_parser(sub) -> None:
                    help="thickness in mm of a bare 'R' column or a contrast card's film "
                    "without one (R_over_black, R_over_white; overrides '# thickness_mm:'); "
                    "warned of when no file has one")
-    c.add_argument("--saunderson", type=_saunderson, metavar="K1,K2",
-                   help="Saunderson's surface correction for readings that include the "
-                   "surface's reflection (specular included, SCI): R_m = K1 + (1-K1)(1-K2) R "
-                   "/ (1 - K2 R), K1 the external (about 0.04; 0 for SCE), K2 the internal "
-                   "reflection (about 0.4-0.6); the KM film and its backgrounds are then "
-                   "internal reflectances, the fit's residuals stay in the readings; recorded "
-                   "in the JSON. Default: none")
+    saunderson(c, "the KM film and its backgrounds are then internal reflectances, the "
+               "fit's residuals stay in the readings; recorded in the JSON")
     c.add_argument("--percent", action="store_true",
                    help="reflectance columns are in percent (0–100) instead of 0–1 (without "
                    "it, a file whose reflectances have a median above 1.5 is read as percent, "
@@ -156,22 +151,6 @@ def _coverage_cells(r) -> tuple[str, str, str]:
         x = cov["hiding_98_films"]
         x98 = "-" if x is None else f"{x:.3g} x film"
     return c, x98, de
-
-
-def _saunderson(text: str) -> tuple[float, float]:
-    """`--saunderson K1,K2`: two numbers in [0, 1)."""
-    import argparse
-    import math
-
-    parts = text.replace(" ", "").split(",")
-    try:
-        k = tuple(float(p) for p in parts)
-    except ValueError:
-        k = ()
-    if len(k) != 2 or not all(math.isfinite(v) and 0 <= v < 1 for v in k):
-        raise argparse.ArgumentTypeError(f"expected K1,K2: two numbers in [0, 1) such as "
-                                         f"0.04,0.6, got {text!r}")
-    return k
 
 
 def _read_all(args, outputs: Outputs, noise: float) -> tuple[list, list]:

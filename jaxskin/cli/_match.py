@@ -11,7 +11,7 @@ from pathlib import Path
 from ..io import InputError
 from ..outputs import Outputs, check_name, slug
 from ._mix import add_density, densities
-from ._options import no_report, number, seed
+from ._options import no_report, number, saunderson, seed
 from ._process import Run, print_written
 from ._terminal import note, warn
 
@@ -75,6 +75,8 @@ def add_parser(sub) -> None:
                    "convention) or 2 (what the renderer and fit-skin use)")
     m.add_argument("--starts", type=number(int, 1, 256), default=12, metavar="S",
                    help="starts, 1-256: equal shares, each component dominant, then random (12)")
+    saunderson(m, "the mixture's body reflectance is compared with the target after the "
+               "correction, as calibrate --saunderson reads such readings; recorded in the JSON")
     seed(m)
     add_density(m, "the match also gives its recipe by weight (concentrations_by_weight)")
     no_report(m, "JSON")
@@ -195,7 +197,8 @@ def run(args, record: Run) -> int:
     record.stage = "matching"
     t0 = time.perf_counter()
     result = match.fit(comps, wl, R, None if args.lab is None else target_lab, thickness,
-                       background, args.spectral_weight, args.starts, args.seed, args.observer)
+                       background, args.spectral_weight, args.starts, args.seed, args.observer,
+                       args.saunderson or (0.0, 0.0))
     seconds = time.perf_counter() - t0
     record.stage = f"writing {json_path.name}"
     from ..fitting.match_report import match_json, write_report

@@ -63,3 +63,26 @@ def seed(p) -> None:
 def no_report(p, what: str) -> None:
     """`--no-report`: write the fit's `what` (JSON, CSV) only, not its PNG report."""
     p.add_argument("--no-report", action="store_true", help=f"write the {what} only, no PNG")
+
+
+def saunderson_pair(text: str) -> tuple[float, float]:
+    """`--saunderson K1,K2`: two numbers in [0, 1)."""
+    parts = text.replace(" ", "").split(",")
+    try:
+        k = tuple(float(p) for p in parts)
+    except ValueError:
+        k = ()
+    if len(k) != 2 or not all(math.isfinite(v) and 0 <= v < 1 for v in k):
+        raise argparse.ArgumentTypeError(f"expected K1,K2: two numbers in [0, 1) such as "
+                                         f"0.04,0.6, got {text!r}")
+    return k
+
+
+def saunderson(p, what: str) -> None:
+    """The `--saunderson K1,K2` option (calibrate, match); `what` says what it does there."""
+    p.add_argument("--saunderson", type=saunderson_pair, metavar="K1,K2",
+                   help="Saunderson's surface correction for readings that include the "
+                   "surface's reflection (specular included, SCI): R_m = K1 + (1-K1)(1-K2) R "
+                   "/ (1 - K2 R), K1 the external (about 0.04; 0 for SCE), K2 the internal "
+                   f"reflection (about 0.4-0.6); {what}. Default: none")
+
