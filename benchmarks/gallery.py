@@ -1,11 +1,14 @@
-"""The gallery: every built-in scene and a melanin × blood grid of the hand, on one sheet.
+"""The gallery: every built-in scene, a melanin × blood grid of the hand, and a scan under
+makeup, on one sheet.
 
     .venv/bin/python benchmarks/gallery.py [--size 320] [--out benchmarks/gallery.png]
 
 Renders each built-in scene at its own settings (only the image size changed) and the Blinn
-hand over melanin × blood in 0–1 (one vmapped program per blood value), and writes one
-contact-sheet PNG, linked from the README. Look at it after any change to what users see;
-tests/test_golden.py holds the small references that fail when it changes.
+hand over melanin × blood in 0–1 (one vmapped program per blood value), and the shipped
+stand-in scan (`data/meshes/astronaut_face.*`, its texture as the skin through
+`skin.texture`) bare, under a sheer foundation, and under the `makeup` scene's full look;
+and writes one contact-sheet PNG, linked from the README. Look at it after any change to
+what users see; tests/test_golden.py holds the small references that fail when it changes.
 """
 
 from __future__ import annotations
@@ -37,7 +40,35 @@ def skin_grid(size: int) -> np.ndarray:
     return np.clip(grid(GRID, GRID, size=size, overrides=["view.mode=wrinkles"]), 0.0, 1.0)
 
 
-def contact_sheet(scenes: dict[str, np.ndarray], grid: np.ndarray, path: Path) -> None:
+SCAN_LOOKS = {  # the makeup scene's layers over the scan: -D overrides per panel
+    "scan: bare": [f"layer.{n}.thickness_mm=0"
+                   for n in ("foundation", "eyeshadow", "blush", "lipstick")],
+    "scan: foundation": ["layer.foundation.thickness_mm=0.001",
+                         *(f"layer.{n}.thickness_mm=0" for n in ("eyeshadow", "blush",
+                                                                  "lipstick"))],
+    "scan: full look": ["layer.foundation.thickness_mm=0.001"],
+}
+
+
+def scan_images(size: int) -> dict[str, np.ndarray]:
+    """The stand-in scan in the `makeup` scene (`SCAN_LOOKS`), biophysical skin from its
+    texture (inverted once, then kept in memory)."""
+    from jaxskin import render
+    from jaxskin.io import data_dir
+    from jaxskin.scene import scene_at_width
+
+    mesh = data_dir() / "meshes" / "astronaut_face"
+    scan = [f"mesh.file={mesh}.obj", "material.model=biophysical",
+            f"skin.texture={mesh}.png"]
+    out = {}
+    for name, extra in SCAN_LOOKS.items():
+        scene = scene_at_width("makeup", size, [*scan, *extra])
+        out[name] = np.clip(np.asarray(render.render(scene.config, scene.params)), 0.0, 1.0)
+    return out
+
+
+def contact_sheet(scenes: dict[str, np.ndarray], grid: np.ndarray, path: Path,
+                  scans: dict[str, np.ndarray] | None = None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -46,11 +77,15 @@ def contact_sheet(scenes: dict[str, np.ndarray], grid: np.ndarray, path: Path) -
     from jaxskin.io import atomic_write
 
     names = list(scenes)
+    scans = scans or {}
     mosaic = [names, [".", *["grid"] * (len(names) - 2), "."]]
-    fig, axes = plt.subplot_mosaic(mosaic, figsize=(3.0 * len(names), 9.5), dpi=110,
-                                   height_ratios=[1.0, 1.6], layout="constrained",
-                                   facecolor="black")
-    for name, image in scenes.items():
+    if scans:
+        side = (len(names) - len(scans)) // 2
+        mosaic.append(["."] * side + list(scans) + ["."] * (len(names) - len(scans) - side))
+    fig, axes = plt.subplot_mosaic(mosaic, figsize=(3.0 * len(names), 9.5 + 3.2 * bool(scans)),
+                                   dpi=110, height_ratios=[1.0, 1.6, 1.0][:len(mosaic)],
+                                   layout="constrained", facecolor="black")
+    for name, image in {**scenes, **scans}.items():
         axes[name].imshow(image)
         axes[name].set_title(name, color="white", fontsize=12)
         axes[name].axis("off")
@@ -80,7 +115,7 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     scenes = {name: scene_image(name, args.size) for name in BUILTIN_SCENES}
     grid = skin_grid(args.grid_size)
-    contact_sheet(scenes, grid, args.out)
+    contact_sheet(scenes, grid, args.out, scan_images(args.size))
     print(f"wrote {args.out} ({time.perf_counter() - t0:.1f} s)")
     return 0
 
