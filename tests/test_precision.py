@@ -79,7 +79,8 @@ def test_the_km_fit_solver_uses_highest_and_float64():
     with jax.enable_x64(True):
         f64 = lambda a: jnp.asarray(a, jnp.float64)  # noqa: E731
         args = (f64([0.05, 0.15]), f64(np.full((n, 2), 0.3)), f64(np.full(n, 0.5)),
-                f64(np.full(n, 0.04)), f64(0.1), jnp.ones(n, bool), f64(np.zeros(n)))
+                f64(np.full(n, 0.04)), f64(0.1), jnp.ones(n, bool), f64(np.zeros(n)),
+                (f64(0.04), f64(0.6)))  # with Saunderson's correction: its products too
         y0 = f64(np.zeros((n, 2)))
         found = []
         for solve in (fit_km._solve_coupled, fit_km._solve_separable):

@@ -125,11 +125,11 @@ def run(args, record: Run) -> int:
     figures = [_coverage_cells(r) for _, r, _ in rows]
     cr = max([8, *(len(f[0]) for f in figures)])
     print(f"{'material':<{wide}} {'bands':>5} {'identifiable':>12} {'rmse':>9} {'steps':>5} "
-          f"{'time s':>7} {'CR':>{cr}} {'hide 98%':>10} {'ΔE00 b/w':>{cr}}")
+          f"{'CR':>{cr}} {'hide 98%':>10} {'ΔE00 b/w':>{cr}} {'time s':>7}")
     for (name, r, dt), (c, x98, de) in zip(rows, figures, strict=True):
         flag = "" if r.converged else "  (not converged: see report)"
         print(f"{name:<{wide}} {len(r.wavelength_nm):>5} {int(r.identifiable.sum()):>12} "
-              f"{r.rmse:>9.2e} {r.steps:>5} {dt:>7.2f} {c:>{cr}} {x98:>10} {de:>{cr}}{flag}")
+              f"{r.rmse:>9.2e} {r.steps:>5} {c:>{cr}} {x98:>10} {de:>{cr}} {dt:>7.2f}{flag}")
     print("CR: contrast ratio Y over black / Y over white of each film as measured, hide 98%: "
           "the thickness where it is 0.98, ΔE00 b/w: CIEDE2000 over black vs white (ASTM "
           "D2805's black 0 and white 0.80 under the film; D65, 10°; x film: in multiples of a "

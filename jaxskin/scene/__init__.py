@@ -78,8 +78,10 @@ brightness = 1.0                   # biophysical: a factor 0–2 on the skin's r
 brightness_image = "b.png"         # biophysical, optional: brightness × this greyscale map
 colour_image = "c.png"             # biophysical, optional, with mask_image: an RGB image whose
                                    #   colour (a smooth spectrum of it) replaces the skin
-mask_image = "s.png"               #   where this greyscale mask is below 1 (skin-maps writes
-                                   #   both: eyes, hair, lips keep the texture's colour)
+                                   #   where mask_image is below 1
+mask_image = "s.png"               # biophysical, optional, with colour_image: a greyscale
+                                   #   mask, 1 on skin; below 1 colour_image shows there,
+                                   #   under no cosmetic layer (skin-maps writes both)
 # texture = "scan.png"             # biophysical, optional: a colour texture inverted into
                                    #   all of the above (jaxskin skin-maps' maps, at the
                                    #   scalars' defaults; they scale them), kept by jaxskin
