@@ -450,7 +450,7 @@ def fit(m: Measurement, smooth: float = 0.0, noise: float = DEFAULT_NOISE,
     if not ident.any() and m.is_card:
         raise InputError(
             f"no band where S can be separated from K: the film reads the same over the card's "
-            f"black and white parts (within 3 x --noise {noise:g}: opaque), or as the card "
+            f"black and white parts (within 3√2 x --noise {noise:g}: opaque), or as the card "
             "alone, or inconsistently at every band; measure a thinner film (or a thicker one "
             "if it cannot be seen)", m.path, m.header_line, m.columns[0])
     if not ident.any():
@@ -467,7 +467,8 @@ def fit(m: Measurement, smooth: float = 0.0, noise: float = DEFAULT_NOISE,
         logS0 = np.interp(wl, wl[valid], np.log(S_cf[valid]))
     else:
         logS0 = np.full_like(wl, -np.log(np.mean(m.thickness_mm)))
-    R_inf0 = cards.r_inf_start(m, saunderson) if m.is_card else m.R_inf
+    R_inf0 = (cards.r_inf_start(m, saunderson) if m.is_card
+              else cards.internal(m, saunderson)[2])
     ratio = np.asarray(km.ks_from_r_inf(np.clip(R_inf0, 1e-4, 1 - 1e-6)))
     logK0 = np.where(valid, np.log(np.where(valid, K_cf, 1.0)), logS0 + np.log(ratio))
     if solver == "dense":
@@ -477,7 +478,7 @@ def fit(m: Measurement, smooth: float = 0.0, noise: float = DEFAULT_NOISE,
 
     with jax.enable_x64(True):
         f64 = functools.partial(jnp.asarray, dtype=jnp.float64)
-        Rg = cards.internal(m, saunderson)[1] if m.is_card else m.backgrounds
+        Rg = cards.internal(m, saunderson)[1]  # internal, as the model's films are
         sd = None if saunderson is None else tuple(f64(k) for k in saunderson)
         data = (f64(m.thickness_mm), f64(m.R.T), None if m.R_inf is None else f64(m.R_inf),
                 f64(Rg.T), f64(smooth * noise), jnp.asarray(ident))

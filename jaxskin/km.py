@@ -184,14 +184,16 @@ def two_backgrounds(
     def L(R):
         return 0.5 * jnp.log(jnp.abs((inv - R) / (R_inf - R)))
 
-    # R_b strictly between Rg_b and R∞ (R_b = R∞: opaque, S·X = inf, left to the log)
-    inside = (Rb - Gb) * (R_inf - Rb) > 0
-    opaque = Rb == R_inf
+    # R_b strictly between Rg_b and R∞. Opaque: the film reads the same over both
+    # backgrounds (then a = (R + 1/R)/2 exactly, R∞ = R_b; the recomputed R∞ is rarely
+    # bit-equal to R_b, so the readings decide), S·X = inf.
+    opaque = Rb == Rw
+    inside = ((Rb - Gb) * (R_inf - Rb) > 0) & ~opaque
     Rb_safe = jnp.where(inside, Rb, 0.5 * (Gb + R_inf))
     SX = jnp.where(opaque, jnp.inf, (L(Rb_safe) - L(Gb)) / b)
     good = ok & (inside | opaque)
     nan = jnp.full_like(SX, jnp.nan)
-    return jnp.where(good, R_inf, nan), jnp.where(good, SX, nan)
+    return jnp.where(good, jnp.where(opaque, Rb, R_inf), nan), jnp.where(good, SX, nan)
 
 
 def saunderson(R: Float[ArrayLike, "*shape"], k1, k2) -> Float[Array, "*shape"]:

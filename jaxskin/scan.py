@@ -26,9 +26,9 @@ MAX_TEXTURE = 8192
 @dataclasses.dataclass(frozen=True)
 class TextureInfo:
     """What `check_texture` found: `width`, `height` (pixels), PIL's `mode` ('RGB', 'RGBA',
-    'P'), `bits` per channel, `transparent` (the fraction of pixels whose alpha is below
-    1; 0 without alpha) and `notes`: one line each about what the reader will do that the
-    user should know (alpha ignored, palette expanded, resampled)."""
+    'P'), `bits` per channel, `transparent` (the fraction of pixels whose alpha is 0: not
+    skin; 0 without alpha) and `notes`: one line each about what the reader will do that
+    the user should know (16 bits read, transparent texels, palette expanded, resampled)."""
 
     path: str
     width: int
@@ -99,7 +99,7 @@ def check_texture(path, key: str | None = None, size: int | None = None,
     if alpha is not None:
         import numpy as np
 
-        transparent = float(np.mean(np.asarray(alpha) < 255))
+        transparent = float(np.mean(np.asarray(alpha) == 0))  # as read_texture drops them
         notes.append(f"{path}: has an alpha channel: its transparent texels "
                      f"({transparent:.0%}) are not skin; the colour is read as it is elsewhere")
     if mode == "P":

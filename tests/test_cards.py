@@ -73,6 +73,16 @@ def test_two_backgrounds_outside_its_domain_is_nan_not_an_error(x64):
     assert float(R_inf[2]) == pytest.approx(0.4, abs=1e-12) and np.isinf(SX[2])
 
 
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_an_opaque_film_is_opaque_at_any_reading(x64, dtype):
+    """A film that reads the same over black and white is opaque whatever its reading: R∞
+    is that reading and S·X = inf (before, the recomputed R∞ had to equal the reading to
+    the bit: 0.3 gave S·X 11.9, 0.123456 NaN, in float32 0.7 NaN)."""
+    R = jnp.asarray([0.5, 0.3, 0.123456, 0.7], dtype)
+    R_inf, SX = km.two_backgrounds(R, R, jnp.full(4, 0.02, dtype), jnp.full(4, 0.85, dtype))
+    assert np.array_equal(np.asarray(R_inf), np.asarray(R)) and np.isinf(SX).all()
+
+
 @pytest.mark.parametrize("SX, KX, Gb, Gw", [POINTS[0], POINTS[3], POINTS[4]])
 def test_two_backgrounds_gradients(x64, SX, KX, Gb, Gw):
     Rb, Rw = (float(_mp_reflectance(mp.mpf(SX), mp.mpf(KX), g)) for g in (Gb, Gw))
@@ -122,6 +132,28 @@ def card(S, K, thicknesses, noise=0.0, known=True, seed=0, saunderson=None, r_in
     return Measurement(Path("card.csv"), "card", WL, np.array(th), np.array(rows),
                        R_inf if r_inf else None, black, tuple(names), 1, (), white,
                        tuple(over), known)
+
+
+def test_saunderson_on_the_classic_layout_reads_the_background_as_a_reading():
+    """Thin films over one background, R∞ and the background alone, all read specular
+    included (k1 0.04, k2 0.6): with `saunderson` the background's reading is made internal
+    too, and S, K come back to 1e-6 (before, it was taken as internal: off by up to 90x)."""
+    S, K = make_measurements.true_spectra("foundation_beige")
+    k = (0.04, 0.6)
+    Rg = np.full(WL.shape, 0.3)  # the background's internal reflectance
+    Xs = [0.005, 0.02]
+    with jax.enable_x64(True):
+        rows = np.array([np.asarray(km.saunderson(km.over(*km.layer(S, K, X), Rg), *k))
+                         for X in Xs])
+        R_inf = np.asarray(km.saunderson(km.r_inf(S, K), *k))
+        Rg_seen = np.asarray(km.saunderson(Rg, *k))
+    m = Measurement(Path("m.csv"), "m", WL, np.array(Xs), rows, R_inf, Rg_seen,
+                    ("R_0.005mm", "R_0.02mm"), 1)
+    r = fkm.fit(m, saunderson=k)
+    i = r.identifiable
+    assert i.sum() >= 70 and r.converged
+    np.testing.assert_allclose(r.S_per_mm[i], S[i], rtol=1e-6)
+    np.testing.assert_allclose(r.K_per_mm[i], K[i], rtol=1e-6)
 
 
 @pytest.mark.parametrize("known", [True, False])
