@@ -304,10 +304,11 @@ def invert(rgb, grid: Grid | None = None, fixed: Fixed | None = None, polish: in
     aim, p = target, _lookup(tab, target)
     xyz = forward(p)
     err = np.linalg.norm(_lab_np(xyz, white) - target, axis=-1)
+    last = xyz  # the colour the last aim gave: the next aim corrects that, not the best
     for _ in range(int(polish)):
-        aim = aim + (target - _lab_np(xyz, white))
+        aim = aim + (target - _lab_np(last, white))
         p_new = _lookup(tab, aim)
-        xyz_new = forward(p_new)
+        xyz_new = last = forward(p_new)
         err_new = np.linalg.norm(_lab_np(xyz_new, white) - target, axis=-1)
         better = err_new < err
         p[better], xyz[better], err[better] = p_new[better], xyz_new[better], err_new[better]
