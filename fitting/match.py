@@ -305,8 +305,8 @@ def fit(components: Components, target_wavelengths=None, target_R=None, target_l
     - `observer`: 10 (default, the colour-matching industry's) or 2 (the renderer's) degrees.
     - `saunderson`: `(k1, k2)` of a target measured with the surface (specular included):
       the mixture's body reflectance is compared after `km.saunderson`, as
-      `jaxskin calibrate --saunderson` reads such readings; (0, 0) (default) compares it
-      as it is.
+      `jaxskin calibrate --saunderson` reads such readings, and a film's `background` is
+      taken as read the same way (made internal); (0, 0) (default) compares it as it is.
 
     **Returns:** a `Match`. **Raises:** `InputError` if the target and components share
     less than 400–700 nm; `FitError` if every start failed.
@@ -332,6 +332,8 @@ def fit(components: Components, target_wavelengths=None, target_R=None, target_l
         Rg = resample_target(*background, grid)
     else:
         Rg = np.full(len(grid), float(background))
+    if background is not None and any(saunderson):  # a background read as the target was
+        Rg = np.clip(np.asarray(km.saunderson_inverse(Rg, *saunderson)), 0.0, 1.0)
     m, fit_x = len(components.names), thickness_mm == "fit"
     p0 = _starts(m, starts, fit_x, seed)
     with jax.enable_x64(True):

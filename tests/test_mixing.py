@@ -213,6 +213,27 @@ def test_match_of_a_target_measured_with_its_surface(x64):
     assert plain.saunderson is None
 
 
+def test_match_of_a_film_over_a_background_both_read_with_their_surface(x64):
+    """A 8 µm film over a background, the film and the background alone both read specular
+    included (written out: k1 0.04, k2 0.6): with `saunderson` the background's reading is
+    made internal too, and the recipe comes back within 0.01."""
+    from jaxskin.fitting import match
+
+    c = np.array([0.5, 0.2, 0.3])
+    k1, k2 = 0.04, 0.6
+    wl = np.arange(380.0, 781.0, 5.0)
+    Rg = np.linspace(0.2, 0.5, 81)  # internal
+    comps = match.read_components([MATERIALS / f"{n}.json" for n in PIGMENTS[:3]])
+    R = np.asarray(mixture.reflectance(comps.S, comps.K, c, 0.008, Rg))
+
+    def seen(r):
+        return k1 + (1 - k1) * (1 - k2) * r / (1 - k2 * r)
+
+    r = match.fit(comps, wl, seen(R), thickness_mm=0.008, background=(wl, seen(Rg)),
+                  starts=6, saunderson=(k1, k2))
+    assert np.max(np.abs(r.concentrations - c)) < 0.01 and r.dE2000 <= 0.1, r.concentrations
+
+
 def test_match_recovers_a_film_and_its_thickness(x64):
     """Concentrations within 0.01 and the thickness within 2 % (compiles the film's LM,
     km.layer inside, twice: 14-21 s on two shared cores)."""

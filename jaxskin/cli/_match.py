@@ -76,7 +76,8 @@ def add_parser(sub) -> None:
     m.add_argument("--starts", type=number(int, 1, 256), default=12, metavar="S",
                    help="starts, 1-256: equal shares, each component dominant, then random (12)")
     saunderson(m, "the mixture's body reflectance is compared with the target after the "
-               "correction, as calibrate --saunderson reads such readings; recorded in the JSON")
+               "correction, and a --background as read the same way, as calibrate --saunderson "
+               "reads such readings; recorded in the JSON")
     seed(m)
     add_density(m, "the match also gives its recipe by weight (concentrations_by_weight)")
     no_report(m, "JSON")
