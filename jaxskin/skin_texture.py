@@ -23,7 +23,7 @@ from . import biophysical, maps
 from .io import InputError, atomic_write
 from .skin_maps import BRIGHTNESS, Fixed, Inversion
 
-__all__ = ["MAP_FILES", "SCALES", "cache_beside", "cache_folder", "invert_file",
+__all__ = ["MAP_FILES", "SCALES", "cache_beside", "cache_folder",
            "invert_texture", "output_names", "read_texture", "scene_snippet", "texture_digest",
            "texture_maps", "write_all", "write_report"]
 
@@ -52,14 +52,6 @@ def read_texture(path, key=None, size: int | None = None, square: bool = False
     if alpha is not None and not (alpha <= 0.0).any():
         alpha = None
     return rgb, alpha, notes
-
-
-def invert_file(path, fixed: Fixed | None = None, threshold: float | None = None, key=None
-                ) -> tuple[np.ndarray, Inversion, list[str]]:
-    """Read a texture (`read_texture`) and invert it (`invert_texture`): `(rgb, inversion,
-    notes)`."""
-    rgb, alpha, notes = read_texture(path, key=key)
-    return rgb, invert_texture(rgb, alpha, fixed, threshold), notes
 
 
 def invert_texture(rgb, alpha=None, fixed: Fixed | None = None,

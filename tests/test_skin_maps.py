@@ -352,7 +352,8 @@ def test_skin_texture_key_renders_the_texture_and_caches_it(tmp_path, monkeypatc
         raise AssertionError("inverted again")
 
     skin_texture._MEMO.clear()
-    monkeypatch.setattr(skin_texture, "invert_file", no_inversion)
+    render.prepare.cache_clear()  # else the arrays prepared above are reused, not the files
+    monkeypatch.setattr(skin_texture, "invert_texture", no_inversion)
     assert main(["render", str(tmp_path / "s.toml"), "-o", str(out)]) == 0
     maps.write_grey16(np.ones((4, 4)), tmp_path / "h.png")
     with pytest.raises(InputError, match="give one of the two"):
