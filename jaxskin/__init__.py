@@ -34,6 +34,7 @@ Optics (Bando 2001 §4.2; Huang et al. 2013):
 - `shading`: one model per module: `shading.blinn`, `shading.lafortune`, `shading.kelemen`
   and `shading.layered` (KM layers over skin with SSS and per-layer specular).
 - `precision`: float32 products at full precision on every device.
+- `vectors`: dot products and unit vectors over a last axis of three, written out (fast on CPU).
 - `linear`: a linear map with a transpose written by hand.
 
 Pipeline:

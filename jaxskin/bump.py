@@ -37,6 +37,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from .vectors import dot, unit
+
 __all__ = ["bump_normals", "frame_bump_normals", "height_gradient"]
 
 
@@ -87,7 +89,7 @@ def frame_bump_normals(
 
     def tangential(g):
         g = jnp.asarray(g, n.dtype)
-        return g - jnp.sum(g * n, axis=-1, keepdims=True) * n
+        return g - dot(g, n, keepdims=True) * n
 
     g = hs[..., None] * tangential(grad_s) + ht[..., None] * tangential(grad_t)
     return _unit(jnp.where(jnp.any(n != 0, axis=-1, keepdims=True), n - k_bump * g, 0.0))
@@ -95,6 +97,4 @@ def frame_bump_normals(
 
 def _unit(N):
     """N / |N|, 0 where N = 0 (double `where`: finite value and gradient)."""
-    norm2 = jnp.sum(N * N, axis=-1, keepdims=True)
-    ok = norm2 > 0
-    return jnp.where(ok, N / jnp.sqrt(jnp.where(ok, norm2, 1.0)), 0.0)
+    return unit(N)

@@ -41,6 +41,7 @@ from .raster import interpolate
 from .render_args import check_call, check_maps, check_ranges, known_keys, strong
 from .scene import BIOPHYSICAL_KEYS, SKIN_MAPS, SceneConfig
 from .shading import blinn, lafortune, layered
+from .vectors import dot, unit
 from .view import (
     PIXEL_TABLE,
     View,
@@ -317,9 +318,7 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
     else:
         # Shade where the camera looks: the bumped normal map sampled into the view (fewer
         # samples than texels), in the object's frame.
-        n = to_view(normals)
-        nn = jnp.sum(n * n, axis=-1, keepdims=True)
-        N = jnp.where(nn > 0, n / jnp.sqrt(jnp.where(nn > 0, nn, 1.0)), 0.0)
+        N = unit(to_view(normals))
         L, V = _light_and_view(arrays, params["light.direction"], jnp.float32,
                                lambda: to_view(arrays["positions"]))
         ambient, light = params["light.ambient"], params["light.intensity"]
@@ -380,7 +379,7 @@ def _light_and_view(arrays: dict, direction, dtype, positions):
     if "eye" not in arrays:
         return L, matmul(jnp.asarray([0.0, 0.0, 1.0], dtype), R)
     to_eye = jnp.asarray(arrays["eye"], dtype) - matmul(positions(), R.T)
-    return L, matmul(to_eye / jnp.linalg.norm(to_eye, axis=-1, keepdims=True), R)
+    return L, matmul(to_eye / jnp.sqrt(dot(to_eye, to_eye, keepdims=True)), R)
 
 
 def expose(linear, stops):

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
+from ..vectors import dot
 from .lafortune import positive_power
 
 __all__ = ["A_BLOOD", "A_MELANIN", "R_BASE", "shade", "skin_colour"]
@@ -62,12 +63,12 @@ def shade(N, L, V, melanin, blood, specular, shininess, ambient=0.3, light=0.7):
     light and the viewer (broadcastable); `ambient`, `light`: irradiances (module
     docstring). **Returns:** colour `(..., 3)`."""
     r = skin_colour(melanin, blood)
-    cos_t = jnp.sum(N * L, axis=-1)
+    cos_t = dot(N, L)
     h = L + V
-    hh = jnp.sum(h * h, axis=-1, keepdims=True)
+    hh = dot(h, h, keepdims=True)
     ok = hh > 0  # L = −V: no half vector, no highlight
     H = jnp.where(ok, h / jnp.sqrt(jnp.where(ok, hh, 1.0)), 0.0)
-    cos_g = jnp.where(cos_t > 0, jnp.sum(N * H, axis=-1), 0.0)
+    cos_g = jnp.where(cos_t > 0, dot(N, H), 0.0)
     spec = positive_power(cos_g, shininess)
     return (ambient * r + light * r * jnp.maximum(cos_t, 0.0)[..., None]
             + light * specular * spec[..., None])

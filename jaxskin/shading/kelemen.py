@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
+from ..vectors import dot
+
 __all__ = ["F0_SKIN", "specular"]
 
 F0_SKIN = 0.028
@@ -26,16 +28,16 @@ def specular(N, L, V, roughness, rho_s, F0=F0_SKIN):
     reflectance at normal incidence.
     """
     h = L + V
-    hh = jnp.sum(h * h, axis=-1)
+    hh = dot(h, h)
     has_h = hh > 1e-12
     H = h / jnp.sqrt(jnp.where(has_h, hh, 1.0))[..., None]
-    cos_l = jnp.sum(N * L, axis=-1)
-    cos_a = jnp.sum(N * H, axis=-1)
+    cos_l = dot(N, L)
+    cos_a = dot(N, H)
     ok = has_h & (cos_a > 1e-4) & (cos_l > 0)
     c = jnp.where(ok, cos_a, 1.0)
     c2 = c * c
     m2 = roughness * roughness
     P_H = jnp.exp(-(1.0 - c2) / (c2 * m2)) / (m2 * c2 * c2)
-    F = F0 + (1.0 - F0) * (1.0 - jnp.clip(jnp.sum(H * L, axis=-1), 0.0, 1.0)) ** 5
+    F = F0 + (1.0 - F0) * (1.0 - jnp.clip(dot(H, L), 0.0, 1.0)) ** 5
     value = rho_s * cos_l * P_H * F / jnp.where(has_h, hh, 1.0)
     return jnp.where(ok, value, 0.0)

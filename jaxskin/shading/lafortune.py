@@ -26,6 +26,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ..io import InputError
+from ..vectors import dot
 
 __all__ = ["Lafortune", "brdf", "from_json", "positive_power", "shade", "skin", "to_json"]
 
@@ -78,10 +79,10 @@ def shade(p: Lafortune, N, L, V, ambient=0.3, light=0.7):
     **Arguments:** `N (..., 3)` unit normals, `L`, `V` unit vectors to light and viewer
     (broadcastable), `ambient`, `light`: I_ambient and I_light. **Returns:** `(..., 3)`.
     """
-    cos_l = jnp.sum(N * L, axis=-1)
-    cos_v = jnp.sum(N * V, axis=-1)
+    cos_l = dot(N, L)
+    cos_v = dot(N, V)
     zz = cos_l * cos_v
-    f = _evaluate(p, jnp.sum(L * V, axis=-1) - zz, zz)
+    f = _evaluate(p, dot(L, V) - zz, zz)
     return ambient * p.diffuse + (math.pi * light) * f * jnp.maximum(cos_l, 0.0)[..., None]
 
 

@@ -48,6 +48,7 @@ from .. import km
 from ..linear import linear_call
 from ..precision import matmul
 from ..spectral import Grid
+from ..vectors import dot
 from . import kelemen
 
 __all__ = ["COVER_MM", "irradiance", "radiance"]
@@ -57,7 +58,7 @@ COVER_MM = 0.001  # a layer's surface (its highlight) is there at a few microns
 
 def irradiance(N, L, ambient, light):
     """E = I_ambient + I_light max(0, N·L) per texel: `(...)` from `N (..., 3)`."""
-    return ambient + light * jnp.maximum(jnp.sum(N * L, axis=-1), 0.0)
+    return ambient + light * jnp.maximum(dot(N, L), 0.0)
 
 
 def radiance(grid: Grid, N, L, V, ambient, light, skin_R, skin_roughness, skin_rho,
