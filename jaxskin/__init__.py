@@ -35,6 +35,7 @@ Optics (Bando 2001 §4.2; Huang et al. 2013):
   and `shading.layered` (KM layers over skin with SSS and per-layer specular).
 - `precision`: float32 products at full precision on every device.
 - `vectors`: dot products and unit vectors over a last axis of three, written out (fast on CPU).
+- `samples`: the view's samples on the mesh as a list (Blinn and Lafortune shade only those).
 - `linear`: a linear map with a transpose written by hand.
 
 Pipeline:

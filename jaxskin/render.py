@@ -39,6 +39,7 @@ from . import biophysical, cosmetics, formats, maps, shadow, skin, sss, texture
 from .precision import matmul
 from .raster import interpolate
 from .render_args import check_call, check_maps, check_ranges, known_keys, strong
+from .samples import sample_list, to_pixels
 from .scene import BIOPHYSICAL_KEYS, SKIN_MAPS, SceneConfig
 from .shading import blinn, lafortune, layered
 from .vectors import dot, unit
@@ -117,6 +118,10 @@ def _prepare(config: SceneConfig) -> Prepared:
     if config.spectral is not None and config.mode != "height":
         tables = pixel_table(view.tex, view.shaded, arrays["pad"], s.mask.shape, view.wrap_x,
                              config.supersample)
+    elif config.mode != "height":  # Blinn, Lafortune: the samples on the mesh as a list
+        tables = sample_list(view.tex, view.shaded, config.supersample)
+        tables.update(transpose_table(tables["list_tex"], tables["list_on"], arrays["pad"],
+                                      s.mask.shape, view.wrap_x))
     else:
         tables = transpose_table(view.tex, view.shaded, arrays["pad"], s.mask.shape,
                                  view.wrap_x)
@@ -316,21 +321,28 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
                                                                   normals))
         return _finish(None, view_mask, k, output, params["camera.exposure"], mean)
     else:
-        # Shade where the camera looks: the bumped normal map sampled into the view (fewer
-        # samples than texels), in the object's frame.
-        N = unit(to_view(normals))
+        # Shade where the camera looks: the bumped normal map sampled at the view's samples
+        # on the mesh (`jaxskin.samples`: fewer than the texels), in the object's frame.
+        def to_list(texture_image):
+            return sample_padded(texture_image, arrays["pad"], arrays["list_tex"],
+                                 arrays["list_on"], p.view.wrap_x, table)
+
+        N = unit(to_list(normals))
         L, V = _light_and_view(arrays, params["light.direction"], jnp.float32,
-                               lambda: to_view(arrays["positions"]))
+                               lambda: to_list(arrays["positions"]))
         ambient, light = params["light.ambient"], params["light.intensity"]
         if "lit" in arrays:  # shadows: the direct light only where the light reaches
-            light = light * arrays["lit"][..., None]
+            light = light * arrays["lit"].reshape(-1)[arrays["list_index"]][..., None]
         if config.material == "blinn":
             colour = blinn.shade(N, L, V, params["material.melanin"], params["material.blood"],
                                  params["material.specular"], params["material.shininess"],
                                  ambient, light)
         else:
             colour = lafortune.shade(params["material.lafortune"], N, L, V, ambient, light)
-        colour = jnp.where(shaded[..., None], colour, 0.0)
+        colour = jnp.where(arrays["list_on"][..., None], colour, 0.0)
+        pixels = (view_mask.shape[0] // k, view_mask.shape[1] // k)
+        mean = to_pixels(colour, arrays["list_pixel"], arrays["pixel_list"], pixels)
+        return _finish(None, view_mask, k, output, params["camera.exposure"], mean)
     if config.mode == "height":
         return _finish(colour, view_mask, k, output, None)
     # Every material model gives linear sRGB on one scale (`shading.blinn`'s docstring):

@@ -20,7 +20,7 @@ import time
 
 import numpy as np
 
-from .. import maps, render, texture
+from .. import maps, render, samples, texture
 from ..scene import LayerSpec, SceneConfig
 
 __all__ = ["Rendering"]
@@ -54,11 +54,26 @@ class Rendering:
         # gradients): its row count changes with every turn or zoom, and so would the
         # arrays' shapes and the compiled program.
         arrays = {k: v for k, v in prepared.arrays.items() if k not in render.VIEWS}
+        if "list_tex" in arrays:  # Blinn, Lafortune: every sample listed, so that a turn
+            arrays.update(self._full_list(prepared, config.supersample))  # keeps the shapes
         if config.needs_furrows:
             arrays["h0"] = texture.furrows(config.texture)[0]
         if self.paint and config.spectral is not None:
             arrays["cover"] = self._cover(config, arrays)
         return arrays
+
+    def _full_list(self, prepared, k: int) -> dict:
+        """`samples.sample_list` of the prepared view as long as the view has samples: the
+        render's list is as long as the samples on the mesh (rounded up), which a turn or
+        a zoom changes, and with it the compiled program."""
+        import jax.numpy as jnp
+
+        cached = getattr(self, "_list_cache", None)
+        if cached is None or cached[0] is not prepared:
+            view = prepared.view
+            full = samples.sample_list(view.tex, view.shaded, k, length=view.shaded.size)
+            self._list_cache = cached = (prepared, {n: jnp.asarray(v) for n, v in full.items()})
+        return cached[1]
 
     def _prepared_config(self, config: SceneConfig) -> SceneConfig:
         """A configuration equal to `config` but for what `arrays` puts in (field edits,

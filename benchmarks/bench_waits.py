@@ -1,0 +1,142 @@
+"""What users wait for (issue 38), this tree beside a baseline revision, in one run.
+
+Each figure is measured in a fresh process (`--item NAME`), alternately for this tree and
+for the baseline (a git worktree of `--baseline REV`, default the commit before issue 38's
+work, on `PYTHONPATH`), so the two see the same machine and the same load; the table gives
+both medians and their ratio. Warm medians: each process warms its program up first; the
+second `jaxskin render hand` is timed from the shell after a first one has filled the
+compilation cache.
+
+    .venv/bin/python benchmarks/bench_waits.py [--baseline REV] [--rounds N] [--write]
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from common import machine, table, write_section
+
+ROOT = Path(__file__).resolve().parents[1]
+BASELINE = "e1e6641"  # main before issue 38
+REPEAT = 9
+
+# (item, what the user waits for, aim in seconds)
+ITEMS = [
+    ("hand_preview", "editor, dragging: a parameter change on the hand (preview)", 0.050),
+    ("stroke_preview", "editor, dragging: a brush stroke on the makeup face (preview)", 0.100),
+    ("hand_final", "editor, on release: a parameter change on the hand (final)", 0.250),
+    ("stroke_final", "editor, on release: a brush stroke on the makeup face (final)", 0.250),
+    ("makeup_frame", "the default makeup frame, 1280×720", 0.100),
+    ("hand_frame", "the default Blinn hand frame", 0.040),
+    ("second_render", "a second `jaxskin render hand` from the shell", 4.0),
+]
+
+
+def _median(step, repeat=REPEAT):
+    step(0)  # warm: compiles
+    times = []
+    for i in range(1, repeat + 1):
+        t0 = time.perf_counter()
+        step(i)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def _item(name: str) -> float:
+    """One figure, in this process (`--item`): the median seconds."""
+    import jax
+
+    from jaxskin import compile_cache
+    compile_cache.enable()
+    out = tempfile.mkdtemp(prefix="bench_waits_")
+    if name in ("hand_preview", "hand_final", "stroke_preview", "stroke_final"):
+        from jaxskin.editor import Session
+        preview = name.endswith("preview")
+        if name.startswith("hand"):
+            s = Session("hand", out)
+
+            def step(i):
+                s.set({"material.melanin": 0.1 + 0.05 * (i % 8)})
+                s.image_file(preview)
+        else:
+            s = Session("makeup", out)
+
+            def step(i):
+                y = 200 + 8 * i
+                s.paint_stroke("bench", "blush", [[200, y], [260, y]], 12, 0.5)
+                s.image_file(preview)
+        return _median(step)
+    if name in ("makeup_frame", "hand_frame"):
+        from jaxskin import render
+        from jaxskin.scene import load_scene
+        sc = (load_scene("makeup", ["camera.size=1280", "camera.height=720"])
+              if name == "makeup_frame" else load_scene("hand"))
+        return _median(lambda i: jax.block_until_ready(render.render(sc.config, sc.params)))
+    if name == "second_render":
+        cmd = [sys.executable, "-m", "jaxskin.cli", "render", "hand", "-o", out]
+        subprocess.run(cmd, check=True, capture_output=True)  # fills the cache
+
+        def step(i):
+            subprocess.run(cmd, check=True, capture_output=True)
+        return _median(step, 3)
+    raise SystemExit(f"no item {name!r}")
+
+
+def _run(tree: Path, name: str) -> float:
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    r = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--item", name],
+                       cwd=tempfile.gettempdir(), env=env, capture_output=True, text=True)
+    if r.returncode:
+        raise SystemExit(f"{name} in {tree}: {r.stderr.strip().splitlines()[-1:]}")
+    return json.loads(r.stdout.strip().splitlines()[-1])["seconds"]
+
+
+def main(argv) -> int:
+    if "--item" in argv:
+        print(json.dumps({"seconds": _item(argv[argv.index("--item") + 1])}))
+        return 0
+    rev = argv[argv.index("--baseline") + 1] if "--baseline" in argv else BASELINE
+    rounds = int(argv[argv.index("--rounds") + 1]) if "--rounds" in argv else 2
+    base = Path(tempfile.mkdtemp(prefix="bench_waits_base_")) / "tree"
+    subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(base), rev],
+                   check=True, capture_output=True)
+    rows, loads = [], []
+    try:
+        for name, what, aim in ITEMS:
+            ours, theirs = [], []
+            for _ in range(rounds):  # alternately: both see the same load
+                theirs.append(_run(base, name))
+                ours.append(_run(ROOT, name))
+                loads.append(os.getloadavg()[0])
+            o, t = statistics.median(ours), statistics.median(theirs)
+            unit, scale = ("s", 1.0) if aim >= 1 else ("ms", 1e3)
+            rows.append((what, f"{t * scale:.{2 if unit == 's' else 0}f} {unit}",
+                         f"{o * scale:.{2 if unit == 's' else 0}f} {unit}", f"{o / t:.2f}",
+                         f"≤ {aim * scale:g} {unit}", "yes" if o <= aim else "**no**"))
+            print(rows[-1], flush=True)
+    finally:
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(base)],
+                       capture_output=True)
+    body = table(["what a user waits for", f"before ({rev})", "now", "now / before", "aim",
+                  "met"], rows)
+    body += (f"\n\nMedians over {rounds} processes each, alternating (each process: "
+             f"the median of {REPEAT} warm calls; the second render: of 3 runs). Load "
+             f"average during the run: {min(loads):.1f}–{max(loads):.1f} on "
+             f"{os.cpu_count()} cores.")
+    print(body)
+    if "--write" in argv:
+        write_section("waits", "## What users wait for (issue 38)\n\n"
+                      "Command: `.venv/bin/python benchmarks/bench_waits.py --write`. "
+                      f"Machine: {machine()}.\n\n" + body)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
