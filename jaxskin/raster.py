@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -137,11 +138,17 @@ def interpolate(attributes, faces, raster: Raster, empty=0.0):
 
     Differentiable with respect to `attributes` (visibility, in `raster`, is fixed).
     """
-    attributes = jnp.asarray(attributes)
-    tri = jnp.asarray(raster.tri)
+    # One program (the host arrays go in as arguments): run op by op, each of its dozen
+    # operations was a program of its own that a new process loads from the compilation
+    # cache (about 10 ms each; a second `jaxskin render hand` ran 25 of them here).
+    return _interpolate(attributes, np.asarray(raster.tri), np.asarray(faces),
+                        np.asarray(raster.bary), empty)
+
+
+@jax.jit
+def _interpolate(attributes, tri, faces, bary, empty):
     safe = jnp.where(tri >= 0, tri, 0)
-    corners = jnp.asarray(np.asarray(faces))[safe]  # (H, W, 3)
+    corners = faces[safe]  # (H, W, 3)
     values = attributes[corners]  # (H, W, 3, C)
-    bary = jnp.asarray(raster.bary, attributes.dtype)
-    out = einsum("hwk,hwkc->hwc", bary, values)
-    return jnp.where((tri >= 0)[..., None], out, empty)
+    out = einsum("hwk,hwkc->hwc", bary.astype(values.dtype), values)
+    return jnp.where((tri >= 0)[..., None], out, jnp.asarray(empty, out.dtype))

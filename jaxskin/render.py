@@ -108,9 +108,11 @@ def _prepare(config: SceneConfig) -> Prepared:
     # that see a triangle's front (colour is sampled there; the inside of an open mesh,
     # seen through its opening, is black: shaded as the outside, it would be lit from the
     # wrong side)
-    arrays = {"normals": s.normals, "mask": s.mask, "tex": jnp.asarray(view.tex),
-              "view_mask": jnp.asarray(view.mask), "view_shaded": jnp.asarray(view.shaded),
-              "pad": jnp.asarray(pad_index(s.tmap.raster.mask, s.tmap.wrap_x), jnp.int32)}
+    # (host arrays by `jax.device_put`: `jnp.asarray` of one compiles a program per shape,
+    # which a new process loads from the compilation cache, ~10 ms each)
+    arrays = {"normals": s.normals, "mask": s.mask, "tex": jax.device_put(view.tex),
+              "view_mask": jax.device_put(view.mask), "view_shaded": jax.device_put(view.shaded),
+              "pad": jax.device_put(pad_index(s.tmap.raster.mask, s.tmap.wrap_x).astype(np.int32))}
     # The view sampling's transpose as a table: reverse mode reads it instead of scattering.
     # The cosmetics model samples a colour that is linear all the way to the pixels: the
     # sampling and the averaging over supersamples as one map, a table each way (at
@@ -125,7 +127,7 @@ def _prepare(config: SceneConfig) -> Prepared:
     else:
         tables = transpose_table(view.tex, view.shaded, arrays["pad"], s.mask.shape,
                                  view.wrap_x)
-    arrays.update({k: jnp.asarray(v) for k, v in tables.items()})
+    arrays.update({k: jax.device_put(v) for k, v in tables.items()})
     if config.needs_furrows:
         arrays["h0"] = texture.furrows(config.texture)[0]
         arrays["noise"] = texture.noise(config.texture)
