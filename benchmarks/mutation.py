@@ -211,8 +211,8 @@ MUTANTS = [
            "order = np.lexsort((f, z, pixel))", "order = np.lexsort((f, -z, pixel))",
            _k("tests/test_geometry.py", "nearest")),
     Mutant("raster-interpolate-barycentrics-reversed", "jaxskin/raster.py",
-           'einsum("hwk,hwkc->hwc", bary, values)',
-           'einsum("hwk,hwkc->hwc", bary[..., ::-1], values)',
+           'einsum("hwk,hwkc->hwc", bary.astype(values.dtype), values)',
+           'einsum("hwk,hwkc->hwc", bary.astype(values.dtype)[..., ::-1], values)',
            _k("tests/test_geometry.py", "linear_attribute")),
     # ---- Blinn's skin colour in optical density (shading/blinn.py, data/make_skin_colour.py)
     Mutant("blinn-melanin-red-density-1.56-to-1.0", "jaxskin/shading/blinn.py",
