@@ -37,7 +37,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from .vectors import dot, unit
+from .vectors import dot, unit_stack
 
 __all__ = ["bump_normals", "frame_bump_normals", "height_gradient"]
 
@@ -66,8 +66,7 @@ def bump_normals(
     # component: XLA:CPU runs the stacked (..., 3) form 4x slower (`jaxskin.vectors`)
     a = (ny * -ny - nz * nz, nz * 0.0 - nx * -ny, nx * nz - ny * 0.0)
     b = (0.0 * nz - -nx * ny, -nx * nx - nz * nz, nz * ny - 0.0 * nx)
-    return _unit(jnp.stack([n[..., i] + k_bump * (hs * a[i] + ht * b[i]) for i in range(3)],
-                           axis=-1))
+    return unit_stack([n[..., i] + k_bump * (hs * a[i] + ht * b[i]) for i in range(3)])
 
 
 def frame_bump_normals(
@@ -97,10 +96,5 @@ def frame_bump_normals(
     # component by component, as `bump_normals`
     ts, tt = tangential(grad_s), tangential(grad_t)
     on = (n[..., 0] != 0) | (n[..., 1] != 0) | (n[..., 2] != 0)
-    return _unit(jnp.stack([jnp.where(on, n[..., i] - k_bump * (hs * ts[i] + ht * tt[i]), 0.0)
-                            for i in range(3)], axis=-1))
-
-
-def _unit(N):
-    """N / |N|, 0 where N = 0 (double `where`: finite value and gradient)."""
-    return unit(N)
+    return unit_stack([jnp.where(on, n[..., i] - k_bump * (hs * ts[i] + ht * tt[i]), 0.0)
+                       for i in range(3)])

@@ -39,7 +39,7 @@ from . import biophysical, cosmetics, formats, maps, shadow, skin, sss, texture
 from .precision import matmul
 from .raster import interpolate
 from .render_args import check_call, check_maps, check_ranges, known_keys, strong
-from .samples import sample_list, to_pixels
+from .samples import list_corners, sample_list, to_pixels
 from .scene import BIOPHYSICAL_KEYS, SKIN_MAPS, SceneConfig
 from .shading import blinn, lafortune, layered
 from .vectors import dot, unit
@@ -51,6 +51,7 @@ from .view import (
     make_view,
     pad_index,
     pixel_table,
+    sample_corners,
     sample_padded,
     transpose_table,
     view_pixels,
@@ -124,6 +125,8 @@ def _prepare(config: SceneConfig) -> Prepared:
         tables = sample_list(view.tex, view.shaded, config.supersample)
         tables.update(transpose_table(tables["list_tex"], tables["list_on"], arrays["pad"],
                                       s.mask.shape, view.wrap_x))
+        tables["list_corners"] = list_corners(tables["list_tex"], tables["list_on"],
+                                              arrays["pad"], s.mask.shape, view.wrap_x)
     else:
         tables = transpose_table(view.tex, view.shaded, arrays["pad"], s.mask.shape,
                                  view.wrap_x)
@@ -326,8 +329,8 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
         # Shade where the camera looks: the bumped normal map sampled at the view's samples
         # on the mesh (`jaxskin.samples`: fewer than the texels), in the object's frame.
         def to_list(texture_image):
-            return sample_padded(texture_image, arrays["pad"], arrays["list_tex"],
-                                 arrays["list_on"], p.view.wrap_x, table)
+            return sample_corners(texture_image, arrays["list_corners"], arrays["list_tex"],
+                                  arrays["list_on"], table)
 
         N = unit(to_list(normals))
         L, V = _light_and_view(arrays, params["light.direction"], jnp.float32,

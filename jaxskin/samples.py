@@ -24,7 +24,7 @@ import numpy as np
 
 from .linear import linear_call
 
-__all__ = ["SAMPLE_LIST", "sample_list", "to_pixels"]
+__all__ = ["SAMPLE_LIST", "list_corners", "sample_list", "to_pixels"]
 
 # `sample_list`'s arrays, in `Prepared.arrays`: per listed sample its flat index in the
 # view `(M,)`, its texture coordinates `(M, 2)`, whether it is one (not padding) `(M,)` and
@@ -62,6 +62,19 @@ def sample_list(tex, shaded, k: int, length: int | None = None) -> dict:
     pixel_list[pixel, (row % k) * k + col % k] = np.arange(M, dtype=np.int32)
     return {"list_index": list_index, "list_tex": list_tex, "list_on": list_on,
             "list_pixel": list_pixel, "pixel_list": pixel_list}
+
+
+def list_corners(list_tex, list_on, pad, shape: tuple[int, int], wrap_x: bool) -> np.ndarray:
+    """The texels the listed samples' bilinear corners read, through the padding `pad`
+    (`view.pad_index`) of a texture of `shape`: `(4, M)` int32 flat indices (0 on the
+    padding), for `view.sample_corners`."""
+    from .view import corners
+
+    on = np.asarray(list_on, bool)
+    where, texels, _ = corners(list_tex, on, pad, shape, wrap_x)
+    out = np.zeros((4, on.size), np.int32)
+    out[:, where] = texels
+    return out
 
 
 def to_pixels(values, list_pixel, pixel_list, pixels: tuple[int, int]):

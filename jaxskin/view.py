@@ -30,9 +30,10 @@ from .linear import linear_call
 from .projection import TextureMap
 from .raster import Raster, rasterize
 
-__all__ = ["PIXEL_TABLE", "View", "coverage", "downsample", "hidden_side_share", "make_view",
-           "pad_index", "pixel_entries", "pixel_table", "rotation", "sample", "sample_padded",
-           "transpose_table", "view_pixels"]
+__all__ = ["PIXEL_TABLE", "View", "bilinear", "blend", "corners", "coverage", "downsample",
+           "hidden_side_share", "make_view", "pad_index", "pixel_entries", "pixel_table",
+           "rotation", "sample", "sample_corners", "sample_padded", "transpose_table",
+           "view_pixels"]
 
 MARGIN = 0.05
 PAD = 3  # texels of padding around the mesh's texels (bilinear reads reach one)
@@ -204,18 +205,30 @@ def sample(image, tex, mask, wrap_x: bool, background=0.0):
     view sees no mesh. Differentiable in `image`."""
     image = jnp.asarray(image)
     Ht, Wt = image.shape[:2]
-    x = jnp.asarray(tex)[..., 0] - 0.5
-    y = jnp.asarray(tex)[..., 1] - 0.5
-    x0, y0 = jnp.floor(x), jnp.floor(y)
-    fx, fy = (x - x0)[..., None], (y - y0)[..., None]
+    x0, y0, fx, fy = bilinear(tex)
 
     def at(xi, yi):
         xi = jnp.mod(xi, Wt) if wrap_x else jnp.clip(xi, 0, Wt - 1)
         return image[jnp.clip(yi, 0, Ht - 1).astype(jnp.int32), xi.astype(jnp.int32)]
 
-    out = ((1 - fx) * (1 - fy) * at(x0, y0) + fx * (1 - fy) * at(x0 + 1, y0)
-           + (1 - fx) * fy * at(x0, y0 + 1) + fx * fy * at(x0 + 1, y0 + 1))
+    out = blend(at(x0, y0), at(x0 + 1, y0), at(x0, y0 + 1), at(x0 + 1, y0 + 1), fx, fy)
     return jnp.where(jnp.asarray(mask)[..., None], out, background)
+
+
+def bilinear(tex):
+    """Where bilinear samples at texture coordinates `tex (..., 2)` (texel centres at
+    half-integers) read: the lower corner `x0, y0 (...)` and the fractions `fx, fy (..., 1)`."""
+    x = jnp.asarray(tex)[..., 0] - 0.5
+    y = jnp.asarray(tex)[..., 1] - 0.5
+    x0, y0 = jnp.floor(x), jnp.floor(y)
+    return x0, y0, (x - x0)[..., None], (y - y0)[..., None]
+
+
+def blend(c00, c10, c01, c11, fx, fy):
+    """The bilinear sample of the corners' values `(..., C)` (00, 10, 01, 11) at the
+    fractions `fx, fy (..., 1)` (`bilinear`)."""
+    return ((1 - fx) * (1 - fy) * c00 + fx * (1 - fy) * c10
+            + (1 - fx) * fy * c01 + fx * fy * c11)
 
 
 def pad_index(mask, wrap_x: bool, width: int = PAD) -> np.ndarray:
@@ -276,14 +289,14 @@ def transpose_table(tex, mask, pad, shape, wrap_x: bool, width: int = 16) -> dic
     float32; a float64 gradient recomputes them from the coordinates (exact). Made once per
     view (numpy), from the view's texture coordinates `tex (H, W, 2)`, its `mask (H, W)`,
     the padding `pad (Ht, Wt)` (`pad_index`) and the texture's `shape (Ht, Wt)`."""
-    where, texels, weights = _corners(tex, mask, pad, shape, wrap_x)
+    where, texels, weights = corners(tex, mask, pad, shape, wrap_x)
     samples = (4 * where + np.arange(4)[:, None]).reshape(-1)  # corner-major, as the others
     texels, weights = texels.reshape(-1), weights.reshape(-1)
     rows, w, dest = _grouped(texels, samples, weights, width)
     return {"view_rows": rows, "view_weights": w, "view_dest": dest}
 
 
-def _corners(tex, mask, pad, shape, wrap_x: bool):
+def corners(tex, mask, pad, shape, wrap_x: bool):
     """The bilinear reads of every sample that sees the mesh, as `sample` makes them: the
     samples' flat indices `where (N,)`, and per corner (00, 10, 01, 11) the padded texel it
     reads `(4, N)` and its weight `(4, N)` float64."""
@@ -311,7 +324,7 @@ def pixel_entries(tex, mask, pad, shape, wrap_x: bool, k: int):
     sorted by pixel, then texel."""
     Ht, Wt = shape
     W = np.asarray(mask).shape[1]
-    where, texels, weights = _corners(tex, mask, pad, shape, wrap_x)
+    where, texels, weights = corners(tex, mask, pad, shape, wrap_x)
     pixel = (where // W // k) * (W // k) + (where % W) // k
     key = np.tile(pixel, 4).astype(np.int64) * (Ht * Wt) + texels.reshape(-1)
     key, inverse = np.unique(key, return_inverse=True)
@@ -414,6 +427,47 @@ def sample_padded(image, pad, tex, mask, wrap_x: bool, table=None):
     if table is None:
         return _padded_sample(wrap_x, image, pad, tex, mask)
     return _sample_with_table(wrap_x, image, (pad, tex, mask, *table))
+
+
+def sample_corners(image, corners, tex, mask, table=None):
+    """`sample_padded` at samples whose corners' texels are known: `corners (4, N)` flat
+    indices into `image (Ht, Wt, C)`, through the padding (`corners`, made once per view),
+    for samples at `tex (N, 2)`, `mask (N,)`: `(N, C)`, the same values (the same texels
+    and weights, added in the same order) without padding the whole image first. `table`:
+    `transpose_table`'s, for reverse mode, as there."""
+    if table is None:
+        return _corner_sample(image, corners, tex, mask)
+    return _corners_with_table(image, (corners, tex, mask, *table))
+
+
+def _corner_sample(image, corners, tex, mask, *table):
+    flat = image.reshape(-1, image.shape[-1])
+    _, _, fx, fy = bilinear(tex)
+    out = blend(*(flat[corners[i]] for i in range(4)), fx, fy)
+    return jnp.where(jnp.asarray(mask)[..., None], out, 0.0)
+
+
+@jax.custom_jvp
+def _corners_with_table(image, residuals):
+    return _corner_sample(image, *residuals)
+
+
+@_corners_with_table.defjvp
+def _corners_with_table_jvp(primals, tangents):
+    image, residuals = primals
+    out = _corners_with_table(image, residuals)
+    return out, linear_call(*_corner_rules(image.shape), tuple(residuals), (tangents[0],))
+
+
+@functools.cache
+def _corner_rules(shape):
+    def fun(corners, tex, mask, rows, weights, dest, image):
+        return _corner_sample(image, corners, tex, mask)
+
+    def transpose(corners, tex, mask, rows, weights, dest, ct):  # as `sample_padded`'s
+        return _sample_rules(False, shape)[1](None, tex, mask, rows, weights, dest, ct)
+
+    return fun, transpose
 
 
 def _padded_sample(wrap_x, image, pad, tex, mask, *table):

@@ -120,3 +120,30 @@ def test_the_editor_turns_a_blinn_hand_without_a_new_program(tmp_path):
         np.testing.assert_array_equal(np.round(np.clip(image, 0, 1) * 255),
                                       np.round(np.clip(expected, 0, 1) * 255))
     assert len(lengths) > 1  # the CLI's lists differ: the editor's one program covers them
+
+
+@pytest.mark.parametrize("wrap_x", [False, True])
+def test_sampling_at_known_corners_is_sampling_the_padded_image(wrap_x, x64):
+    """`view.sample_corners` (the corners' texels found once, through the padding) against
+    `view.sample_padded` (the whole image padded, then sampled): equal values, and the
+    gradient (fwd, and rev through the transpose table) checked."""
+    from jaxskin.samples import list_corners
+    from jaxskin.view import pad_index, sample_corners, sample_padded, transpose_table
+
+    rng = np.random.default_rng(5)
+    mask = np.zeros((12, 16), bool)
+    mask[2:10, 1:15] = True
+    mask[4:6, 6:9] = False
+    pad = pad_index(mask, wrap_x)
+    shaded = rng.random((6, 8)) < 0.7
+    tex = (rng.random((6, 8, 2)) * [16, 12]).astype(np.float32)
+    t = sample_list(tex, shaded, 2)
+    corners = list_corners(t["list_tex"], t["list_on"], pad, mask.shape, wrap_x)
+    table = transpose_table(t["list_tex"], t["list_on"], pad, mask.shape, wrap_x)
+    table = [table[k] for k in ("view_rows", "view_weights", "view_dest")]
+    image = jnp.asarray(rng.normal(size=(12, 16, 3)))
+    ours = sample_corners(image, corners, t["list_tex"], t["list_on"], table)
+    theirs = sample_padded(image, pad, t["list_tex"], t["list_on"], wrap_x)
+    np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-15)
+    check_grads(lambda im: sample_corners(im, corners, t["list_tex"], t["list_on"], table) ** 2,
+                (image,), order=1, modes=("fwd", "rev"))

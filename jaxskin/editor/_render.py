@@ -72,6 +72,9 @@ class Rendering:
         if cached is None or cached[0] is not prepared:
             view = prepared.view
             full = samples.sample_list(view.tex, view.shaded, k, length=view.shaded.size)
+            full["list_corners"] = samples.list_corners(
+                full["list_tex"], full["list_on"], np.asarray(prepared.arrays["pad"]),
+                prepared.arrays["mask"].shape, view.wrap_x)
             self._list_cache = cached = (prepared, {n: jnp.asarray(v) for n, v in full.items()})
         return cached[1]
 
