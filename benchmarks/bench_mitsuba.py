@@ -1,0 +1,440 @@
+"""jaxskin's default hand beside Mitsuba 3, like for like, measured side by side (issue 38).
+
+    python benchmarks/bench_mitsuba.py --write      # about a minute on 2 cores
+    python benchmarks/bench_mitsuba.py --quick      # tiny sizes: checks that it runs
+    python benchmarks/bench_mitsuba.py --images DIR # also both images as PNGs, to look at
+
+Needs Mitsuba 3 (`pip install -e '.[bench]'`) and, for its `llvm_ad_rgb` variant, an LLVM
+library: Debian's `libllvm19` (`apt-get install libllvm19`), found through
+`DRJIT_LIBLLVM_PATH` (set here to `/usr/lib/x86_64-linux-gnu/libLLVM-19.so` when it is
+unset and that file exists). Without Mitsuba or LLVM it says so in one line and exits 0.
+
+The same scene on both sides: the built-in hand's mesh as jaxskin builds it, a 512² image
+at one sample per pixel (the pixel's centre), the same orthographic frame (`view.make_view`:
+the bounding box less a 5 % margin), a parallel light from `light.direction`.
+
+- jaxskin: the `hand` scene with a 1024² texture, `camera.supersample = 1`, Blinn (its
+  default), `render.render_prepared` under `jax.jit` with the prepared arrays as arguments
+  (closed over, XLA folds them into constants: see the render section). Its gradient: of
+  the image MSE against 0.5 with respect to `material.melanin`, `.blood`, `.specular` and
+  `.shininess` (as `bench_render.py`); a second row with respect to the 1024² furrow
+  height map (`h0`, a texture-sized input, as Mitsuba's is).
+- Mitsuba: the same mesh, vertex normals and texture coordinates (the planar map's texels,
+  `setup.tmap.xy`), a `diffuse` BSDF whose reflectance is a 1024² `bitmap` (jaxskin's skin
+  albedo times its furrow height map, so the furrows show where jaxskin's are), a
+  `directional` emitter (irradiance 0.7π: a white surface facing it reflects 0.7, as
+  jaxskin's `light.intensity`), a `stratified` sampler without jitter (one sample at the
+  pixel's centre, as jaxskin), the `prb` integrator with `max_depth = 2` (direct light,
+  no bounces). Its gradient: of the same loss with respect to the bitmap's 1024² × 3
+  values (`dr.enable_grad`, `dr.backward`).
+
+Every call is waited for: jaxskin by `jax.block_until_ready`, Mitsuba by `dr.eval` of the
+result and `dr.sync_thread()`. Both warm (three calls each first), then interleaved:
+jaxskin forward, Mitsuba forward, jaxskin gradient, Mitsuba gradient, `--repeat` rounds
+(default 15); medians. Then the jaxskin forward split into its stages, each jitted
+separately (arrays as arguments), checked to compose to the renderer's image. Aim
+(issue 38): forward and forward + gradient each ≤ 0.5× Mitsuba's.
+
+Agreement: both scenes rendered diffuse only (jaxskin: no highlight, no ambient, no bump;
+its linear image times the bitmap's factor sampled into the view) must cover the same
+pixels and give the same colour. `--write` replaces the `mitsuba` section of RESULTS.md.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import common  # noqa: E402
+
+from jaxskin import render, texture  # noqa: E402
+from jaxskin.scene import load_scene  # noqa: E402
+from jaxskin.shading import blinn  # noqa: E402
+from jaxskin.view import MARGIN, downsample, sample_padded  # noqa: E402
+
+LLVM = "/usr/lib/x86_64-linux-gnu/libLLVM-19.so"  # Debian's libllvm19
+
+HAND = ["texture.size=1024", "camera.size=512", "camera.supersample=1"]
+QUICK = ["texture.size=128", "camera.size=64", "camera.supersample=1"]
+MATERIAL = ("material.melanin", "material.blood", "material.specular", "material.shininess")
+
+
+def load_mitsuba():
+    """`(mitsuba, drjit)` with the `llvm_ad_rgb` variant set, or a one-line reason why not."""
+    if "DRJIT_LIBLLVM_PATH" not in os.environ and Path(LLVM).is_file():
+        os.environ["DRJIT_LIBLLVM_PATH"] = LLVM  # read when drjit is first imported
+    try:
+        import drjit as dr
+        import mitsuba as mi
+    except ImportError:
+        return None, "Mitsuba 3 is not installed (pip install -e '.[bench]')"
+    try:
+        mi.set_variant("llvm_ad_rgb")
+    except Exception as e:  # noqa: BLE001 - whatever Dr.Jit raises without LLVM
+        return None, (f"Mitsuba's llvm_ad_rgb variant is unavailable ({str(e).splitlines()[0]}"
+                      f"); install libllvm19 or set DRJIT_LIBLLVM_PATH")
+    return (mi, dr), None
+
+
+class Jaxskin:
+    """The hand's jitted forward and gradients, the prepared arrays passed as arguments."""
+    def __init__(self, overrides):
+        sc = load_scene("hand", overrides)
+        self.config, self.params = config, params = sc.config, sc.params
+        self.prepared = render.prepare(config)
+        self.arrays = self.prepared.arrays
+        self.texture, self.image = config.texture.size, config.image
+
+        def loss(sub, arrays):
+            image = render.render_prepared(config, {**params, **sub}, arrays)
+            return jnp.mean((image - 0.5) ** 2)
+
+        def loss_map(h0, arrays):
+            return loss({}, {**arrays, "h0": h0})
+
+        self.sub = {k: params[k] for k in MATERIAL}
+        self._forward = jax.jit(lambda p, a: render.render_prepared(config, p, a))
+        self._grad = jax.jit(jax.grad(loss))
+        self._grad_map = jax.jit(jax.grad(loss_map))
+        self.block = jax.block_until_ready
+
+    def forward(self):
+        return self.block(self._forward(self.params, self.arrays))
+
+    def gradient(self):
+        return self.block(self._grad(self.sub, self.arrays))
+
+    def gradient_map(self):
+        return self.block(self._grad_map(self.arrays["h0"], self.arrays))
+
+    def albedo(self):
+        """The skin's diffuse albedo, linear sRGB `(3,)`, at the scene's melanin and blood."""
+        return np.asarray(blinn.skin_colour(self.params["material.melanin"],
+                                            self.params["material.blood"]), np.float32)
+
+
+class Mitsuba:
+    """The same hand in Mitsuba 3: mesh, frame and light from jaxskin's prepared scene."""
+    KEY = "hand.bsdf.reflectance.data"
+
+    def __init__(self, mi, dr, jx: Jaxskin):
+        self.mi, self.dr = mi, dr
+        s, view = jx.prepared.setup, jx.prepared.view
+        R = np.asarray(view.R)
+        v = s.mesh.vertices @ R.T  # the camera's frame, as make_view turns the mesh
+        n = s.mesh.normals @ R.T
+        uv = s.tmap.xy / np.array([s.tmap.width, s.tmap.height])  # row 0 at v = 0
+        # The bitmap: jaxskin's albedo times its furrow heights, padded beyond the mesh's
+        # texels as jaxskin pads its own (`view.pad_index`).
+        h0 = np.asarray(jx.arrays["h0"]).reshape(-1)[np.asarray(jx.arrays["pad"])]
+        self.factor = h0
+        bitmap = (h0[..., None] * jx.albedo()).astype(np.float32)
+        props = mi.Properties()
+        props["bsdf"] = mi.load_dict({"type": "diffuse", "reflectance": {
+            "type": "bitmap", "data": mi.TensorXf(bitmap), "raw": True, "filter_type": "bilinear",
+            "wrap_mode": "clamp"}})
+        mesh = mi.Mesh("hand", len(v), len(s.mesh.faces), props=props,
+                       has_vertex_normals=True, has_vertex_texcoords=True)
+        mp = mi.traverse(mesh)
+        mp["vertex_positions"] = mi.Float(v.astype(np.float32).ravel())
+        mp["vertex_normals"] = mi.Float(n.astype(np.float32).ravel())
+        mp["vertex_texcoords"] = mi.Float(uv.astype(np.float32).ravel())
+        mp["faces"] = mi.UInt32(s.mesh.faces.astype(np.uint32).ravel())
+        mp.update()
+        d = np.asarray(jx.params["light.direction"], np.float64)
+        d = d / np.linalg.norm(d)  # toward the light, camera frame (jaxskin's L before Rᵀ)
+        self.scene = mi.load_dict({
+            "type": "scene",
+            "integrator": {"type": "prb", "max_depth": 2},
+            "sensor": _sensor(mi, v, jx.image),
+            "light": {"type": "directional", "direction": (-d).tolist(),
+                      "irradiance": {"type": "rgb",
+                                     "value": math.pi * float(jx.params["light.intensity"])}},
+            "hand": mesh})
+        self.params = mi.traverse(self.scene)
+        dr.enable_grad(self.params[self.KEY])
+        self.params.update()
+
+    def forward(self):
+        image = self.mi.render(self.scene, spp=1)
+        self.dr.eval(image)
+        self.dr.sync_thread()
+        return image
+
+    def gradient(self):
+        dr, texture = self.dr, self.params[self.KEY]
+        image = self.mi.render(self.scene, self.params, spp=1)
+        dr.backward(dr.mean(dr.square(image - 0.5), axis=None))
+        grad = dr.grad(texture)
+        dr.eval(grad)
+        dr.sync_thread()
+        dr.clear_grad(texture)  # backward accumulates: start the next call from zero
+        return grad
+
+    def coverage(self):
+        """Which pixels see the mesh `(H, W)`: a depth AOV, once (not timed)."""
+        aov = self.mi.load_dict({"type": "aov", "aovs": "depth:depth"})
+        return np.asarray(self.mi.render(self.scene, integrator=aov, spp=1))[..., 0] > 0
+
+
+def _sensor(mi, v, size: int) -> dict:
+    """`view.make_view`'s orthographic frame as Mitsuba's `orthographic` sensor: the
+    bounding box's centre in the middle, its larger side (1 − 2·MARGIN) of the image.
+    Mitsuba's window is [−1, 1] across x before `to_world`'s scale."""
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    centre, extent = (lo + hi) / 2, hi - lo
+    half = size / 2 / ((1 - 2 * MARGIN) * size / max(extent[0], extent[1]))
+    T = mi.ScalarTransform4f
+    eye = [float(centre[0]), float(centre[1]), float(hi[2] + extent.max())]
+    to_world = T().look_at(origin=eye, target=[eye[0], eye[1], float(lo[2])],
+                           up=[0, 1, 0]) @ T().scale([half, half, 1.0])
+    return {"type": "orthographic", "to_world": to_world, "near_clip": 1e-3,
+            "far_clip": 10.0 * float(extent.max() + 1.0),
+            "sampler": {"type": "stratified", "sample_count": 1, "jitter": False},
+            "film": {"type": "hdrfilm", "width": size, "height": size,
+                     "rfilter": {"type": "box"}, "pixel_format": "rgb"}}
+
+
+def agreement(jx: Jaxskin, mt: Mitsuba) -> dict:
+    """Both scenes diffuse only: Mitsuba's image as timed; jaxskin's with no highlight, no
+    ambient and no bump, linear, times the bitmap's factor (the furrow heights) sampled into
+    the view. The pixels each covers and their colours' relative difference."""
+    flat = {**jx.params, "material.specular": np.float32(0.0),
+            "light.ambient": np.float32(0.0), "wrinkles.k_bump": np.float32(0.0)}
+    linear = np.asarray(render.render_prepared(jx.config, flat, jx.arrays, "linear_rgba"))
+    factor = np.asarray(render.texture_to_view(jx.config, jx.arrays, jx.arrays["h0"][..., None]))
+    ours = linear[..., :3] * factor
+    theirs = np.asarray(mt.forward())
+    mine, other = linear[..., 3] > 0, mt.coverage()
+    both = mine & other & (ours.sum(-1) > 1e-3) & (theirs.sum(-1) > 1e-3)  # lit on both
+    rel = np.abs(ours[both] - theirs[both]).sum(-1) / ours[both].sum(-1)
+    return {"covered": int((mine | other).sum()), "one_side": int((mine ^ other).sum()),
+            "iou": float((mine & other).sum() / max((mine | other).sum(), 1)),
+            "compared": int(both.sum()), "median": float(np.median(rel)),
+            "p99": float(np.percentile(rel, 99)), "images": (ours, theirs)}
+
+
+def write_images(folder: Path, jx: Jaxskin, mt: Mitsuba, agree: dict) -> None:
+    """The timed images and the diffuse-only pair, sRGB-encoded 8-bit PNGs."""
+    import imageio.v3 as iio
+
+    from jaxskin.io import atomic_write
+
+    def png(name, display):
+        path = folder / name
+        with atomic_write(path, "wb") as fh:
+            fh.write(iio.imwrite("<bytes>", (np.clip(display, 0, 1) * 255 + 0.5).astype(
+                np.uint8), extension=".png"))
+        print(f"wrote {path}")
+
+    def encoded(linear):
+        return np.asarray(render.encode_srgb(linear))
+
+    ours, theirs = agree["images"]
+    png("jaxskin.png", np.asarray(jx.forward()))
+    png("mitsuba.png", encoded(theirs))
+    png("jaxskin_diffuse.png", encoded(ours))
+
+
+def _median_ms(fn, repeat: int) -> float:
+    fn()
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times) * 1e3
+
+
+def stage_times(jx: Jaxskin, repeat: int) -> dict:
+    """jaxskin's forward (Blinn, orthographic, no shadows: the hand's) as four programs
+    jitted apart, their inputs as arguments, as `render._render` computes it: bump normals
+    in texture space, their bilinear samples in the view, Blinn shading, exposure and sRGB
+    encoding. Medians in ms, and how far their composition is from the renderer's image."""
+    a, p, k = jx.arrays, jx.params, jx.config.supersample
+    wrap_t, wrap_v = jx.prepared.setup.tmap.wrap_x, jx.prepared.view.wrap_x
+    frame = {key: a[key] for key in ("grad_s", "grad_t") if key in a}
+    look = {key: a[key] for key in ("pad", "tex", "view_shaded", *render.VIEW_TABLE)}
+
+    def bump(p, normals, mask, h0, noise, frame):
+        return texture.bumped(normals, mask, h0, noise, p, frame, wrap_t)["normals"]
+
+    def sample(normals, v):
+        return sample_padded(normals, v["pad"], v["tex"], v["view_shaded"], wrap_v,
+                             [v[key] for key in render.VIEW_TABLE])
+
+    def shade(n, p, shaded, R):
+        nn = jnp.sum(n * n, axis=-1, keepdims=True)
+        N = jnp.where(nn > 0, n / jnp.sqrt(jnp.where(nn > 0, nn, 1.0)), 0.0)
+        d = p["light.direction"]
+        R = jnp.asarray(R, jnp.float32)
+        L, V = (d / jnp.linalg.norm(d)) @ R, jnp.asarray([0.0, 0.0, 1.0]) @ R
+        c = blinn.shade(N, L, V, *(p[key] for key in MATERIAL), p["light.ambient"],
+                        p["light.intensity"])
+        return jnp.where(shaded[..., None], c, 0.0)
+
+    def encode(colour, stops):
+        return render.encode_srgb(render.expose(downsample(colour, k), stops))
+
+    bump, sample, shade, encode = (jax.jit(f) for f in (bump, sample, shade, encode))
+    args = {"bump normals (texture space)": (bump, (p, a["normals"], a["mask"], a["h0"],
+                                                    a["noise"], frame))}
+    normals = bump(*args["bump normals (texture space)"][1])
+    args["view sampling (bilinear, padded)"] = (sample, (normals, look))
+    n = sample(normals, look)
+    args["Blinn shading"] = (shade, (n, p, a["view_shaded"], a["view_R"]))
+    colour = shade(n, p, a["view_shaded"], a["view_R"])
+    args["exposure + sRGB encoding"] = (encode, (colour, p["camera.exposure"]))
+    error = float(np.abs(np.asarray(encode(colour, p["camera.exposure"]))
+                         - np.asarray(jx.forward())).max())
+    out = {name: _median_ms(lambda f=f, x=x: jax.block_until_ready(f(*x)), repeat)
+           for name, (f, x) in args.items()}
+    return {"stages": out, "whole": _median_ms(jx.forward, repeat), "error": error,
+            "repeat": repeat}
+
+
+def call_overhead(jx: Jaxskin, repeat: int) -> dict:
+    """Per-call cost around the renderer: the public `render.render` (checks, the prepare
+    cache, its jitted core), `render_prepared` called as it is, the jitted call the table
+    times, and a jitted call with the same arguments that does no work (dispatch)."""
+    c, p, a = jx.config, jx.params, jx.arrays
+    nothing = jax.jit(lambda p, a: p["camera.exposure"])
+    block = jax.block_until_ready
+    return {"render.render(config, params) (checks, prepare's cache)":
+            _median_ms(lambda: block(render.render(c, p)), repeat),
+            "render.render_prepared(config, params, arrays), unjitted (checks)":
+            _median_ms(lambda: block(render.render_prepared(c, p, a)), repeat),
+            "jax.jit(render_prepared) (the forward timed above)":
+            _median_ms(jx.forward, repeat),
+            "a jitted call with the same arguments that computes nothing (dispatch)":
+            _median_ms(lambda: block(nothing(p, a)), repeat)}
+
+
+def _options(ap) -> None:
+    ap.set_defaults(repeat=15)
+    ap.add_argument("--write", action="store_true",
+                    help="replace the mitsuba section of RESULTS.md (or of --results)")
+    ap.add_argument("--images", type=Path, metavar="DIR",
+                    help="write jaxskin.png, mitsuba.png and jaxskin_diffuse.png (the "
+                         "agreement check's jaxskin image) into DIR")
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = common.options(__doc__, argv, _options)
+    loaded, why = load_mitsuba()
+    if loaded is None:
+        print(f"bench_mitsuba: skipped: {why}")
+        return 0
+    mi, dr = loaded
+    print(common.machine(), flush=True)
+    jx = Jaxskin(QUICK if args.quick else HAND)
+    mt = Mitsuba(mi, dr, jx)
+    agree = agreement(jx, mt)
+    print({k: v for k, v in agree.items() if k != "images"}, flush=True)
+    if args.images:
+        write_images(args.images, jx, mt, agree)
+    timed = {"jaxskin forward": jx.forward, "Mitsuba forward": mt.forward,
+             "jaxskin gradient": jx.gradient, "Mitsuba gradient": mt.gradient,
+             "jaxskin gradient, height map": jx.gradient_map}
+    for fn in timed.values():  # warm: compiled, caches filled
+        for _ in range(3):
+            fn()
+    times = {name: [] for name in timed}
+    load = [os.getloadavg()[0]]
+    for _ in range(args.repeat):  # interleaved: a change of load moves every row alike
+        for name, fn in timed.items():
+            t0 = time.perf_counter()
+            fn()
+            times[name].append(time.perf_counter() - t0)
+    load.append(os.getloadavg()[0])
+    ms = {name: [t * 1e3 for t in v] for name, v in times.items()}
+    for name, v in ms.items():
+        print(f"{name}: median {statistics.median(v):.1f} ms ({min(v):.1f}–{max(v):.1f})",
+              flush=True)
+    stages = stage_times(jx, args.repeat)
+    overhead = call_overhead(jx, args.repeat)
+    body = section(common.command("benchmarks/bench_mitsuba.py", argv), args.repeat, mi, dr,
+                   jx, ms, load, agree, stages, overhead)
+    print(body)
+    if args.write:
+        common.write_section("mitsuba", body)
+        print(f"wrote {common.RESULTS}")
+    return 0
+
+
+def section(command, repeat, mi, dr, jx, ms, load, agree, stages, overhead) -> str:
+    med = {name: statistics.median(v) for name, v in ms.items()}
+
+    def row(what, ours, diff):
+        mine, theirs = f"jaxskin {ours}", f"Mitsuba {ours.split(',')[0]}"
+        ratio = med[mine] / med[theirs]
+        return (what, f"{med[mine]:.1f} ({min(ms[mine]):.0f}–{max(ms[mine]):.0f})",
+                f"{med[theirs]:.1f} ({min(ms[theirs]):.0f}–{max(ms[theirs]):.0f})",
+                f"{ratio:.2f}", "yes" if ratio <= 0.5 else "no", diff)
+
+    tex = f"{jx.texture}²"
+    t1 = common.table(
+        ["", "jaxskin ms, median (min–max)", "Mitsuba ms, median (min–max)",
+         "jaxskin / Mitsuba", "≤ 0.5×", "jaxskin differentiates"],
+        [row("forward", "forward", ""),
+         row("forward + gradient", "gradient", "melanin, blood, specular, shininess"),
+         row("forward + gradient", "gradient, height map", f"the furrow height map, {tex}")])
+    total = sum(stages["stages"].values())
+    t2 = common.table(["jaxskin forward, stage", "median ms", "share of the sum"],
+                      [(name, f"{v:.2f}", f"{v / total:.0%}")
+                       for name, v in stages["stages"].items()]
+                      + [("sum of the stages", f"{total:.2f}", ""),
+                         ("the forward as one program", f"{stages['whole']:.2f}", "")])
+    t3 = common.table(["jaxskin call", "median ms"],
+                      [(f"`{name}`", f"{v:.2f}") for name, v in overhead.items()])
+    return f"""## jaxskin beside Mitsuba 3 (issue 38)
+
+Command: `{command}`. Machine: {common.machine()}. Mitsuba {mi.__version__}
+(`{mi.variant()}`, Dr.Jit {dr.__version__}, {dr.thread_count()} threads, LLVM
+`{os.environ.get("DRJIT_LIBLLVM_PATH", "found by Dr.Jit")}`). Load average (1 min):
+{load[0]:.2f} before the timed rounds, {load[1]:.2f} after.
+
+The built-in hand, {jx.image}² pixels at one sample each (the pixel's centre), a {tex}
+texture, on both sides the same mesh (vertices, normals, the planar map's texture
+coordinates), orthographic frame and parallel light. jaxskin: Blinn over its bump-mapped
+normal map, `render_prepared` jitted with the prepared arrays as arguments. Mitsuba:
+a `diffuse` BSDF with a {tex} `bitmap` (jaxskin's skin albedo times its furrow heights),
+a `directional` emitter, the `prb` integrator with `max_depth` 2 (direct light only); its
+gradient is with respect to the bitmap's {tex} × 3 values. Loss on both sides: the
+image's MSE against 0.5. Warm, every call waited for (`block_until_ready`; `dr.eval` and
+`dr.sync_thread`), the five rows interleaved over {repeat} rounds. Aim: jaxskin ≤ 0.5×
+Mitsuba for the forward and for forward + gradient.
+
+{t1}
+
+The two scenes agree: rendered diffuse only (jaxskin without highlight, ambient or bump,
+its linear image times the bitmap's factor sampled into the view), {agree["one_side"]} of
+the {agree["covered"]:,} pixels either covers are covered by one side only (silhouette
+IoU {agree["iou"]:.4f}); over the {agree["compared"]:,} pixels lit on both, the colours
+differ by {agree["median"]:.2%} (median) and {agree["p99"]:.2%} (99th percentile),
+relative.
+
+Where jaxskin's forward goes: each stage jitted on its own, inputs as arguments, median of
+{stages["repeat"]}; composed, they give the renderer's image to {stages["error"]:.1e}.
+The sum exceeds the single program by each call's dispatch and what XLA fuses across
+stages.
+
+{t2}
+
+Around the renderer, per call (median of {repeat}):
+
+{t3}
+"""
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
