@@ -305,7 +305,9 @@ def stage_times(jx: Jaxskin, repeat: int) -> dict:
         fns[name] = lambda f=f, args=args: jax.block_until_ready(f(*args))
     error = float(np.abs(np.asarray(x) - np.asarray(jx.forward())).max())
     fns["whole"] = jx.forward
-    ms = {name: statistics.median(v) for name, v in interleaved(fns, repeat).items()}
+    cpu = {}
+    wall = interleaved(fns, repeat, cpu)
+    ms = {name: (statistics.median(wall[name]), statistics.median(cpu[name])) for name in fns}
     return {"whole": ms.pop("whole"), "stages": ms, "error": error, "repeat": repeat}
 
 
@@ -402,12 +404,14 @@ def section(command, repeat, mi, dr, jx, times, load, agree, stages, host) -> st
         [row("forward", "forward", ""),
          row("forward + gradient", "gradient", "melanin, blood, specular, shininess"),
          row("forward + gradient", "gradient, height map", f"the furrow height map, {tex}")])
-    total = sum(stages["stages"].values())
-    t2 = common.table(["jaxskin forward, stage", "median ms", "share of the sum"],
-                      [(name, f"{v:.2f}", f"{v / total:.0%}")
+    total = [sum(v[i] for v in stages["stages"].values()) for i in (0, 1)]
+    whole = stages["whole"]
+    t2 = common.table(["jaxskin forward, stage", "median ms", "CPU ms", "share of the CPU"],
+                      [(name, f"{v[0]:.1f}", f"{v[1]:.1f}", f"{v[1] / total[1]:.0%}")
                        for name, v in stages["stages"].items()]
-                      + [("sum of the stages", f"{total:.2f}", ""),
-                         ("the forward as one program", f"{stages['whole']:.2f}", "")])
+                      + [("sum of the stages", f"{total[0]:.1f}", f"{total[1]:.1f}", ""),
+                         ("the forward as one program", f"{whole[0]:.1f}", f"{whole[1]:.1f}",
+                          "")])
     t3 = common.table(["host work per call", "µs"],
                       [(name, f"{v:.0f}") for name, v in host.items()])
     return f"""## jaxskin beside Mitsuba 3 (issue 38)
