@@ -29,15 +29,17 @@ the bounding box less a 5 % margin), a parallel light from `light.direction`.
   values (`dr.enable_grad`, `dr.backward`).
 
 Every call is waited for: jaxskin by `jax.block_until_ready`, Mitsuba by `dr.eval` of the
-result and `dr.sync_thread()`. Both warm (three calls each first), then interleaved:
-jaxskin forward, Mitsuba forward, jaxskin gradient, Mitsuba gradient, `--repeat` rounds
-(default 15); medians. Then the jaxskin forward split into its stages, each jitted
-separately (arrays as arguments), checked to compose to the renderer's image. Aim
-(issue 38): forward and forward + gradient each ≤ 0.5× Mitsuba's.
+result and `dr.sync_thread()`. All warm (three rounds first), then interleaved: jaxskin
+forward, Mitsuba forward, jaxskin gradient, Mitsuba gradient, jaxskin's height-map
+gradient, `--repeat` rounds (default 15); medians of the wall time, and of the process's
+CPU time. Then jaxskin's forward split into its stages, each jitted apart (inputs as
+arguments), checked to compose to the renderer's image, and the host work `render.render`
+does per call. Aim (issue 38): forward and forward + gradient each ≤ 0.5× Mitsuba's.
 
-Agreement: both scenes rendered diffuse only (jaxskin: no highlight, no ambient, no bump;
-its linear image times the bitmap's factor sampled into the view) must cover the same
-pixels and give the same colour. `--write` replaces the `mitsuba` section of RESULTS.md.
+Agreement first: both scenes rendered diffuse only (jaxskin: no highlight, no ambient, no
+bump; its linear image times the bitmap's factor sampled into the view) must cover the
+same pixels and give the same colour, or it stops (exit 1) and writes nothing. `--write`
+replaces the `mitsuba` section of RESULTS.md.
 """
 
 from __future__ import annotations
@@ -88,6 +90,7 @@ def load_mitsuba():
 
 class Jaxskin:
     """The hand's jitted forward and gradients, the prepared arrays passed as arguments."""
+
     def __init__(self, overrides):
         sc = load_scene("hand", overrides)
         self.config, self.params = config, params = sc.config, sc.params
@@ -125,6 +128,7 @@ class Jaxskin:
 
 class Mitsuba:
     """The same hand in Mitsuba 3: mesh, frame and light from jaxskin's prepared scene."""
+
     KEY = "hand.bsdf.reflectance.data"
 
     def __init__(self, mi, dr, jx: Jaxskin):
@@ -137,7 +141,6 @@ class Mitsuba:
         # The bitmap: jaxskin's albedo times its furrow heights, padded beyond the mesh's
         # texels as jaxskin pads its own (`view.pad_index`).
         h0 = np.asarray(jx.arrays["h0"]).reshape(-1)[np.asarray(jx.arrays["pad"])]
-        self.factor = h0
         bitmap = (h0[..., None] * jx.albedo()).astype(np.float32)
         props = mi.Properties()
         props["bsdf"] = mi.load_dict({"type": "diffuse", "reflectance": {
@@ -250,7 +253,7 @@ def interleaved(fns: dict, repeat: int, cpu: dict | None = None) -> dict:
     """`{name: [ms, ...]}`: each function called once per round, in turn, `repeat` rounds
     (so that a change of the machine's load moves every row alike); wall time. `cpu`, if
     given, gets the process's CPU time per call alike (every thread's: JAX's and Dr.Jit's
-    pools), which other work on the machine moves far less."""
+    pools)."""
     times = {name: [] for name in fns}
     for _ in range(repeat):
         for name, fn in fns.items():
@@ -432,10 +435,11 @@ gradient is with respect to the bitmap's {tex} × 3 values. Loss on both sides: 
 image's MSE against 0.5 (jaxskin's display image, Mitsuba's linear one). Warm, every
 call waited for (`block_until_ready`; `dr.eval` and `dr.sync_thread`), the five rows
 interleaved over {repeat} rounds; the ratios are of the medians. CPU ms: the process's
-CPU time per call (medians; both pools' threads), the work done, which the machine's other
-load moves far less than the wall time. Aim: jaxskin ≤ 0.5× Mitsuba for the forward and for
-forward + gradient. (The issue's own figures, a quiet machine: Mitsuba 30 ms forward,
-88 ms with the gradient; jaxskin 44 and 114 ms.)
+CPU time per call (medians; both pools' threads): the work done, which other work on the
+machine moves less than the wall time (but still: a busy neighbour slows a thread). Aim:
+jaxskin ≤ 0.5× Mitsuba for the forward and for forward + gradient. (The issue's own
+figures, a quiet machine: Mitsuba 30 ms forward, 88 ms with the gradient; jaxskin 44 and
+114 ms.)
 
 {t1}
 
