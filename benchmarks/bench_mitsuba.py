@@ -4,43 +4,34 @@
     python benchmarks/bench_mitsuba.py --quick      # tiny sizes: checks that it runs
     python benchmarks/bench_mitsuba.py --images DIR # also both images as PNGs, to look at
 
-Needs Mitsuba 3 (`pip install -e '.[bench]'`) and, for its `llvm_ad_rgb` variant, an LLVM
-library: Debian's `libllvm19` (`apt-get install libllvm19`), found through
-`DRJIT_LIBLLVM_PATH` (set here to `/usr/lib/x86_64-linux-gnu/libLLVM-19.so` when it is
-unset and that file exists). Without Mitsuba or LLVM it says so in one line and exits 0.
+Needs Mitsuba 3 (`pip install -e '.[bench]'`) and, for its `llvm_ad_rgb` variant, Debian's
+`libllvm19` (`DRJIT_LIBLLVM_PATH`, set here to `/usr/lib/x86_64-linux-gnu/libLLVM-19.so`
+when unset and that file exists). Without either it says so in one line and exits 0.
 
-The same scene on both sides: the built-in hand's mesh as jaxskin builds it, a 512² image
-at one sample per pixel (the pixel's centre), the same orthographic frame (`view.make_view`:
-the bounding box less a 5 % margin), a parallel light from `light.direction`.
+On both sides: the built-in hand's mesh as jaxskin builds it (vertices, vertex normals, the
+planar map's texture coordinates), a 512² image at one sample per pixel, its centre
+(Mitsuba: a `stratified` sampler without jitter), `view.make_view`'s orthographic frame, a
+parallel light along `light.direction` (Mitsuba: `directional`, irradiance π × 0.7, so a
+white surface facing it reflects 0.7 as under jaxskin's `light.intensity`).
 
-- jaxskin: the `hand` scene with a 1024² texture, `camera.supersample = 1`, Blinn (its
-  default), `render.render_prepared` under `jax.jit` with the prepared arrays as arguments
-  (closed over, XLA folds them into constants: see the render section). Its gradient: of
-  the image MSE against 0.5 with respect to `material.melanin`, `.blood`, `.specular` and
-  `.shininess` (as `bench_render.py`); a second row with respect to the 1024² furrow
-  height map (`h0`, a texture-sized input, as Mitsuba's is).
-- Mitsuba: the same mesh, vertex normals and texture coordinates (the planar map's texels,
-  `setup.tmap.xy`), a `diffuse` BSDF whose reflectance is a 1024² `bitmap` (jaxskin's skin
-  albedo times its furrow height map, so the furrows show where jaxskin's are), a
-  `directional` emitter (irradiance 0.7π: a white surface facing it reflects 0.7, as
-  jaxskin's `light.intensity`), a `stratified` sampler without jitter (one sample at the
-  pixel's centre, as jaxskin), the `direct` integrator with one emitter sample and no
-  BSDF sample (these cannot hit a directional light). Its gradient: of the same loss with
-  respect to the bitmap's 1024² × 3 values (`dr.enable_grad`, `dr.backward`). `prb` with
-  `max_depth = 2` gives the same image and gradient, the gradient about 3× slower; `path`
-  and `direct_projective` (no interior samples) give no gradient of the texture.
+- jaxskin: `hand` with a 1024² texture, `camera.supersample = 1`, Blinn; `render_prepared`
+  jitted with the prepared arrays as arguments. Gradient of the image's MSE against 0.5
+  with respect to `material.melanin`, `.blood`, `.specular`, `.shininess` (as
+  `bench_render.py`); a second row with respect to the 1024² furrow height map `h0`.
+- Mitsuba: a `diffuse` BSDF whose reflectance is a 1024² `bitmap` (jaxskin's albedo times
+  its furrow heights, so the furrows lie where jaxskin's do); the `direct` integrator, one
+  emitter sample, no BSDF sample (none can hit a directional light). Gradient of the same
+  loss with respect to the bitmap's 1024² × 3 values (`dr.enable_grad`, `dr.backward`).
+  `prb` with `max_depth = 2` gives the same image and gradient, the gradient about 3×
+  slower; `path` and `direct_projective` (no interior samples) give no texture gradient.
 
-Every call is waited for: jaxskin by `jax.block_until_ready`, Mitsuba by `dr.eval` of the
-result and `dr.sync_thread()`. All warm (three rounds first), then interleaved: jaxskin
-forward, Mitsuba forward, jaxskin gradient, Mitsuba gradient, jaxskin's height-map
-gradient, `--repeat` rounds (default 15); medians of the wall time, and of the process's
-CPU time. Then jaxskin's forward split into its stages, each jitted apart (inputs as
-arguments), checked to compose to the renderer's image, and the host work `render.render`
-does per call. Aim (issue 38): forward and forward + gradient each ≤ 0.5× Mitsuba's.
-
-Agreement first: both scenes rendered diffuse only (jaxskin: no highlight, no ambient, no
-bump; its linear image times the bitmap's factor sampled into the view) must cover the
-same pixels and give the same colour, or it stops (exit 1) and writes nothing. `--write`
+First the agreement: both rendered diffuse only (jaxskin: no highlight, ambient or bump; its
+linear image times the bitmap's factor sampled into the view) must cover the same pixels
+with the same colour, or it stops (exit 1) and writes nothing. Then, warm, every call waited
+for (`jax.block_until_ready`; `dr.eval` and `dr.sync_thread()`), the five measures
+interleaved over `--repeat` rounds (default 15): medians of wall and process CPU time. Then
+jaxskin's forward in its stages, each jitted apart, and the host work `render.render` does
+per call. Aim (issue 38): forward and forward + gradient each ≤ 0.5× Mitsuba's. `--write`
 replaces the `mitsuba` section of RESULTS.md.
 """
 
