@@ -28,8 +28,8 @@ white surface facing it reflects 0.7 as under jaxskin's `light.intensity`).
 First the agreement: both rendered diffuse only (jaxskin: no highlight, ambient or bump; its
 linear image times the bitmap's factor sampled into the view) must cover the same pixels
 with the same colour, or it stops (exit 1) and writes nothing. Then, warm, every call waited
-for (`jax.block_until_ready`; `dr.eval` and `dr.sync_thread()`), the five measures
-interleaved over `--repeat` rounds (default 15): medians of wall and process CPU time. Then
+for (`jax.block_until_ready`; `dr.eval` and `dr.sync_thread()`), each row's pair (jaxskin,
+Mitsuba) interleaved over `--repeat` rounds (default 15): medians of wall and CPU time. Then
 jaxskin's forward in its stages, each jitted apart, and the host work `render.render` does
 per call. Aim (issue 38): forward and forward + gradient each ≤ 0.5× Mitsuba's. `--write`
 replaces the `mitsuba` section of RESULTS.md.
@@ -366,13 +366,16 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     if args.images:
         write_images(args.images, jx, mt, agree)
-    timed = {"jaxskin forward": jx.forward, "Mitsuba forward": mt.forward,
-             "jaxskin gradient": jx.gradient, "Mitsuba gradient": mt.gradient,
-             "jaxskin gradient, height map": jx.gradient_map}
-    interleaved(timed, 3)  # warm: compiled, caches filled
-    load = [os.getloadavg()[0]]
-    cpu = {}
-    ms = interleaved(timed, args.repeat, cpu)
+    # Three pairs, each interleaved A, B, A, B ... (a heavy call before another slows it:
+    # all five in one loop moved Mitsuba's forward from ~18 to ~34 ms CPU).
+    pairs = [{"jaxskin forward": jx.forward, "Mitsuba forward": mt.forward},
+             {"jaxskin gradient": jx.gradient, "Mitsuba gradient": mt.gradient},
+             {"jaxskin gradient, height map": jx.gradient_map,
+              "Mitsuba gradient, height map": mt.gradient}]
+    load, ms, cpu = [os.getloadavg()[0]], {}, {}
+    for pair in pairs:
+        interleaved(pair, 3)  # warm: compiled, caches filled
+        ms.update(interleaved(pair, args.repeat, cpu))
     load.append(os.getloadavg()[0])
     for name, v in ms.items():
         print(f"{name}: median {statistics.median(v):.1f} ms ({min(v):.1f}–{max(v):.1f}), "
@@ -393,7 +396,7 @@ def section(command, repeat, mi, dr, jx, times, load, agree, stages, host) -> st
     cpu = {name: statistics.median(v) for name, v in cpu.items()}
 
     def row(what, ours, diff):
-        mine, theirs = f"jaxskin {ours}", f"Mitsuba {ours.split(',')[0]}"
+        mine, theirs = f"jaxskin {ours}", f"Mitsuba {ours}"
         ratio = med[mine] / med[theirs]
         return (what, f"{med[mine]:.1f} ({min(ms[mine]):.0f}–{max(ms[mine]):.0f})",
                 f"{med[theirs]:.1f} ({min(ms[theirs]):.0f}–{max(ms[theirs]):.0f})",
@@ -452,8 +455,8 @@ a `directional` emitter, the `direct` integrator (one emitter sample, no BSDF sa
 direct light only, as jaxskin); its gradient is with respect to the bitmap's {tex} × 3
 values. Loss on both sides: the image's MSE against 0.5 (jaxskin's display image,
 Mitsuba's linear one). Warm, every call waited for (`block_until_ready`; `dr.eval` and
-`dr.sync_thread`), the five rows interleaved over {repeat} rounds; the ratios are of the
-medians. CPU ms: the process's
+`dr.sync_thread`), each row's pair interleaved over {repeat} rounds (Mitsuba's gradient
+is timed again beside the height map's); the ratios are of the medians. CPU ms: the process's
 CPU time per call (medians; both pools' threads): the work done, which other work on the
 machine moves less than the wall time (but still: a busy neighbour slows a thread). Aim:
 jaxskin ≤ 0.5× Mitsuba for the forward and for forward + gradient. (The issue's own
