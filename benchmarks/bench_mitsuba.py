@@ -390,6 +390,28 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def _reading(jx: Jaxskin, med: dict, stages: dict, total: list, host: dict) -> str:
+    """The section's closing paragraph, from this run's figures."""
+    a, tex, whole = jx.arrays, f"{jx.texture}²", stages["whole"]
+    read = len(np.unique(np.asarray(a["view_dest"]))) / np.asarray(a["mask"]).size
+    r = {k: med[f"jaxskin {k}"] / med[f"Mitsuba {k}"] for k in ("forward", "gradient")}
+    st = stages["stages"]
+    bump = st["bump normals (texture space)"][1] / total[1]
+    host_ms = sum(host.values()) / 1e3
+    met = "met" if max(r.values()) <= 0.5 else "not met"
+    agrees = ("" if stages["error"] < 1e-3 else " **The stages no longer compose to the "
+              "renderer's image: `stage_times` needs to follow `render._render` again.**")
+    return f"""Reading, this run: jaxskin's forward takes {r["forward"]:.2f}× Mitsuba's time,
+forward + gradient {r["gradient"]:.2f}×: the aim (≤ 0.5× for both) is {met}. The forward
+as one program takes {whole[1] / total[1]:.1f}× the CPU time of its four stages jitted
+apart. The bump normals are {bump:.0%} of the stages' CPU time: they are computed over the
+whole {tex} texture, though the view reads {read:.0%} of its texels; shading runs over
+the list of the {stages["listed"]:,} samples on the mesh (padded to
+{stages["list"]:,}) of the {jx.image}² frame. The host work around the renderer
+(`render.render`'s checks and the dispatch) is {host_ms:.2f} ms a call,
+{host_ms / med["jaxskin forward"]:.1%} of the forward's time.{agrees}"""
+
+
 def section(command, repeat, mi, dr, jx, times, load, agree, stages, host) -> str:
     ms, cpu = times
     med = {name: statistics.median(v) for name, v in ms.items()}
@@ -418,24 +440,7 @@ def section(command, repeat, mi, dr, jx, times, load, agree, stages, host) -> st
                       + [("sum of the stages", f"{total[0]:.1f}", f"{total[1]:.1f}", ""),
                          ("the forward as one program", f"{whole[0]:.1f}", f"{whole[1]:.1f}",
                           "")])
-    a = jx.arrays
-    read = len(np.unique(np.asarray(a["view_dest"]))) / np.asarray(a["mask"]).size
-    r = {k: med[f"jaxskin {k}"] / med[f"Mitsuba {k}"] for k in ("forward", "gradient")}
-    st = stages["stages"]
-    bump = st["bump normals (texture space)"][1] / total[1]
-    host_ms = sum(host.values()) / 1e3
-    met = "met" if max(r.values()) <= 0.5 else "not met"
-    agrees = ("" if stages["error"] < 1e-3 else " **The stages no longer compose to the "
-              "renderer's image: `stage_times` needs to follow `render._render` again.**")
-    reading = f"""Reading, this run: jaxskin's forward takes {r["forward"]:.2f}× Mitsuba's time,
-forward + gradient {r["gradient"]:.2f}×: the aim (≤ 0.5× for both) is {met}. The forward
-as one program takes {whole[1] / total[1]:.1f}× the CPU time of its four stages jitted
-apart. The bump normals are {bump:.0%} of the stages' CPU time: they are computed over the
-whole {tex} texture, though the view reads {read:.0%} of its texels; shading runs over
-the list of the {stages["listed"]:,} samples on the mesh (padded to
-{stages["list"]:,}) of the {jx.image}² frame. The host work around the renderer
-(`render.render`'s checks and the dispatch) is {host_ms:.2f} ms a call,
-{host_ms / med["jaxskin forward"]:.1%} of the forward's time.{agrees}"""
+    reading = _reading(jx, med, stages, total, host)
     t3 = common.table(["host work per call", "µs"],
                       [(name, f"{v:.0f}") for name, v in host.items()])
     return f"""## jaxskin beside Mitsuba 3 (issue 38)
