@@ -56,7 +56,7 @@ from jaxskin import render, render_args, samples, texture  # noqa: E402
 from jaxskin.scene import load_scene  # noqa: E402
 from jaxskin.shading import blinn  # noqa: E402
 from jaxskin.vectors import unit  # noqa: E402
-from jaxskin.view import MARGIN, sample_padded  # noqa: E402
+from jaxskin.view import MARGIN, sample_corners  # noqa: E402
 
 LLVM = "/usr/lib/x86_64-linux-gnu/libLLVM-19.so"  # Debian's libllvm19
 
@@ -268,9 +268,9 @@ def stage_times(jx: Jaxskin, repeat: int) -> dict:
     encoding. Each timed blocked on, interleaved with the whole forward. Median ms (wall,
     CPU), and how far the stages' composition is from the renderer's image."""
     a, p = jx.arrays, jx.params
-    wrap_t, wrap_v = jx.prepared.setup.tmap.wrap_x, jx.prepared.view.wrap_x
+    wrap_t = jx.prepared.setup.tmap.wrap_x
     frame = {key: a[key] for key in ("grad_s", "grad_t") if key in a}
-    look = {key: a[key] for key in ("pad", "list_tex", "list_on", *render.VIEW_TABLE)}
+    look = {key: a[key] for key in ("list_corners", "list_tex", "list_on", *render.VIEW_TABLE)}
     pixels = (a["view_mask"].shape[0] // jx.config.supersample,
               a["view_mask"].shape[1] // jx.config.supersample)
 
@@ -278,8 +278,8 @@ def stage_times(jx: Jaxskin, repeat: int) -> dict:
         return texture.bumped(normals, mask, h0, noise, p, frame, wrap_t)["normals"]
 
     def sample(normals, v):
-        return sample_padded(normals, v["pad"], v["list_tex"], v["list_on"], wrap_v,
-                             [v[key] for key in render.VIEW_TABLE])
+        return sample_corners(normals, v["list_corners"], v["list_tex"], v["list_on"],
+                              [v[key] for key in render.VIEW_TABLE])
 
     def shade(n, p, on, R):
         d = p["light.direction"]
