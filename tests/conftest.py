@@ -111,7 +111,7 @@ def _free_compiled_programs():
 # golden images' renders 37 -> 74 s without it, test_cosmetic_colours 17 -> 39 s), as do the
 # commands their tests start. The tolerances hold either way (the golden images pass at -O0
 # too). JAXSKIN_TEST_OPTIMISE=1 compiles every test as a user's run does.
-OPTIMISED_MODULES = {"test_golden", "test_cosmetic_colours"}
+OPTIMISED_MODULES = {"test_golden", "test_cosmetic_colours", "test_docs"}
 
 
 @pytest.fixture(autouse=True, scope="module")
