@@ -107,11 +107,14 @@ def _free_compiled_programs():
 # -O0 without its expensive passes; XLA's own graph passes still run) halves their compile
 # time (2026-12-07, one process on 2 busy cores: test_fast_gradients' GPU-form tests 97 ->
 # 50 s; test_stability, test_lockstep, test_wrinkles, test_shadow, test_scenes_look 265 ->
-# 151 s). The modules listed here run large programs and keep the optimising compiler (the
-# golden images' renders 37 -> 74 s without it, test_cosmetic_colours 17 -> 39 s), as do the
-# commands their tests start. The tolerances hold either way (the golden images pass at -O0
-# too). JAXSKIN_TEST_OPTIMISE=1 compiles every test as a user's run does.
-OPTIMISED_MODULES = {"test_golden", "test_cosmetic_colours", "test_docs"}
+# 151 s). The modules listed here run large programs, or small ones many times (fits), and
+# keep the optimising compiler, as do the commands their tests start: the golden images'
+# renders 37 -> 74 s without it, test_cosmetic_colours 17 -> 39 s, the docs build 97 -> 138 s
+# of CPU, three fit-image and fit-brdf tests 42 -> 73 s. The tolerances hold either way
+# (the golden images pass at -O0 too). JAXSKIN_TEST_OPTIMISE=1 compiles every test as a
+# user's run does.
+OPTIMISED_MODULES = {"test_golden", "test_cosmetic_colours", "test_docs", "test_fit_image",
+                     "test_brdf_fit"}
 
 
 @pytest.fixture(autouse=True, scope="module")
