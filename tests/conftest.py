@@ -63,14 +63,15 @@ def pytest_xdist_auto_num_workers(config):
     return n if n >= 2 else 0
 
 
-# The modules that take longest, longest first (summed test time, 2026-12-03): xdist's
-# loadfile hands modules out in collection order, so these start first and the run ends on
-# short ones, both workers busy to the end (alphabetically test_stability and test_wrinkles
-# came last). A stale list costs time only; the rest follow in file order.
-SLOW_MODULES = ["test_fit_image", "test_makeup", "test_fast_gradients", "test_render",
-                "test_cosmetics", "test_calibrate", "test_docs", "test_cluster", "test_km",
-                "test_lockstep", "test_gradients", "test_wrinkles", "test_cli",
-                "test_stability"]
+# The modules that take longest, longest first (summed test time, 2026-12-07, and the docs
+# build, one test of some 2-4 min, early): xdist's loadfile hands modules out in collection
+# order, so these start first and the run ends on short ones, both workers busy to the end.
+# A stale list costs time only; the rest follow in file order.
+SLOW_MODULES = ["test_fast_gradients", "test_docs", "test_fit_image",
+                "test_fit_skin_instruments", "test_makeup", "test_cluster", "test_render",
+                "test_outputs", "test_fit_skin", "test_lockstep", "test_readme", "test_calibrate",
+                "test_gradients", "test_cli", "test_cosmetics", "test_km", "test_wrinkles",
+                "test_bump_frames", "test_stability", "test_cards"]
 
 
 def pytest_collection_modifyitems(config, items):
@@ -99,6 +100,39 @@ def _free_compiled_programs():
     yield
     jax.clear_caches()
     gc.collect()
+
+
+# Most modules compile far longer than they run (small sizes, many distinct programs): for
+# them XLA's optimisations cost more than they save. `jax_disable_most_optimizations` (LLVM at
+# -O0 without its expensive passes; XLA's own graph passes still run) halves their compile
+# time (2026-12-07, one process on 2 busy cores: test_fast_gradients' GPU-form tests 97 ->
+# 50 s; test_stability, test_lockstep, test_wrinkles, test_shadow, test_scenes_look 265 ->
+# 151 s). The modules listed here run large programs, or small ones many times (fits), and
+# keep the optimising compiler, as do the commands their tests start: the golden images'
+# renders 37 -> 74 s without it, test_cosmetic_colours 17 -> 39 s, the docs build 97 -> 138 s
+# of CPU, three fit-image and fit-brdf tests 42 -> 73 s. The tolerances hold either way
+# (the golden images pass at -O0 too). JAXSKIN_TEST_OPTIMISE=1 compiles every test as a
+# user's run does.
+OPTIMISED_MODULES = {"test_golden", "test_cosmetic_colours", "test_docs", "test_fit_image",
+                     "test_brdf_fit"}
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _compile_fast(request):
+    """Compile this module's programs unoptimised unless it is in OPTIMISED_MODULES: in-process
+    (JAX's flag, read at each compile) and in the commands its tests start (the variable)."""
+    fast = (request.module.__name__.rsplit(".", 1)[-1] not in OPTIMISED_MODULES
+            and os.environ.get("JAXSKIN_TEST_OPTIMISE", "") in ("", "0"))
+    before = os.environ.get("JAX_DISABLE_MOST_OPTIMIZATIONS")
+    was = jax.config.read("jax_disable_most_optimizations")
+    os.environ["JAX_DISABLE_MOST_OPTIMIZATIONS"] = "1" if fast else "0"
+    jax.config.update("jax_disable_most_optimizations", fast)
+    yield
+    jax.config.update("jax_disable_most_optimizations", was)
+    if before is None:
+        os.environ.pop("JAX_DISABLE_MOST_OPTIMIZATIONS", None)
+    else:
+        os.environ["JAX_DISABLE_MOST_OPTIMIZATIONS"] = before
 
 
 _CACHE_DIR = jax.config.jax_compilation_cache_dir  # the run's folder, set above

@@ -255,8 +255,10 @@ def test_nist_spectrum_is_the_subjects_mean():
 
 
 def test_makeup_scene_renders_the_paper_figure(tmp_path):
-    """The built-in makeup scene: lips red, cheeks pinker than the bare face."""
-    face, makeup = (load_scene(n, ["camera.size=128", "sss.enabled=false"])
+    """The built-in makeup scene: lips red, cheeks pinker than the bare face. A 128²
+    texture (the scene's is 512²: 3x the time) gives the same lips: red gain less green gain
+    measured 0.340 (0.334 at 512²; with the lipstick 0 mm thick: −0.010)."""
+    face, makeup = (load_scene(n, ["camera.size=128", "sss.enabled=false", "texture.size=128"])
                     for n in ("face", "makeup"))
     a = np.asarray(render.render(face.config, face.params))
     b = np.asarray(render.render(makeup.config, makeup.params))
