@@ -98,10 +98,10 @@ def test_the_chunked_forward_equals_the_plain_one(x64, monkeypatch, blurred, per
     """`layered._forward_chunked` (the CPU's value of `_colours`: a layer absent from a chunk
     skipped, one uniform over it computed per band) against `_joint` over every texel, to
     1e-13 of the largest entry (the skipped layer changes nothing, bit for bit; fused
-    multiply-adds may round the rest differently). Chunks of 4 texels, two a step: the 40
-    texels give chunks where the bottom layer and a layer above it are absent, uniform (at
-    0.02 mm, and at 10 mm: opaque) and varying, and a padded last step."""
-    args = list(_spectral_inputs("stiff", per_texel_skin))
+    multiply-adds may round the rest differently). Chunks of 4 texels: the 42 texels give
+    chunks where the bottom layer and a layer above it are absent, uniform (at 0.02 mm, and
+    at 10 mm: opaque) and varying, and a padded last chunk."""
+    args = list(_spectral_inputs("stiff", per_texel_skin, P=42))
     X = np.array(args[0])
     X[0, 20:28] = 0.0  # the bottom layer absent from two chunks, uniform over the next two
     X[0, 28:36] = 0.02
