@@ -112,7 +112,7 @@ def stages(config, params, arrays):
     def before_blur(colours, E, skin_R):
         xyz_da = colours[:, 3:6]
         return E * (skin_R @ jnp.asarray(grid.rgb_matrix, jnp.float32)
-                    + xyz_da @ jnp.asarray(grid.xyz_to_rgb, jnp.float32))
+                    + layered._times3(xyz_da, grid.xyz_to_rgb))
 
     skin = run("colour entering the skin", before_blur, colours, E, skin_R)
     img = run("texel list → image (scatter, 3 ch)", to_image, skin)
@@ -133,13 +133,14 @@ def stages(config, params, arrays):
         rgb_surface, xyz_da, xyz_dta = colours[..., :3], colours[..., 3:6], colours[..., 6:]
         to_xyz = jnp.asarray(grid.xyz_matrix, jnp.float32)
         xyz_to_rgb = jnp.asarray(grid.xyz_to_rgb, jnp.float32)
-        skin = E * (skin_R @ jnp.asarray(grid.rgb_matrix, jnp.float32) + xyz_da @ xyz_to_rgb)
+        skin = E * (skin_R @ jnp.asarray(grid.rgb_matrix, jnp.float32)
+                    + layered._times3(xyz_da, xyz_to_rgb))
         xyz_a = skin_R @ to_xyz + xyz_da
         ok = xyz_a > 1e-12
         t1 = jnp.where(ok, xyz_dta / jnp.where(ok, xyz_a, 1.0), -1.0)
         rgb_to_xyz = jnp.asarray(np.linalg.inv(grid.xyz_to_rgb), jnp.float32)
-        x = out + (t1 * (out @ rgb_to_xyz)) @ xyz_to_rgb
-        own = skin + E * (xyz_dta @ xyz_to_rgb)
+        x = out + layered._times3(t1 * layered._times3(out, rgb_to_xyz), xyz_to_rgb)
+        own = skin + E * layered._times3(xyz_dta, xyz_to_rgb)
         return (rgb_surface + layered._in_gamut(x, (1.0 + t1[..., 1:2]) * out,
                                                 jnp.minimum(own, 0.0))) + h
 
