@@ -383,11 +383,16 @@ def view_pixels(image, table, pixels: tuple[int, int]):
 
 
 def _apply(src, w, dest, values, n: int):
-    """Rows of `(src, weight)` gathered from `values (N, C)` and summed into `dest`: `(n, C)`
-    (one gather per channel, as `_sample_rules`' transpose)."""
+    """Rows of `(src, weight)` gathered from `values (N, C)` and summed into `dest`: `(n, C)`.
+    Each entry's C values gathered together, and a row's sum written out entry by entry: as
+    `jnp.sum` along the row (a minor axis of 8 or 16) XLA:CPU runs an unvectorised loop per
+    element (the makeup frame's pixels at 1280×720: 47 → 7 ms CPU, one gather per channel
+    and the sum 22 ms)."""
     w = w.astype(values.dtype)
-    read = jnp.stack([jnp.sum(values[:, c][src] * w, axis=1) for c in range(values.shape[1])],
-                     axis=-1)
+    g = values[src]  # (rows, k, C)
+    read = g[:, 0] * w[:, 0:1]
+    for j in range(1, src.shape[1]):
+        read = read + g[:, j] * w[:, j:j + 1]
     return jnp.zeros((n, values.shape[1]), values.dtype).at[dest].add(read,
                                                                        indices_are_sorted=True)
 

@@ -31,14 +31,16 @@ def dabs(points: list, radius: float) -> list:
     return out[:MAX_DABS]
 
 
-def texels_per_pixel(view, i: int, j: int, k: int) -> float:
+def texels_per_pixel(view, i: int, j: int, k: int, shaded=None) -> float:
     """How many texels one image pixel spans at view sample `(i, j)` (from neighbours on
-    the same surface; 1 where none is)."""
+    the same surface; 1 where none is). `shaded`: `view.shaded` (a property computed
+    over the whole view at each use: a stroke's caller passes it once)."""
     H, W = view.mask.shape
+    shaded = view.shaded if shaded is None else shaded
     steps = []
     for di, dj in ((0, 1), (1, 0), (0, -1), (-1, 0)):
         a, b = i + di, j + dj
-        if 0 <= a < H and 0 <= b < W and view.shaded[a, b]:
+        if 0 <= a < H and 0 <= b < W and shaded[a, b]:
             d = np.abs(view.tex[a, b] - view.tex[i, j])
             if d.max() < 8:  # not across a seam or a fold
                 steps.append(float(np.hypot(*d)))

@@ -136,23 +136,36 @@ class Painting:
             [last, *points], radius)[1:]
         self._stroke.last = points[-1]
         H, W = view.mask.shape
+        shaded = view.shaded  # a property over the whole view: once, not per dab
         shown = None
+        rows = [Ht, 0]  # the texel rows this request's dabs reach
         for x, y in dabs:
             i, j = math.floor(y * k), math.floor(x * k)
-            if not (0 <= i < H and 0 <= j < W and view.shaded[i, j]):
+            if not (0 <= i < H and 0 <= j < W and shaded[i, j]):
                 continue  # off the image (a drag that left the view: the page captures the
                 # pointer) or off the mesh; a stroke may go out and come back
             t = view.tex[i, j].astype(np.float64)
-            scale = brush.texels_per_pixel(view, i, j, k)
+            scale = brush.texels_per_pixel(view, i, j, k, shaded)
             r = max(radius * scale, brush.MIN_RADIUS)
             brush.dab(mask, t[0], t[1], r, s.tmap.wrap_x)
+            rows = [min(rows[0], max(int(t[1] - r - 1), 0)),
+                    max(rows[1], min(int(t[1] + r + 1) + 1, Ht))]
             shown = r / scale
         target = 0.0 if erase else 1.0
         before = self._stroke.before
-        value = before + (target - before) * float(strength) * mask
         first = layer not in self.paint
-        self.paint = {**self.paint, layer: np.round(np.clip(value, 0, 1) * 65535).astype(
-            np.uint16)}
+
+        def painted(a, b):  # the map's rows a:b as the stroke leaves them
+            value = before[a:b] + (target - before[a:b]) * float(strength) * mask[a:b]
+            return np.round(np.clip(value, 0, 1) * 65535).astype(np.uint16)
+
+        if first:
+            new = painted(0, Ht)
+        else:  # elsewhere the map is as the last request left it (the same values)
+            new = self.paint[layer].copy()
+            if rows[0] < rows[1]:
+                new[rows[0]:rows[1]] = painted(*rows)
+        self.paint = {**self.paint, layer: new}
         if first:  # the layer's regions or image give way to its map
             self.scene = self._build(self.changes, self.paint)
         self.version += 1

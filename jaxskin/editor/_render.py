@@ -25,6 +25,12 @@ from ..scene import LayerSpec, SceneConfig
 
 __all__ = ["Rendering"]
 
+# The spectral grid of a preview (nm) where the scene's is finer: the KM layers' work is
+# per band, so 20 nm halves it against the makeup scene's 10 nm, for 0.3-0.5 ΔE2000 at the
+# 99th percentile (benchmarks/RESULTS.md, makeup; 1 is a just-noticeable difference). The
+# final render (release, Save) keeps the scene's grid.
+PREVIEW_STEP = 20
+
 
 class Rendering:
     """The `Session`'s renders (its `render`, `png`, `image_file` and `arrays`)."""
@@ -116,10 +122,14 @@ class Rendering:
 
     def render(self, preview: bool = False) -> np.ndarray:
         """The view `(H, W, 3)` display values, as `jaxskin render` makes it (`preview`:
-        one sample per pixel, for drags)."""
+        one sample per pixel and the cosmetics model's spectra at `PREVIEW_STEP` nm at the
+        finest, for drags)."""
         config = self.scene.config
         if preview and config.supersample > 1:
             config = dataclasses.replace(config, supersample=1)
+        if preview and config.spectral is not None and config.spectral.step < PREVIEW_STEP:
+            config = dataclasses.replace(config, spectral=dataclasses.replace(
+                config.spectral, step=PREVIEW_STEP))
         t0 = time.perf_counter()
         arrays = self.arrays(config)
         image = render.render_prepared(self._key(config), self.scene.params, arrays)

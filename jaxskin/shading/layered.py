@@ -106,14 +106,14 @@ def radiance(grid: Grid, N, L, V, ambient, light, skin_R, skin_roughness, skin_r
     rgb_surface, xyz_da, xyz_dta = colours[..., :3], colours[..., 3:6], colours[..., 6:]
     to_xyz = jnp.asarray(grid.xyz_matrix, dtype)
     xyz_to_rgb = jnp.asarray(grid.xyz_to_rgb, dtype)
-    skin = E * (skin_rgb + matmul(xyz_da, xyz_to_rgb))  # the colour of E a
+    skin = E * (skin_rgb + _times3(xyz_da, xyz_to_rgb))  # the colour of E a
     xyz_a = matmul(skin_R, to_xyz) + xyz_da
     ok = xyz_a > 1e-12
     t1 = jnp.where(ok, xyz_dta / jnp.where(ok, xyz_a, 1.0), -1.0)  # t − 1, in [−1, 0]
     out = blur(skin)
     rgb_to_xyz = jnp.asarray(np.linalg.inv(grid.xyz_to_rgb), dtype)
-    x = out + matmul(t1 * matmul(out, rgb_to_xyz), xyz_to_rgb)
-    own = skin + E * matmul(xyz_dta, xyz_to_rgb)  # E rgb(T a): the texel's own, unblurred
+    x = out + _times3(t1 * _times3(out, rgb_to_xyz), xyz_to_rgb)
+    own = skin + E * _times3(xyz_dta, xyz_to_rgb)  # E rgb(T a): the texel's own, unblurred
     return (rgb_surface + _in_gamut(x, (1.0 + t1[..., 1:2]) * out,
                                     jnp.minimum(own, 0.0))) + h
 
@@ -129,7 +129,20 @@ def _in_gamut(x, y, floor):
     per-texel Gauss–Newton fit of the maps stalls on that)."""
     bad = (x < floor) & (y > floor)
     lam = jnp.where(bad, (floor - x) / jnp.where(bad, y - x, 1.0), 0.0)  # y − x > 0 there
-    return x + jnp.max(lam, axis=-1, keepdims=True) * (y - x)
+    # the largest of the three written out (a reduction along the minor axis of three:
+    # see `_times3`)
+    most = jnp.maximum(jnp.maximum(lam[..., 0:1], lam[..., 1:2]), lam[..., 2:3])
+    return x + most * (y - x)
+
+
+def _times3(a, M):
+    """`a @ M` for colours `a (..., 3)` and a constant `M (3, 3)`, written out as three
+    broadcast products: as a `dot`, XLA:CPU runs the sum along the minor axis of three as
+    an unvectorised loop per element (the colour after the blur: 18.6 → 1.8 ms on the
+    makeup face's 170,324 texels; the sum is the same, rounded alike but for fused
+    multiply-adds)."""
+    M = jnp.asarray(M, a.dtype)
+    return a[..., 0:1] * M[0] + a[..., 1:2] * M[1] + a[..., 2:3] * M[2]
 
 
 def _spectra(X, E, h, h_l, S, K, skin_R):
@@ -152,9 +165,77 @@ def _spectra(X, E, h, h_l, S, K, skin_R):
     return E * top.R + dD, da, dta
 
 
-def _joint(grid, blurred, *args):
-    """The colours `_colours` returns, computed in one program (for small chunks)."""
-    surface, da, dta = _spectra(*args)
+def _spectra_skipping(X, E, h, h_l, S, K, skin_R):
+    """`_spectra` for one chunk of texels, each layer in the form the chunk needs
+    (`lax.switch` on the chunk's thicknesses): absent from every texel (X = 0: R = 0, T = 1,
+    no highlight, so the layer changes nothing and is skipped: composing it would give the
+    same values, bit for bit), uniform over the chunk (its R and T computed once per band,
+    as the foundation over the whole face) or varying (per texel and band). The stack is
+    built from the bottom up, as `km.stack` does. (A `fori_loop` over the layers, one
+    program for all four, compiles in less time but ran 40 % slower.)"""
+    c, n = X.shape[1], S.shape[1]
+    zeros, ones = jnp.zeros((c, n), X.dtype), jnp.ones((c, n), X.dtype)
+
+    def add(i, uniform, x, hl, state):  # layer i on the stack so far (None: the skin)
+        if uniform:
+            R_i, T_i = (jnp.broadcast_to(a, (c, n)) for a in km.layer(S[i], K[i], x[0]))
+        else:
+            R_i, T_i = km.layer(S[i], K[i], x)
+        acc, dD = state
+        slab = (R_i, T_i, R_i) if acc is None else tuple(km.compose((R_i, T_i), acc))
+        cover = -jnp.expm1(-x / COVER_MM)
+        T2 = T_i * T_i
+        return slab, dD * T2 + h * (T2 - 1.0) + cover * hl
+
+    state = (None, zeros)
+    for i in range(X.shape[0]):
+        x = X[i][:, None]
+        if state[0] is None:  # the bottom layer so far: absent leaves the bare skin's slab
+            def absent(x, hl, state):
+                return (zeros, ones, zeros), state[1]
+        else:
+            def absent(x, hl, state):
+                return state
+        branches = [absent] + [functools.partial(add, i, uniform) for uniform in (True, False)]
+        which = jnp.where(jnp.all(x == 0), 0, jnp.where(jnp.all(x == x[0]), 1, 2))
+        state = jax.lax.switch(which, branches, x, h_l[i], state)
+    (R, T, Rb), dD = state
+    g = 1.0 / (1.0 - Rb * skin_R)
+    da = skin_R * ((T - 1.0) + Rb * skin_R) * g
+    dta = (T - 1.0) * (skin_R + da)
+    return E * R + dD, da, dta
+
+
+def _forward_chunked(grid, blurred, X, E, h, h_l, S, K, skin_R):
+    """`_colours`' value on a CPU: `_joint` with `_spectra_skipping`, in a loop over chunks
+    of `FORWARD_CHUNK` texels (the last one padded). In cache-sized chunks the work the
+    three colours share is computed once and kept (over the whole face XLA:CPU would
+    materialise it as full-size arrays, and three programs apart, each fused into one loop,
+    redo it); and the chunk lets a layer be skipped where it is absent and computed once per
+    band where it is uniform (on the makeup face: the foundation everywhere, the other
+    three layers on 2-12 % of the texels each). One chunk a step: two side by side (as the
+    transpose's `STREAMS`) measured no faster and doubled the compile time."""
+    P, per = X.shape[1], skin_R.ndim == 2
+
+    def per_texel(a, axis):
+        return _per_texel(a, axis, P, FORWARD_CHUNK)
+
+    local = (per_texel(X, 1), per_texel(E, 0), per_texel(h, 0), per_texel(h_l, 1),
+             per_texel(skin_R, 0) if per else None)
+
+    def one(c):
+        x, e, hh, hl, sk = c
+        return _joint(grid, blurred, x, e, hh, hl, S, K, sk if per else skin_R,
+                      spectra=_spectra_skipping)
+
+    out = jax.lax.map(one, local)
+    return out.reshape(-1, out.shape[-1])[:P]
+
+
+def _joint(grid, blurred, *args, spectra=None):
+    """The colours `_colours` returns, computed in one program (for small chunks), by
+    `spectra` (default `_spectra`)."""
+    surface, da, dta = (spectra or _spectra)(*args)
     to_rgb = jnp.asarray(grid.rgb_matrix, surface.dtype)
     if not blurred:
         return matmul(surface + args[1] * (da + dta), to_rgb)
@@ -171,6 +252,10 @@ def _joint(grid, blurred, *args):
 CHUNK = 1000
 # Chunks per step of the transpose's loop, computed side by side (`_cotangents_chunked`).
 STREAMS = 2
+# Texels per chunk of the forward pass on a CPU (`_forward_chunked`): 4096 × 41 bands of
+# float32 is 672 KiB an intermediate, about a core's L2; 1024-8192 measured within 10 %
+# of each other, 512 and 16384 slower (benchmarks/RESULTS.md).
+FORWARD_CHUNK = 4096
 # On a GPU the loops' steps are launches: one chunk of up to WIDE_CHUNK texels a step
 # (262,144 × 41 float32 bands: 43 MB an intermediate), so the makeup face's 170,324
 # texels at the default 512² texture are one step, not 86 steps of two chunks.
@@ -196,7 +281,8 @@ def _cpu_form(name: str) -> bool:
 
     - `"chunks"`: the derivative's loops over cache-sized chunks (`_chunking`,
       `_chunked_tangent`);
-    - `"apart"`: the three spectral colours as three programs (`_separately`), not one;
+    - `"forward"`: the colours' value in a loop over chunks of texels that skips absent
+      layers (`_forward_chunked`), not as one program over every texel;
     - `"skip"`: a layer absent from a whole chunk skips its S and K sums (`lax.cond`);
     - `"sums"`: sums over bands and texels as products with ones (`_rowsum`, `_colsum`).
 
@@ -210,8 +296,9 @@ def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
     plus the light through the stack from the skin, as linear sRGB; with blur `(P, 9)`:
     rgb(surface), xyz(da), xyz(dta).
 
-    Performance (XLA on CPU). Forward: without blur one spectral product; with it three,
-    each computed apart (`_separately`). Forward mode: `_chunked_tangent`, a loop over
+    Performance (XLA on CPU). Forward: `_forward_chunked`, a loop over chunks of texels,
+    each chunk's three spectral products in one program, a layer absent from the chunk
+    skipped and one uniform over it computed per band. Forward mode: `_chunked_tangent`, a loop over
     chunks of texels, each chunk's tangent by `jax.jvp` of `_joint`,
     checkpointed. Reverse mode: that tangent's transpose written by hand (`_cotangents`,
     through `linear.linear_call`): the colours' cotangent goes to band space through the
@@ -228,17 +315,10 @@ def _colours(grid, blurred, X, E, h, h_l, S, K, skin_R):
     quicker there than the CPU's forms. The figures: benchmarks/RESULTS.md
     (benchmarks/bench_gradients.py).
     """
-    if not blurred:
-        return _joint(grid, False, X, E, h, h_l, S, K, skin_R)
     args = (X, E, h, h_l, S, K, skin_R)
-    if not _cpu_form("apart"):  # a GPU fuses the three products' shared work itself
-        return _joint(grid, True, *args)
-    to_rgb = jnp.asarray(grid.rgb_matrix, X.dtype)
-    to_xyz = jnp.asarray(grid.xyz_matrix, X.dtype)
-    rgb_surface, xyz_da, xyz_dta = _separately(
-        [lambda: matmul(_spectra(*args)[0], to_rgb), lambda: matmul(_spectra(*args)[1], to_xyz),
-         lambda: matmul(_spectra(*args)[2], to_xyz)])
-    return jnp.concatenate([rgb_surface, xyz_da, xyz_dta], axis=-1)
+    if not _cpu_form("forward"):  # a GPU fuses the three products' shared work itself
+        return _joint(grid, blurred, *args)
+    return _forward_chunked(grid, blurred, *args)
 
 
 @_colours.defjvp
@@ -303,15 +383,6 @@ def _rules(grid, blurred):
         return _cotangents_chunked(grid, blurred, *args)
 
     return tangent, transpose
-
-
-def _separately(fns):
-    """`[f() for f in fns]` (arrays of one shape), each computed as its own XLA program:
-    the branches of a `switch` inside a `map`. Computed together, XLA:CPU materialises the
-    work the outputs share as many unfused arrays (three spectral products together cost
-    nearly three times what they cost apart); apart, each fuses into one loop and the shared
-    work is just redone."""
-    return jax.lax.map(lambda k: jax.lax.switch(k, fns), jnp.arange(len(fns)))
 
 
 def _band(g, M):
