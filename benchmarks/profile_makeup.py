@@ -27,6 +27,7 @@ import numpy as np
 from jaxskin import maps, render, sss, texture
 from jaxskin.scene import load_scene
 from jaxskin.shading import kelemen, layered
+from jaxskin.vectors import times3
 
 HD = ["camera.size=1280", "camera.height=720", "texture.size=512"]
 
@@ -112,7 +113,7 @@ def stages(config, params, arrays):
     def before_blur(colours, E, skin_R):
         xyz_da = colours[:, 3:6]
         return E * (skin_R @ jnp.asarray(grid.rgb_matrix, jnp.float32)
-                    + layered._times3(xyz_da, grid.xyz_to_rgb))
+                    + times3(xyz_da, grid.xyz_to_rgb))
 
     skin = run("colour entering the skin", before_blur, colours, E, skin_R)
     img = run("texel list → image (scatter, 3 ch)", to_image, skin)
@@ -134,13 +135,13 @@ def stages(config, params, arrays):
         to_xyz = jnp.asarray(grid.xyz_matrix, jnp.float32)
         xyz_to_rgb = jnp.asarray(grid.xyz_to_rgb, jnp.float32)
         skin = E * (skin_R @ jnp.asarray(grid.rgb_matrix, jnp.float32)
-                    + layered._times3(xyz_da, xyz_to_rgb))
+                    + times3(xyz_da, xyz_to_rgb))
         xyz_a = skin_R @ to_xyz + xyz_da
         ok = xyz_a > 1e-12
         t1 = jnp.where(ok, xyz_dta / jnp.where(ok, xyz_a, 1.0), -1.0)
         rgb_to_xyz = jnp.asarray(np.linalg.inv(grid.xyz_to_rgb), jnp.float32)
-        x = out + layered._times3(t1 * layered._times3(out, rgb_to_xyz), xyz_to_rgb)
-        own = skin + E * layered._times3(xyz_dta, xyz_to_rgb)
+        x = out + times3(t1 * times3(out, rgb_to_xyz), xyz_to_rgb)
+        own = skin + E * times3(xyz_dta, xyz_to_rgb)
         return (rgb_surface + layered._in_gamut(x, (1.0 + t1[..., 1:2]) * out,
                                                 jnp.minimum(own, 0.0))) + h
 

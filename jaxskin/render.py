@@ -42,7 +42,7 @@ from .render_args import check_call, check_maps, check_ranges, known_keys, stron
 from .samples import list_corners, sample_list, to_pixels
 from .scene import BIOPHYSICAL_KEYS, SKIN_MAPS, SceneConfig
 from .shading import blinn, lafortune, layered
-from .vectors import dot, unit
+from .vectors import dot, times3, unit
 from .view import (
     PIXEL_TABLE,
     View,
@@ -395,8 +395,8 @@ def _light_and_view(arrays: dict, direction, dtype, positions):
     L = matmul(direction / jnp.linalg.norm(direction), R)
     if "eye" not in arrays:
         return L, matmul(jnp.asarray([0.0, 0.0, 1.0], dtype), R)
-    to_eye = jnp.asarray(arrays["eye"], dtype) - matmul(positions(), R.T)
-    return L, matmul(to_eye / jnp.sqrt(dot(to_eye, to_eye, keepdims=True)), R)
+    to_eye = jnp.asarray(arrays["eye"], dtype) - times3(positions(), R.T)  # per point:
+    return L, times3(to_eye / jnp.sqrt(dot(to_eye, to_eye, keepdims=True)), R)  # written out
 
 
 def expose(linear, stops):

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-__all__ = ["dot", "unit", "unit_stack"]
+__all__ = ["dot", "times3", "unit", "unit_stack"]
 
 
 def dot(a, b, keepdims: bool = False):
@@ -40,3 +40,13 @@ def unit_stack(components):
     ok = norm2 > 0
     length = jnp.sqrt(jnp.where(ok, norm2, 1.0))
     return jnp.stack([jnp.where(ok, c / length, 0.0) for c in (x, y, z)], axis=-1)
+
+
+def times3(a, M):
+    """`a @ M` for vectors `a (..., 3)` and a matrix `M (3, 3)`, written out as three
+    broadcast products: as a `dot`, XLA:CPU runs the sum along the minor axis of three as
+    an unvectorised loop per element (the colour after the SSS blur: 18.6 → 1.8 ms on the
+    makeup face's 170,324 texels; the sum is the same, rounded alike but for fused
+    multiply-adds)."""
+    M = jnp.asarray(M, a.dtype)
+    return a[..., 0:1] * M[0] + a[..., 1:2] * M[1] + a[..., 2:3] * M[2]

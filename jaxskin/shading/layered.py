@@ -48,7 +48,7 @@ from .. import km
 from ..linear import linear_call
 from ..precision import matmul
 from ..spectral import Grid
-from ..vectors import dot
+from ..vectors import dot, times3
 from . import kelemen
 
 __all__ = ["COVER_MM", "irradiance", "radiance"]
@@ -106,14 +106,14 @@ def radiance(grid: Grid, N, L, V, ambient, light, skin_R, skin_roughness, skin_r
     rgb_surface, xyz_da, xyz_dta = colours[..., :3], colours[..., 3:6], colours[..., 6:]
     to_xyz = jnp.asarray(grid.xyz_matrix, dtype)
     xyz_to_rgb = jnp.asarray(grid.xyz_to_rgb, dtype)
-    skin = E * (skin_rgb + _times3(xyz_da, xyz_to_rgb))  # the colour of E a
+    skin = E * (skin_rgb + times3(xyz_da, xyz_to_rgb))  # the colour of E a
     xyz_a = matmul(skin_R, to_xyz) + xyz_da
     ok = xyz_a > 1e-12
     t1 = jnp.where(ok, xyz_dta / jnp.where(ok, xyz_a, 1.0), -1.0)  # t − 1, in [−1, 0]
     out = blur(skin)
     rgb_to_xyz = jnp.asarray(np.linalg.inv(grid.xyz_to_rgb), dtype)
-    x = out + _times3(t1 * _times3(out, rgb_to_xyz), xyz_to_rgb)
-    own = skin + E * _times3(xyz_dta, xyz_to_rgb)  # E rgb(T a): the texel's own, unblurred
+    x = out + times3(t1 * times3(out, rgb_to_xyz), xyz_to_rgb)
+    own = skin + E * times3(xyz_dta, xyz_to_rgb)  # E rgb(T a): the texel's own, unblurred
     return (rgb_surface + _in_gamut(x, (1.0 + t1[..., 1:2]) * out,
                                     jnp.minimum(own, 0.0))) + h
 
@@ -130,19 +130,9 @@ def _in_gamut(x, y, floor):
     bad = (x < floor) & (y > floor)
     lam = jnp.where(bad, (floor - x) / jnp.where(bad, y - x, 1.0), 0.0)  # y − x > 0 there
     # the largest of the three written out (a reduction along the minor axis of three:
-    # see `_times3`)
+    # see `vectors.times3`)
     most = jnp.maximum(jnp.maximum(lam[..., 0:1], lam[..., 1:2]), lam[..., 2:3])
     return x + most * (y - x)
-
-
-def _times3(a, M):
-    """`a @ M` for colours `a (..., 3)` and a constant `M (3, 3)`, written out as three
-    broadcast products: as a `dot`, XLA:CPU runs the sum along the minor axis of three as
-    an unvectorised loop per element (the colour after the blur: 18.6 → 1.8 ms on the
-    makeup face's 170,324 texels; the sum is the same, rounded alike but for fused
-    multiply-adds)."""
-    M = jnp.asarray(M, a.dtype)
-    return a[..., 0:1] * M[0] + a[..., 1:2] * M[1] + a[..., 2:3] * M[2]
 
 
 def _spectra(X, E, h, h_l, S, K, skin_R):
