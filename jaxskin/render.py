@@ -318,41 +318,39 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
         height, normals = maps["height"], maps["normals"]
     else:
         height, normals = jnp.ones(mask.shape, jnp.float32), arrays["normals"]
-    if config.mode == "height":
-        colour = jnp.repeat(to_view(height[..., None]), 3, axis=-1)
-    elif config.spectral is not None:
+    if config.mode == "height":  # display values, averaged as they are
+        return _finish(jnp.repeat(to_view(height[..., None]), 3, axis=-1), view_mask, k,
+                       output, None)
+    if config.spectral is not None:
         # linear from texture space to the pixels: sampled and averaged in one map
         mean = texture_to_view(config, arrays, _cosmetics_texture(config, p, params, arrays,
                                                                   normals))
         return _finish(None, view_mask, k, output, params["camera.exposure"], mean)
-    else:
-        # Shade where the camera looks: the bumped normal map sampled at the view's samples
-        # on the mesh (`jaxskin.samples`: fewer than the texels), in the object's frame.
-        def to_list(texture_image):
-            return sample_corners(texture_image, arrays["list_corners"], arrays["list_tex"],
-                                  arrays["list_on"], table)
-
-        N = unit(to_list(normals))
-        L, V = _light_and_view(arrays, params["light.direction"], jnp.float32,
-                               lambda: to_list(arrays["positions"]))
-        ambient, light = params["light.ambient"], params["light.intensity"]
-        if "lit" in arrays:  # shadows: the direct light only where the light reaches
-            light = light * arrays["lit"].reshape(-1)[arrays["list_index"]][..., None]
-        if config.material == "blinn":
-            colour = blinn.shade(N, L, V, params["material.melanin"], params["material.blood"],
-                                 params["material.specular"], params["material.shininess"],
-                                 ambient, light)
-        else:
-            colour = lafortune.shade(params["material.lafortune"], N, L, V, ambient, light)
-        colour = jnp.where(arrays["list_on"][..., None], colour, 0.0)
-        pixels = (view_mask.shape[0] // k, view_mask.shape[1] // k)
-        mean = to_pixels(colour, arrays["list_pixel"], arrays["pixel_list"], pixels)
-        return _finish(None, view_mask, k, output, params["camera.exposure"], mean)
-    if config.mode == "height":
-        return _finish(colour, view_mask, k, output, None)
     # Every material model gives linear sRGB on one scale (`shading.blinn`'s docstring):
     # averaged in linear light, exposed, then encoded.
-    return _finish(colour, view_mask, k, output, params["camera.exposure"])
+    # Blinn, Lafortune: shade where the camera looks, the bumped normal map sampled at the
+    # view's samples on the mesh (`jaxskin.samples`: fewer than the texels), in the
+    # object's frame.
+    def to_list(texture_image):
+        return sample_corners(texture_image, arrays["list_corners"], arrays["list_tex"],
+                              arrays["list_on"], table)
+
+    N = unit(to_list(normals))
+    L, V = _light_and_view(arrays, params["light.direction"], jnp.float32,
+                           lambda: to_list(arrays["positions"]))
+    ambient, light = params["light.ambient"], params["light.intensity"]
+    if "lit" in arrays:  # shadows: the direct light only where the light reaches
+        light = light * arrays["lit"].reshape(-1)[arrays["list_index"]][..., None]
+    if config.material == "blinn":
+        colour = blinn.shade(N, L, V, params["material.melanin"], params["material.blood"],
+                             params["material.specular"], params["material.shininess"],
+                             ambient, light)
+    else:
+        colour = lafortune.shade(params["material.lafortune"], N, L, V, ambient, light)
+    colour = jnp.where(arrays["list_on"][..., None], colour, 0.0)
+    pixels = (view_mask.shape[0] // k, view_mask.shape[1] // k)
+    mean = to_pixels(colour, arrays["list_pixel"], arrays["pixel_list"], pixels)
+    return _finish(None, view_mask, k, output, params["camera.exposure"], mean)
 
 
 def texture_colour(config: SceneConfig, params: dict, arrays: dict, blur_gain=None):

@@ -24,17 +24,16 @@ import numpy as np
 
 from .linear import linear_call
 
-__all__ = ["SAMPLE_LIST", "list_corners", "sample_list", "to_pixels"]
+__all__ = ["list_corners", "sample_list", "to_pixels"]
 
-# `sample_list`'s arrays, in `Prepared.arrays`: per listed sample its flat index in the
-# view `(M,)`, its texture coordinates `(M, 2)`, whether it is one (not padding) `(M,)` and
-# its pixel `(M,)`; per pixel its listed samples `(H W, k²)`
-SAMPLE_LIST = ("list_index", "list_tex", "list_on", "list_pixel", "pixel_list")
 BUCKETS = 16  # the list's length is a multiple of 1/BUCKETS of the view's samples
 
 
 def sample_list(tex, shaded, k: int, length: int | None = None) -> dict:
-    """`SAMPLE_LIST`'s arrays (numpy) for a view's samples `shaded (k H, k W)` (those that
+    """The list's arrays (numpy, in `Prepared.arrays`): per listed sample its flat index in
+    the view `"list_index" (M,)`, its texture coordinates `"list_tex" (M, 2)`, whether it is
+    one (not padding) `"list_on" (M,)` and its pixel `"list_pixel" (M,)`; per pixel its
+    listed samples `"pixel_list" (H W, k²)`; for a view's samples `shaded (k H, k W)` (those that
     see a triangle's front) with texture coordinates `tex (k H, k W, 2)` and supersampling
     `k`. `length`: the list's length (at least the count); default: the count rounded up
     to a multiple of 1/`BUCKETS` of the samples."""

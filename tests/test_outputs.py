@@ -379,12 +379,13 @@ def test_a_name_from_a_file_name_that_is_not_utf8_is_kept():
 
 def test_png_bytes_are_imageios_bytes():
     """`maps.png_bytes` calls Pillow directly (twice as fast): the file is imageio's, byte
-    for byte, for grey, RGB and RGBA (a render's PNG did not change with it)."""
+    for byte, for grey, RGB, RGBA and 16-bit grey (a render's PNG did not change with it)."""
     import imageio.v3 as iio
 
     from jaxskin import maps
 
     rng = np.random.default_rng(0)
-    for shape in [(7, 9), (64, 48, 3), (33, 20, 4)]:
-        image = rng.integers(0, 256, shape).astype(np.uint8)
+    for shape, dtype in [((7, 9), np.uint8), ((64, 48, 3), np.uint8), ((33, 20, 4), np.uint8),
+                         ((9, 7), np.uint16)]:  # 16-bit grey: the height map
+        image = rng.integers(0, np.iinfo(dtype).max + 1, shape).astype(dtype)
         assert maps.png_bytes(image) == iio.imwrite("<bytes>", image, extension=".png"), shape
