@@ -35,16 +35,19 @@ gradient.
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .vectors import dot, unit_stack
 
-__all__ = ["bump_normals", "frame_bump_normals", "height_gradient"]
+__all__ = ["bump_normals", "difference_texels", "frame_bump_normals", "frame_tilt",
+           "height_gradient", "tilt"]
 
 
 def height_gradient(h: Float[ArrayLike, "H W"], wrap_s: bool = False) -> tuple[Array, Array]:
-    """(∂h/∂s, ∂h/∂t) by forward differences in texels (eq. 4.11); 0 on the last row, and on
-    the last column unless `wrap_s` (periodic s: it differences with the first column)."""
+    """(∂h/∂s, ∂h/∂t) by forward differences in texels (eq. 4.11): ∂h/∂t is 0 on the first
+    row (t up: it differences with the previous row), ∂h/∂s on the last column unless
+    `wrap_s` (periodic s: it differences with the first column)."""
     h = jnp.asarray(h)
     if wrap_s:
         hs = jnp.roll(h, -1, axis=1) - h
@@ -54,13 +57,36 @@ def height_gradient(h: Float[ArrayLike, "H W"], wrap_s: bool = False) -> tuple[A
     return hs, ht
 
 
+def difference_texels(texels, shape: tuple[int, int], wrap_s: bool = False) -> np.ndarray:
+    """The texels `height_gradient` differences at `texels` (flat indices into a texture of
+    `shape`, any array shape): `(3, *texels.shape)` int32 flat indices of the texel, its
+    neighbour along s (the next column) and its neighbour along t (the previous row); where
+    `height_gradient` gives 0 (the last column unless `wrap_s`, the first row), the texel
+    itself, so that the difference is 0 there too."""
+    H, W = shape
+    texels = np.asarray(texels, np.int64)
+    row, col = texels // W, texels % W
+    if wrap_s:
+        s = row * W + (col + 1) % W
+    else:
+        s = np.where(col < W - 1, texels + 1, texels)
+    t = np.where(row > 0, texels - W, texels)
+    return np.stack([texels, s, t]).astype(np.int32)
+
+
 def bump_normals(
     normals: Float[ArrayLike, "H W 3"], h: Float[ArrayLike, "H W"], k_bump
 ) -> Float[Array, "H W 3"]:
     """Eq. 4.10: perturbed unit normals `(H, W, 3)` for the **planar** projection, from the
     interpolated normal map and the height field. Differentiable in all three."""
+    return tilt(normals, *height_gradient(h), k_bump)
+
+
+def tilt(normals: Float[ArrayLike, "... 3"], hs, ht, k_bump) -> Float[Array, "... 3"]:
+    """Eq. 4.10 at each point (`bump_normals` without the differences): the unit normal of
+    `normals (..., 3)` tilted by the height's forward differences `hs`, `ht (...)`. The
+    renderer evaluates it at the texels its view reads only (`texture.bumped_at`)."""
     n = jnp.asarray(normals)
-    hs, ht = height_gradient(h)
     nx, ny, nz = n[..., 0], n[..., 1], n[..., 2]
     # n × (0, n_z, −n_y) and (n_z, 0, −n_x) × n, as `jnp.cross` writes them, component by
     # component: XLA:CPU runs the stacked (..., 3) form 4x slower (`jaxskin.vectors`)
@@ -85,15 +111,22 @@ def frame_bump_normals(
 
     **Returns:** unit normals `(H, W, 3)`, 0 off the mesh. Differentiable in every array.
     """
+    return frame_tilt(normals, *height_gradient(h, wrap_s), k_bump, grad_s, grad_t)
+
+
+def frame_tilt(normals: Float[ArrayLike, "... 3"], hs, ht, k_bump, grad_s, grad_t
+               ) -> Float[Array, "... 3"]:
+    """The general form at each point (`frame_bump_normals` without the differences):
+    `normals`, `grad_s`, `grad_t (..., 3)`, the height's forward differences `hs`, `ht (...)`;
+    unit normals, 0 where `normals` is 0."""
     n = jnp.asarray(normals)
-    hs, ht = height_gradient(h, wrap_s)
 
     def tangential(g):
         g = jnp.asarray(g, n.dtype)
         along = dot(g, n)
         return [g[..., i] - along * n[..., i] for i in range(3)]
 
-    # component by component, as `bump_normals`
+    # component by component, as `tilt`
     ts, tt = tangential(grad_s), tangential(grad_t)
     on = (n[..., 0] != 0) | (n[..., 1] != 0) | (n[..., 2] != 0)
     return unit_stack([jnp.where(on, n[..., i] - k_bump * (hs * ts[i] + ht * tt[i]), 0.0)

@@ -39,13 +39,14 @@ from . import biophysical, cosmetics, formats, maps, shadow, skin, sss, texture
 from .precision import matmul
 from .raster import interpolate
 from .render_args import check_call, check_maps, check_ranges, known_keys, strong
-from .samples import list_corners, sample_list, to_pixels
+from .samples import list_corners, place, sample_list, to_covered
 from .scene import BIOPHYSICAL_KEYS, SKIN_MAPS, SceneConfig
 from .shading import blinn, lafortune, layered
 from .vectors import dot, times3, unit
 from .view import (
     PIXEL_TABLE,
     View,
+    blend_corners,
     coverage,
     downsample,
     make_view,
@@ -135,6 +136,8 @@ def _prepare(config: SceneConfig) -> Prepared:
         arrays["h0"] = texture.furrows(config.texture)[0]
         arrays["noise"] = texture.noise(config.texture)
         arrays.update(s.frame)  # the surface gradients for the general bump form
+    if "list_corners" in arrays:
+        arrays.update(corner_arrays(s, arrays, arrays["list_corners"]))
     # The camera's rotation (and eye) as arguments: a turn or a zoom in the editor then
     # reuses the compiled program (only the view's arrays change), not compiles a new one.
     arrays["view_R"] = np.asarray(view.R)
@@ -269,6 +272,17 @@ def render(config: SceneConfig, params: dict, output: str = "display"):
     return _render(config, params, arrays, output)
 
 
+def corner_arrays(setup: texture.TextureSetup, arrays: dict, corners) -> dict:
+    """The fixed maps Blinn and Lafortune read of a bumped scene (one whose `arrays` hold
+    the noise) at the listed samples' corners `corners (4, M)` (`samples.list_corners`):
+    `texture.corner_inputs`, device arrays; {} without a bump (the normals are sampled)."""
+    if "noise" not in arrays:
+        return {}
+    inputs = texture.corner_inputs(setup, arrays["noise"], np.asarray(corners),
+                                   setup.tmap.wrap_x)
+    return {k: jax.device_put(v) for k, v in inputs.items()}
+
+
 def render_prepared(config: SceneConfig, params: dict, arrays: dict,
                     output: str = "display"):
     """`render` with the prepared arrays (`prepare(config).arrays`) passed in: inside your
@@ -311,17 +325,20 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
         return sample_padded(texture_image, arrays["pad"], arrays["tex"], shaded,
                              p.view.wrap_x, table)
 
-    if config.needs_furrows:
+    def texture_maps():  # the whole texture's height and normals
+        if not config.needs_furrows:
+            return jnp.ones(mask.shape, jnp.float32), arrays["normals"]
         frame = {k: arrays[k] for k in ("grad_s", "grad_t") if k in arrays}
         maps = texture.bumped(arrays["normals"], mask, arrays["h0"], arrays["noise"], params,
                               frame, p.setup.tmap.wrap_x)
-        height, normals = maps["height"], maps["normals"]
-    else:
-        height, normals = jnp.ones(mask.shape, jnp.float32), arrays["normals"]
+        return maps["height"], maps["normals"]
+
     if config.mode == "height":  # display values, averaged as they are
+        height = texture_maps()[0]
         return _finish(jnp.repeat(to_view(height[..., None]), 3, axis=-1), view_mask, k,
                        output, None)
     if config.spectral is not None:
+        normals = texture_maps()[1]
         # linear from texture space to the pixels: sampled and averaged in one map
         mean = texture_to_view(config, arrays, _cosmetics_texture(config, p, params, arrays,
                                                                   normals))
@@ -330,12 +347,17 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
     # averaged in linear light, exposed, then encoded.
     # Blinn, Lafortune: shade where the camera looks, the bumped normal map sampled at the
     # view's samples on the mesh (`jaxskin.samples`: fewer than the texels), in the
-    # object's frame.
+    # object's frame. The bump is computed at the texels those samples read only (their
+    # bilinear corners, `texture.bumped_at`): the same normals there, a quarter of the work.
     def to_list(texture_image):
         return sample_corners(texture_image, arrays["list_corners"], arrays["list_tex"],
                               arrays["list_on"], table)
 
-    N = unit(to_list(normals))
+    if "corner_texels" in arrays:
+        N = unit(blend_corners(texture.bumped_at(arrays["h0"], arrays, params),
+                               arrays["list_tex"], arrays["list_on"]))
+    else:
+        N = unit(to_list(arrays["normals"]))
     L, V = _light_and_view(arrays, params["light.direction"], jnp.float32,
                            lambda: to_list(arrays["positions"]))
     ambient, light = params["light.ambient"], params["light.intensity"]
@@ -349,8 +371,15 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
         colour = lafortune.shade(params["material.lafortune"], N, L, V, ambient, light)
     colour = jnp.where(arrays["list_on"][..., None], colour, 0.0)
     pixels = (view_mask.shape[0] // k, view_mask.shape[1] // k)
-    mean = to_pixels(colour, arrays["list_pixel"], arrays["pixel_list"], pixels)
-    return _finish(None, view_mask, k, output, params["camera.exposure"], mean)
+    # the pixels that show a listed sample averaged, exposed and encoded as a list too
+    # (the sRGB curve is the frame's costliest step after the bump), then placed
+    mean = to_covered(colour, arrays)
+    place_image = functools.partial(place, tables=arrays, pixels=pixels)
+    alpha = None if output == "display" else coverage(view_mask, k)[..., None]
+    at_rows = None if alpha is None else jnp.take(alpha.reshape(-1, 1), arrays["covered_pixel"],
+                                                   axis=0, mode="fill", fill_value=0.0)
+    return _finish_covered(mean, place_image, output, params["camera.exposure"], alpha,
+                           at_rows)
 
 
 def texture_colour(config: SceneConfig, params: dict, arrays: dict, blur_gain=None):
@@ -428,6 +457,20 @@ def _finish(samples, view_mask, k: int, output: str, stops, averaged=None):
     covered = alpha > 0
     straight = jnp.where(covered, mean / jnp.where(covered, alpha, 1.0), 0.0)
     return jnp.concatenate([encode_srgb(straight) if linear else straight, alpha], axis=-1)
+
+
+def _finish_covered(mean, place_image, output: str, stops, alpha, at_rows):
+    """`_finish` of the covered pixels' linear means `mean (P, 3)`, each step on the list,
+    then `place_image`d: the same values. `alpha (H, W, 1)` and its values at the rows
+    `at_rows (P, 1)` (None for "display"; 0 on the padding rows, which no pixel shows)."""
+    mean = expose(mean, stops)
+    if output == "display":
+        return place_image(encode_srgb(mean))
+    if output == "linear_rgba":
+        return jnp.concatenate([place_image(mean), alpha], axis=-1)
+    covered = at_rows > 0
+    straight = jnp.where(covered, mean / jnp.where(covered, at_rows, 1.0), 0.0)
+    return jnp.concatenate([place_image(encode_srgb(straight)), alpha], axis=-1)
 
 
 def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: dict, normals,

@@ -24,43 +24,64 @@ import numpy as np
 
 from .linear import linear_call
 
-__all__ = ["list_corners", "sample_list", "to_pixels"]
+__all__ = ["list_corners", "place", "sample_list", "to_covered", "to_pixels"]
 
 BUCKETS = 16  # the list's length is a multiple of 1/BUCKETS of the view's samples
 
 
 def sample_list(tex, shaded, k: int, length: int | None = None) -> dict:
-    """The list's arrays (numpy, in `Prepared.arrays`): per listed sample its flat index in
-    the view `"list_index" (M,)`, its texture coordinates `"list_tex" (M, 2)`, whether it is
-    one (not padding) `"list_on" (M,)` and its pixel `"list_pixel" (M,)`; per pixel its
-    listed samples `"pixel_list" (H W, k²)`; for a view's samples `shaded (k H, k W)` (those that
-    see a triangle's front) with texture coordinates `tex (k H, k W, 2)` and supersampling
-    `k`. `length`: the list's length (at least the count); default: the count rounded up
-    to a multiple of 1/`BUCKETS` of the samples."""
+    """The list's arrays (numpy, in `Prepared.arrays`), for a view's samples `shaded (k H,
+    k W)` (those that see a triangle's front) with texture coordinates `tex (k H, k W, 2)`
+    and supersampling `k`:
+
+    - per listed sample: its flat index in the view `"list_index" (M,)`, its texture
+      coordinates `"list_tex" (M, 2)`, whether it is one (not padding) `"list_on" (M,)`
+      and its pixel's row among the covered pixels `"list_pixel" (M,)` (P: none);
+    - per covered pixel (one with a listed sample): its listed samples `"pixel_list" (P,
+      k²)` (M: none) and its flat index in the image `"covered_pixel" (P,)` (H W: none);
+    - per pixel: its row among the covered pixels `"pixel_covered" (H W,)` (P: none).
+
+    The covered pixels are averaged, exposed and encoded as a list too, then placed in the
+    image (`to_covered`, `place`). `length`: the list's length (at least the count), and
+    then every pixel is a row; default: the count rounded up to a multiple of 1/`BUCKETS`
+    of the samples, and the covered pixels' of the pixels."""
     shaded = np.asarray(shaded, bool)
     kH, kW = shaded.shape
     H, W = kH // k, kW // k
     idx = np.flatnonzero(shaded)
     M = idx.size
-    if length is None:
-        step = -(-shaded.size // BUCKETS)
-        length = max(step, -(-M // step) * step)
+    given, length = length, _bucket(M, shaded.size) if length is None else length
     if length < M:
         raise ValueError(f"a list of {length} cannot hold {M} samples")
     row, col = idx // kW, idx % kW
     pixel = (row // k) * W + col // k
+    covered, row_of = np.unique(pixel, return_inverse=True)
+    # a list of a given length (the editor's, every sample): every pixel a row, so that
+    # the shapes stay as they are when the view turns
+    P = _bucket(covered.size, H * W) if given is None else H * W
     list_index = np.zeros(length, np.int32)  # padding: sample 0 (read, never shown)
     list_index[:M] = idx
     list_tex = np.zeros((length, 2), np.float32)
     list_tex[:M] = np.asarray(tex, np.float32).reshape(-1, 2)[idx]
     list_on = np.zeros(length, bool)
     list_on[:M] = True
-    list_pixel = np.full(length, H * W, np.int32)  # padding: the zero row past the pixels
-    list_pixel[:M] = pixel
-    pixel_list = np.full((H * W, k * k), length, np.int32)  # none: the zero row
-    pixel_list[pixel, (row % k) * k + col % k] = np.arange(M, dtype=np.int32)
+    list_pixel = np.full(length, P, np.int32)  # padding: the zero row past the pixels
+    list_pixel[:M] = row_of
+    pixel_list = np.full((P, k * k), length, np.int32)  # none: the zero row
+    pixel_list[row_of, (row % k) * k + col % k] = np.arange(M, dtype=np.int32)
+    covered_pixel = np.full(P, H * W, np.int32)
+    covered_pixel[:covered.size] = covered
+    pixel_covered = np.full(H * W, P, np.int32)
+    pixel_covered[covered] = np.arange(covered.size, dtype=np.int32)
     return {"list_index": list_index, "list_tex": list_tex, "list_on": list_on,
-            "list_pixel": list_pixel, "pixel_list": pixel_list}
+            "list_pixel": list_pixel, "pixel_list": pixel_list,
+            "covered_pixel": covered_pixel, "pixel_covered": pixel_covered}
+
+
+def _bucket(count: int, total: int) -> int:
+    """`count` rounded up to a multiple of 1/`BUCKETS` of `total` (at least one step)."""
+    step = -(-total // BUCKETS)
+    return max(step, -(-count // step) * step)
 
 
 def list_corners(list_tex, list_on, pad, shape: tuple[int, int], wrap_x: bool) -> np.ndarray:
@@ -76,43 +97,53 @@ def list_corners(list_tex, list_on, pad, shape: tuple[int, int], wrap_x: bool) -
     return out
 
 
-def to_pixels(values, list_pixel, pixel_list, pixels: tuple[int, int]):
+def to_pixels(values, tables: dict, pixels: tuple[int, int]):
     """The mean over each pixel's k × k samples of the listed samples' `values (M, C)`
     (samples not listed count as 0, as the background): `(H, W, C)`, linear in `values`;
-    reverse mode gathers too. `pixels`: `(H, W)`."""
-    return _to_pixels(tuple(pixels), values, (list_pixel, pixel_list))
+    reverse mode gathers too. `tables`: `sample_list`'s arrays; `pixels`: `(H, W)`."""
+    return place(to_covered(values, tables), tables, pixels)
 
 
-def _mean(values, pixel_list):
+def to_covered(values, tables: dict):
+    """The mean over each covered pixel's k × k samples of the listed samples' `values (M,
+    C)`: `(P, C)`, in the order of `tables["covered_pixel"]` (0 on the padding)."""
+    return _gather_mean(values, tables["pixel_list"], tables["list_pixel"])
+
+
+def place(values, tables: dict, pixels: tuple[int, int]):
+    """The covered pixels' `values (P, C)` in the image: `(H, W, C)`, 0 elsewhere."""
+    H, W = pixels
+    out = _gather_mean(values, tables["pixel_covered"][:, None], tables["covered_pixel"])
+    return out.reshape(H, W, values.shape[-1])
+
+
+def _gather_mean(values, rows, inverse):
+    """`out[r] = mean_j values[rows[r, j]]` `(R, C)` (index N, past `values (N, C)`: 0),
+    where each value is read by one row at most: row `inverse[n]` (R: none). Linear in
+    `values`; reverse mode gathers through `inverse` (XLA:CPU's scatter-add is slow)."""
+    return _gathered(values, (rows, inverse))
+
+
+def _mean(rows, inverse, values):
     C = values.shape[-1]
     padded = jnp.concatenate([values, jnp.zeros((1, C), values.dtype)])
-    read = padded[pixel_list]  # (H W, k², C); the k² summed as written (a short axis)
+    read = padded[rows]  # (R, J, C); the J summed as written (a short axis)
     return functools.reduce(lambda a, b: a + b, [read[:, j] for j in range(read.shape[1])]) \
-        / pixel_list.shape[1]
+        / rows.shape[1]
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
-def _to_pixels(pixels, values, table):
-    return _rules(pixels)[0](*table, values)
+def _mean_transpose(rows, inverse, ct):
+    padded = jnp.concatenate([ct, jnp.zeros((1, ct.shape[-1]), ct.dtype)])
+    return (padded[inverse] / rows.shape[1],)
 
 
-@_to_pixels.defjvp
-def _to_pixels_jvp(pixels, primals, tangents):
+@jax.custom_jvp
+def _gathered(values, table):
+    return _mean(*table, values)
+
+
+@_gathered.defjvp
+def _gathered_jvp(primals, tangents):
     values, table = primals
-    out = _to_pixels(pixels, values, table)
-    return out, linear_call(*_rules(pixels), tuple(table), (tangents[0],))
-
-
-@functools.cache
-def _rules(pixels):
-    H, W = pixels
-
-    def fun(list_pixel, pixel_list, values):
-        return _mean(values, pixel_list).reshape(H, W, values.shape[-1])
-
-    def transpose(list_pixel, pixel_list, ct):
-        C = ct.shape[-1]
-        padded = jnp.concatenate([ct.reshape(-1, C), jnp.zeros((1, C), ct.dtype)])
-        return (padded[list_pixel] / pixel_list.shape[1],)
-
-    return fun, transpose
+    return _gathered(values, table), linear_call(_mean, _mean_transpose, tuple(table),
+                                                 (tangents[0],))

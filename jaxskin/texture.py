@@ -22,8 +22,8 @@ from .mesh import Mesh, load_mesh
 from .projection import TextureMap, project
 from .raster import interpolate
 
-__all__ = ["EditSpec", "TextureConfig", "TextureSetup", "furrows", "mapped", "setup",
-           "texture_maps"]
+__all__ = ["EditSpec", "TextureConfig", "TextureSetup", "bumped_at", "corner_inputs", "furrows",
+           "mapped", "setup", "texture_maps"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -185,3 +185,39 @@ def bumped(normals, mask, h0, r, params, frame: dict, wrap_s: bool = False) -> d
         return {"height": h, "normals": bump.bump_normals(normals, h, k)}
     return {"height": h, "normals": bump.frame_bump_normals(
         normals, h, k, frame["grad_s"], frame["grad_t"], wrap_s=wrap_s)}
+
+
+def corner_inputs(setup: TextureSetup, noise, corners, wrap_s: bool = False) -> dict:
+    """What `bumped_at` reads of the texture's fixed maps at the texels `corners (4, M)`
+    (the listed samples' bilinear corners, `samples.list_corners`), gathered once per view:
+    `"corner_texels" (3, 4, M)`, the texels whose heights the forward differences take
+    (`bump.difference_texels`), with the noise `"corner_noise"` and the mask
+    `"corner_mask"` there; the normals `"corner_normals" (4, M, 3)` and, for the general
+    form, the surface gradients `"corner_grad_s"`, `"corner_grad_t"`. `wrap_s`: as
+    `bumped`'s."""
+    shape = tuple(setup.mask.shape)
+    frame = setup.frame
+    texels = bump.difference_texels(corners, shape, wrap_s and bool(frame))
+
+    def at(image, index):
+        image = np.asarray(image)
+        return image.reshape(-1, *image.shape[2:])[index]
+
+    out = {"corner_texels": texels, "corner_noise": at(noise, texels),
+           "corner_mask": at(setup.mask, texels), "corner_normals": at(setup.normals, corners)}
+    out.update({f"corner_{k}": at(v, corners) for k, v in frame.items()})
+    return out
+
+
+def bumped_at(h0, inputs: dict, params) -> jax.Array:
+    """`bumped`'s normals at the texels of `corner_inputs` only, `(4, M, 3)`: noise (step
+    9) and eq. 4.10 (or the general form where the inputs hold the surface gradients) with
+    the same forward differences, from the height field `h0 (H, W)` read at those texels.
+    Blinn and Lafortune sample nothing else of the bump map (`render`)."""
+    h = wrinkles.add_noise(jnp.reshape(h0, -1)[inputs["corner_texels"]], inputs["corner_mask"],
+                           params["wrinkles.k_noise"], inputs["corner_noise"])
+    hs, ht = h[1] - h[0], h[2] - h[0]  # the forward differences of `bump.height_gradient`
+    k, n = params["wrinkles.k_bump"], inputs["corner_normals"]
+    if "corner_grad_s" not in inputs:
+        return bump.tilt(n, hs, ht, k)
+    return bump.frame_tilt(n, hs, ht, k, inputs["corner_grad_s"], inputs["corner_grad_t"])

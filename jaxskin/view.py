@@ -30,7 +30,8 @@ from .linear import linear_call
 from .projection import TextureMap
 from .raster import Raster, rasterize
 
-__all__ = ["PIXEL_TABLE", "View", "bilinear", "blend", "corners", "coverage", "downsample",
+__all__ = ["PIXEL_TABLE", "View", "bilinear", "blend", "blend_corners", "corners", "coverage",
+           "downsample",
            "hidden_side_share", "make_view", "pad_index", "pixel_entries", "pixel_table",
            "rotation", "sample", "sample_corners", "sample_padded", "transpose_table",
            "view_pixels"]
@@ -445,11 +446,17 @@ def sample_corners(image, corners, tex, mask, table=None):
     return _corners_with_table(image, (corners, tex, mask, *table))
 
 
+def blend_corners(values, tex, mask):
+    """The bilinear samples at `tex (N, 2)` of the values `(4, N, C)` at their corners (00,
+    10, 01, 11, as `corners` orders them): `(N, C)`, 0 where not `mask (N,)`."""
+    _, _, fx, fy = bilinear(tex)
+    out = blend(*(values[i] for i in range(4)), fx, fy)
+    return jnp.where(jnp.asarray(mask)[..., None], out, 0.0)
+
+
 def _corner_sample(image, corners, tex, mask, *table):
     flat = image.reshape(-1, image.shape[-1])
-    _, _, fx, fy = bilinear(tex)
-    out = blend(*(flat[corners[i]] for i in range(4)), fx, fy)
-    return jnp.where(jnp.asarray(mask)[..., None], out, 0.0)
+    return blend_corners([flat[corners[i]] for i in range(4)], tex, mask)
 
 
 @jax.custom_jvp

@@ -33,8 +33,9 @@ def test_the_list_holds_the_shaded_samples_and_pads_to_a_bucket():
     # each pixel lists its own samples only: its 2 x 2 block, in the block's row order
     rows, cols = np.nonzero(shaded)
     for i, (r, c) in enumerate(zip(rows, cols, strict=True)):
-        assert t["list_pixel"][i] == (r // 2) * 7 + c // 2
+        assert t["covered_pixel"][t["list_pixel"][i]] == (r // 2) * 7 + c // 2
         assert t["pixel_list"][t["list_pixel"][i], (r % 2) * 2 + c % 2] == i
+        assert t["pixel_covered"][(r // 2) * 7 + c // 2] == t["list_pixel"][i]
     with pytest.raises(ValueError, match="cannot hold"):
         sample_list(tex, shaded, 2, length=M - 1)
 
@@ -49,7 +50,7 @@ def test_the_pixels_are_the_mean_of_the_scattered_samples(k):
     full = np.zeros((shaded.size, 3), np.float32)
     full[np.flatnonzero(shaded)] = values[t["list_on"]]
     expected = np.asarray(downsample(full.reshape(*shaded.shape, 3), k))
-    got = np.asarray(to_pixels(values, t["list_pixel"], t["pixel_list"], (5, 7)))
+    got = np.asarray(to_pixels(values, t, (5, 7)))
     np.testing.assert_allclose(got, expected, rtol=0, atol=2e-7)
 
 
@@ -59,7 +60,7 @@ def test_the_pixel_mean_is_gradient_checked(x64):
     values = jnp.asarray(np.random.default_rng(4).normal(size=(t["list_on"].size, 3)))
 
     def f(v):
-        return to_pixels(v, t["list_pixel"], t["pixel_list"], (5, 7)) ** 2
+        return to_pixels(v, t, (5, 7)) ** 2
 
     check_grads(f, (values,), order=1, modes=("fwd", "rev"))
     # the padding reads no pixel: its gradient is 0
@@ -147,3 +148,99 @@ def test_sampling_at_known_corners_is_sampling_the_padded_image(wrap_x, x64):
     np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-15)
     check_grads(lambda im: sample_corners(im, corners, t["list_tex"], t["list_on"], table) ** 2,
                 (image,), order=1, modes=("fwd", "rev"))
+
+
+@pytest.mark.parametrize("name", ["hand", "arm"])
+def test_the_bump_at_the_samples_corners_is_the_whole_maps_there(name):
+    """Blinn and Lafortune compute the bump at the texels their samples read only
+    (`texture.bumped_at`): against the whole texture's bump map (`texture.bumped`) sampled
+    at the same samples. The hand is planar (eq. 4.10), the arm cylindrical (the general
+    form, s wrapping at the seam); noise on, so that the masked heights count too."""
+    from jaxskin import texture
+    from jaxskin.vectors import unit
+    from jaxskin.view import blend_corners, sample_corners
+
+    sc = scene_at_width(name, 48, ["texture.size=64", "wrinkles.k_noise=0.4",
+                                   "camera.rotate=0,90,0"])
+    a, p = render.prepare(sc.config).arrays, sc.params
+    s = texture.setup(sc.config.texture)
+    assert ("corner_grad_s" in a) == (name == "arm")
+    whole = texture.bumped(a["normals"], a["mask"], a["h0"], a["noise"], p, s.frame,
+                           s.tmap.wrap_x)["normals"]
+    expected = sample_corners(whole, a["list_corners"], a["list_tex"], a["list_on"])
+    got = blend_corners(texture.bumped_at(a["h0"], a, p), a["list_tex"], a["list_on"])
+    np.testing.assert_allclose(got, expected, rtol=0, atol=2e-7)
+    on = np.asarray(a["list_on"])
+    assert on.sum() > 150 and np.all(np.abs(np.linalg.norm(unit(got)[on], axis=-1) - 1) < 1e-6)
+    if name == "arm":  # the view reads texels in both the seam's first and last columns
+        W = s.mask.shape[1]
+        cols = np.asarray(a["list_corners"])[:, on] % W
+        assert cols.min() == 0 and cols.max() == W - 1
+
+
+@pytest.mark.parametrize("k_bump", [0.5, 1e6])
+def test_the_bump_at_the_samples_corners_is_gradient_checked(k_bump, x64):
+    """With respect to the height map, k_bump and k_noise, in float64, at an ordinary and
+    a huge k_bump (the normals then lie along the height's gradient)."""
+    from jaxskin import texture
+    from jaxskin.view import blend_corners
+
+    sc = scene_at_width("arm", 24, ["texture.size=32", "wrinkles.k_noise=0.4"])
+    a = render.prepare(sc.config).arrays
+    inputs = {k: jnp.asarray(v, jnp.float64) if np.asarray(v).dtype == np.float32 else v
+              for k, v in a.items() if k.startswith("corner_")}
+    h0 = jnp.asarray(a["h0"], jnp.float64)
+
+    def f(h, kb, kn):
+        n = texture.bumped_at(h, inputs, {"wrinkles.k_bump": kb, "wrinkles.k_noise": kn})
+        return blend_corners(n, jnp.asarray(a["list_tex"], jnp.float64), a["list_on"])
+
+    args = (h0, jnp.float64(k_bump), jnp.float64(0.4))
+    check_grads(f, args, order=1, modes=("fwd", "rev"), eps=1e-6 if k_bump > 1 else 1e-4)
+    value, grads = jax.value_and_grad(lambda *x: jnp.sum(f(*x) ** 3), argnums=(0, 1, 2))(*args)
+    assert np.isfinite(value) and all(np.all(np.isfinite(g)) for g in grads)
+
+
+def test_a_blinn_program_computes_no_texture_sized_normal_map():
+    """Leave out what the scene does not need: the hand's bump is computed at its samples'
+    corner texels, not over its whole texture (the texture is larger than the view)."""
+    sc = scene_at_width("hand", 64, ["texture.size=256"])
+    a = render.prepare(sc.config).arrays
+    hlo = jax.jit(lambda p, a: render.render_prepared(sc.config, p, a)).lower(
+        sc.params, a).compile().as_text()
+    assert "256,256,3" not in hlo and "65536,3" not in hlo
+    assert f"4,{a['list_tex'].shape[0]}" in hlo  # the corners' normals
+
+
+def test_the_covered_pixels_give_every_output_as_the_whole_image_did():
+    """The list's pixels are averaged, exposed and encoded as a list, then placed: each
+    output against the same steps done on the whole image, by hand (`view.downsample` of
+    the samples put back in their places; alpha the share of a pixel's samples that see
+    the mesh), on a hand at 2 × 2 samples a pixel, so that its outline is partly covered."""
+    from jaxskin.view import downsample
+
+    sc = scene_at_width("hand", 40, ["texture.size=64", "camera.supersample=2",
+                                     "camera.exposure=0.5"])
+    a, p = render.prepare(sc.config).arrays, sc.params
+    linear = np.asarray(render.render(sc.config, p, "linear_rgba"), np.float64)
+    rgba = np.asarray(render.render(sc.config, p, "rgba"), np.float64)
+    display = np.asarray(render.render(sc.config, p), np.float64)
+    alpha = np.asarray(downsample(np.asarray(a["view_mask"], np.float32)[..., None], 2))
+    partly = (alpha[..., 0] > 0) & (alpha[..., 0] < 1)
+    assert partly.sum() > 20
+    np.testing.assert_array_equal(linear[..., 3:], alpha)
+    np.testing.assert_array_equal(rgba[..., 3:], alpha)
+
+    def encode(x):  # IEC 61966-2-1, float64
+        return np.where(x > 0.0031308, 1.055 * np.maximum(x, 0.0031308) ** (1 / 2.4) - 0.055,
+                        12.92 * x)
+
+    np.testing.assert_allclose(display, encode(linear[..., :3]), rtol=0, atol=2e-6)
+    covered = alpha[..., 0] > 0
+    straight = np.where(covered[..., None], linear[..., :3] / np.where(covered, alpha[..., 0],
+                                                                       1)[..., None], 0)
+    np.testing.assert_allclose(rgba[..., :3], encode(straight), rtol=0, atol=2e-6)
+    assert np.all(display[~covered] == 0) and np.all(rgba[~covered] == 0)
+    # exposure on the list: half a stop brighter than at 0 (linear light)
+    base = np.asarray(render.render(sc.config, {**p, "camera.exposure": 0.0}, "linear_rgba"))
+    np.testing.assert_allclose(linear[..., :3], 2 ** 0.5 * base[..., :3], rtol=2e-6, atol=1e-7)

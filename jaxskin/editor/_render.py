@@ -81,6 +81,8 @@ class Rendering:
             full["list_corners"] = samples.list_corners(
                 full["list_tex"], full["list_on"], np.asarray(prepared.arrays["pad"]),
                 prepared.arrays["mask"].shape, view.wrap_x)
+            full.update(render.corner_arrays(prepared.setup, prepared.arrays,
+                                             full["list_corners"]))
             self._list_cache = cached = (prepared, {n: jnp.asarray(v) for n, v in full.items()})
         return cached[1]
 
