@@ -38,6 +38,14 @@ def test_the_list_holds_the_shaded_samples_and_pads_to_a_bucket():
         assert t["pixel_covered"][(r // 2) * 7 + c // 2] == t["list_pixel"][i]
     with pytest.raises(ValueError, match="cannot hold"):
         sample_list(tex, shaded, 2, length=M - 1)
+    # one sample a pixel: the covered pixels' rows are the list's, in its order (the
+    # renderer then takes the list as the rows, `render._render`)
+    for length in (None, shaded.size):
+        t = sample_list(tex, shaded, 1, length)
+        assert t["pixel_list"].shape == (t["list_on"].size, 1)
+        assert np.array_equal(t["pixel_list"][:M, 0], np.arange(M))
+        assert np.all(t["pixel_list"][M:, 0] == t["list_on"].size)
+        assert np.array_equal(t["covered_pixel"][:M], t["list_index"][:M])
 
 
 @pytest.mark.parametrize("k", [1, 2, 3])
