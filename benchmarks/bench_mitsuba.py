@@ -70,7 +70,9 @@ QUICK = ["texture.size=128", "camera.size=64", "camera.supersample=1"]
 # frames of one renderer. Measured (2 cores, quiet, 9 rounds): one call each in turn,
 # jaxskin's forward 6.9–7.9 ms wall and 13–16 ms CPU, against 5.1 and 8.4 ms between its
 # own stages; with 50 ms of rest before each call, Mitsuba's forward 7.8 → 13.0 ms.
-BURST = int(os.environ.get("BENCH_BURST", "3"))
+BURST = int(os.environ.get("BENCH_BURST", "10"))
+SWITCH = int(os.environ.get("BENCH_SWITCH", "2"))
+TRACE = os.environ.get("BENCH_TRACE") == "1"
 MATERIAL = ("material.melanin", "material.blood", "material.specular", "material.shininess")
 
 
@@ -173,8 +175,9 @@ class Mitsuba:
         self.params.update()
 
     def forward(self):
-        image = self.mi.render(self.scene, spp=1)
-        self.dr.eval(image)
+        with self.dr.suspend_grad():  # a frame: no AD graph (the bitmap has grad enabled)
+            image = self.mi.render(self.scene, spp=1)
+            self.dr.eval(image)
         self.dr.sync_thread()
         return image
 
@@ -261,10 +264,12 @@ def interleaved(fns: dict, repeat: int, cpu: dict | None = None) -> dict:
     times = {name: [] for name in fns}
     for _ in range(repeat):
         for name, fn in fns.items():
-            for i in range(BURST + 1):  # the first call of a burst is not timed (BURST)
+            for i in range(BURST):  # the first calls of a burst are not timed (BURST)
                 t0, c0 = time.perf_counter(), time.process_time()
                 fn()
-                if i == 0:
+                if TRACE:
+                    print(f"{name} {i} {(time.perf_counter() - t0) * 1e3:.2f}")
+                if i < SWITCH:
                     continue
                 times[name].append((time.perf_counter() - t0) * 1e3)
                 if cpu is not None:

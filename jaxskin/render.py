@@ -68,6 +68,10 @@ VIEW_TABLE = ("view_rows", "view_weights", "view_dest")  # `view.transpose_table
 # The cosmetics model's view: `view.pixel_table` (sampling and supersample averaging in one
 # linear map, a table each way); a scene without it samples, then averages.
 VIEWS = (*VIEW_TABLE, *PIXEL_TABLE)  # every view table (the editor drops them: see there)
+# What Blinn and Lafortune read of the bump's fixed maps at the listed samples' corners
+# (`corner_arrays`; the editor makes its own for its list)
+CORNERS = ("corner_texels", "corner_noise", "corner_mask", "corner_normals", "corner_grad_s",
+           "corner_grad_t")
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -275,8 +279,11 @@ def render(config: SceneConfig, params: dict, output: str = "display"):
 def corner_arrays(setup: texture.TextureSetup, arrays: dict, corners) -> dict:
     """The fixed maps Blinn and Lafortune read of a bumped scene (one whose `arrays` hold
     the noise) at the listed samples' corners `corners (4, M)` (`samples.list_corners`):
-    `texture.corner_inputs`, device arrays; {} without a bump (the normals are sampled)."""
-    if "noise" not in arrays:
+    `texture.corner_inputs`, device arrays (`CORNERS`). {} without a bump (the normals are
+    sampled), and where the corners are as many as the texels or more (more samples than
+    texels: the default hand's 2 × 2 samples a pixel on a texture as wide as its view),
+    for which the whole texture's bump is less work (then sampled, with the same values)."""
+    if "noise" not in arrays or np.size(corners) >= np.size(setup.mask):
         return {}
     inputs = texture.corner_inputs(setup, arrays["noise"], np.asarray(corners),
                                    setup.tmap.wrap_x)
@@ -353,11 +360,11 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
         return sample_corners(texture_image, arrays["list_corners"], arrays["list_tex"],
                               arrays["list_on"], table)
 
-    if "corner_texels" in arrays:
+    if "corner_texels" in arrays:  # where fewer than the texels (`corner_arrays`)
         N = unit(blend_corners(texture.bumped_at(arrays["h0"], arrays, params),
                                arrays["list_tex"], arrays["list_on"]))
     else:
-        N = unit(to_list(arrays["normals"]))
+        N = unit(to_list(texture_maps()[1]))
     L, V = _light_and_view(arrays, params["light.direction"], jnp.float32,
                            lambda: to_list(arrays["positions"]))
     ambient, light = params["light.ambient"], params["light.intensity"]

@@ -10,7 +10,7 @@ from jax.test_util import check_grads
 
 from jaxskin import render
 from jaxskin.samples import BUCKETS, sample_list, to_pixels
-from jaxskin.scene import scene_at_width
+from jaxskin.scene import load_scene, scene_at_width
 from jaxskin.view import downsample
 
 
@@ -168,8 +168,8 @@ def test_the_bump_at_the_samples_corners_is_the_whole_maps_there(name):
     from jaxskin.vectors import unit
     from jaxskin.view import blend_corners, sample_corners
 
-    sc = scene_at_width(name, 48, ["texture.size=64", "wrinkles.k_noise=0.4",
-                                   "camera.rotate=0,90,0"])
+    sc = scene_at_width(name, 96, ["texture.size=128", "camera.supersample=1",
+                                   "wrinkles.k_noise=0.4", "camera.rotate=-90,0,0"])
     a, p = render.prepare(sc.config).arrays, sc.params
     s = texture.setup(sc.config.texture)
     assert ("corner_grad_s" in a) == (name == "arm")
@@ -193,7 +193,8 @@ def test_the_bump_at_the_samples_corners_is_gradient_checked(k_bump, x64):
     from jaxskin import texture
     from jaxskin.view import blend_corners
 
-    sc = scene_at_width("arm", 24, ["texture.size=32", "wrinkles.k_noise=0.4"])
+    sc = scene_at_width("arm", 16, ["texture.size=64", "camera.supersample=1",
+                                    "wrinkles.k_noise=0.4"])
     a = render.prepare(sc.config).arrays
     inputs = {k: jnp.asarray(v, jnp.float64) if np.asarray(v).dtype == np.float32 else v
               for k, v in a.items() if k.startswith("corner_")}
@@ -209,11 +210,24 @@ def test_the_bump_at_the_samples_corners_is_gradient_checked(k_bump, x64):
     assert np.isfinite(value) and all(np.all(np.isfinite(g)) for g in grads)
 
 
+def test_the_bump_is_made_where_it_is_less_work():
+    """The corners' bump where the listed samples' corners are fewer than the texels (the
+    like-for-like hand of benchmarks/bench_mitsuba.py: a 1024² texture, 512² samples), the
+    whole texture's where they are not (the default hand: a 512² texture, 1024² samples)."""
+    for over, corners in ((["camera.size=128", "texture.size=256", "camera.supersample=1"],
+                           True), (["camera.size=128", "texture.size=128"], False)):
+        sc = load_scene("hand", over)
+        a = render.prepare(sc.config).arrays
+        assert ("corner_texels" in a) == corners, over
+        assert (4 * a["list_on"].size < a["mask"].size) == corners
+
+
 def test_a_blinn_program_computes_no_texture_sized_normal_map():
     """Leave out what the scene does not need: the hand's bump is computed at its samples'
     corner texels, not over its whole texture (the texture is larger than the view)."""
     sc = scene_at_width("hand", 64, ["texture.size=256"])
     a = render.prepare(sc.config).arrays
+    assert "corner_texels" in a
     hlo = jax.jit(lambda p, a: render.render_prepared(sc.config, p, a)).lower(
         sc.params, a).compile().as_text()
     assert "256,256,3" not in hlo and "65536,3" not in hlo

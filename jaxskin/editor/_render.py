@@ -59,7 +59,8 @@ class Rendering:
         # Without the view's transpose table (reverse mode only; the editor takes no
         # gradients): its row count changes with every turn or zoom, and so would the
         # arrays' shapes and the compiled program.
-        arrays = {k: v for k, v in prepared.arrays.items() if k not in render.VIEWS}
+        arrays = {k: v for k, v in prepared.arrays.items()
+                  if k not in render.VIEWS and k not in render.CORNERS}
         if "list_tex" in arrays:  # Blinn, Lafortune: every sample listed, so that a turn
             arrays.update(self._full_list(prepared, config.supersample))  # keeps the shapes
         if config.needs_furrows:
