@@ -29,7 +29,8 @@ First the agreement: both rendered diffuse only (jaxskin: no highlight, ambient 
 linear image times the bitmap's factor sampled into the view) must cover the same pixels
 with the same colour, or it stops (exit 1) and writes nothing. Then, warm, every call waited
 for (`jax.block_until_ready`; `dr.eval` and `dr.sync_thread()`), each row's pair (jaxskin,
-Mitsuba) interleaved over `--repeat` rounds (default 15): medians of wall and CPU time. Then
+Mitsuba) in turn over `--repeat` rounds (default 15), each turn a burst of `BURST` calls
+of which the first `SWITCH` are not timed (see `BURST`): medians of wall and CPU time. Then
 jaxskin's forward in its stages, each jitted apart, and the host work `render.render` does
 per call. Aim (issue 38): forward and forward + gradient each ≤ 0.5× Mitsuba's. `--write`
 replaces the `mitsuba` section of RESULTS.md.
@@ -72,7 +73,6 @@ QUICK = ["texture.size=128", "camera.size=64", "camera.supersample=1"]
 # own stages; with 50 ms of rest before each call, Mitsuba's forward 7.8 → 13.0 ms.
 BURST = int(os.environ.get("BENCH_BURST", "10"))
 SWITCH = int(os.environ.get("BENCH_SWITCH", "2"))
-TRACE = os.environ.get("BENCH_TRACE") == "1"
 MATERIAL = ("material.melanin", "material.blood", "material.specular", "material.shininess")
 
 
@@ -256,7 +256,8 @@ def write_images(folder: Path, jx: Jaxskin, mt: Mitsuba, agree: dict) -> None:
     png("jaxskin_diffuse.png", encoded(ours))
 
 
-def interleaved(fns: dict, repeat: int, cpu: dict | None = None) -> dict:
+def interleaved(fns: dict, repeat: int, cpu: dict | None = None,
+                switch: dict | None = None) -> dict:
     """`{name: [ms, ...]}`: each function called once per round, in turn, `repeat` rounds
     (so that a change of the machine's load moves every row alike); wall time. `cpu`, if
     given, gets the process's CPU time per call alike (every thread's: JAX's and Dr.Jit's
@@ -267,8 +268,8 @@ def interleaved(fns: dict, repeat: int, cpu: dict | None = None) -> dict:
             for i in range(BURST):  # the first calls of a burst are not timed (BURST)
                 t0, c0 = time.perf_counter(), time.process_time()
                 fn()
-                if TRACE:
-                    print(f"{name} {i} {(time.perf_counter() - t0) * 1e3:.2f}")
+                if i == 0 and switch is not None:
+                    switch.setdefault(name, []).append((time.perf_counter() - t0) * 1e3)
                 if i < SWITCH:
                     continue
                 times[name].append((time.perf_counter() - t0) * 1e3)
@@ -390,17 +391,17 @@ def main(argv: list[str] | None = None) -> int:
              {"jaxskin gradient": jx.gradient, "Mitsuba gradient": mt.gradient},
              {"jaxskin gradient, height map": jx.gradient_map,
               "Mitsuba gradient, height map": mt.gradient}]
-    load, ms, cpu = [os.getloadavg()[0]], {}, {}
+    load, ms, cpu, switch = [os.getloadavg()[0]], {}, {}, {}
     for pair in pairs:
         interleaved(pair, 3)  # warm: compiled, caches filled
-        ms.update(interleaved(pair, args.repeat, cpu))
+        ms.update(interleaved(pair, args.repeat, cpu, switch))
     load.append(os.getloadavg()[0])
     for name, v in ms.items():
         print(f"{name}: median {statistics.median(v):.1f} ms ({min(v):.1f}–{max(v):.1f}), "
               f"CPU {statistics.median(cpu[name]):.1f} ms", flush=True)
     stages, host = stage_times(jx, args.repeat), host_costs(jx)
     body = section(common.command("benchmarks/bench_mitsuba.py", argv), args.repeat, mi, dr,
-                   jx, (ms, cpu), load, agree, stages, host)
+                   jx, (ms, cpu, switch), load, agree, stages, host)
     print(body)
     if args.write:
         common.write_section("mitsuba", body)
@@ -432,7 +433,10 @@ not over the whole texture. The host work around the renderer
 
 
 def section(command, repeat, mi, dr, jx, times, load, agree, stages, host) -> str:
-    ms, cpu = times
+    ms, cpu, switch = times
+    first = {name: statistics.median(v) for name, v in switch.items()}
+    switch = (f"{first['jaxskin forward']:.1f} ms for jaxskin's forward and "
+              f"{first['Mitsuba forward']:.1f} ms for Mitsuba's (medians of the first calls)")
     med = {name: statistics.median(v) for name, v in ms.items()}
     cpu = {name: statistics.median(v) for name, v in cpu.items()}
 
@@ -479,8 +483,11 @@ a `directional` emitter, the `direct` integrator (one emitter sample, no BSDF sa
 direct light only, as jaxskin); its gradient is with respect to the bitmap's {tex} × 3
 values. Loss on both sides: the image's MSE against 0.5 (jaxskin's display image,
 Mitsuba's linear one). Warm, every call waited for (`block_until_ready`; `dr.eval` and
-`dr.sync_thread`), each row's pair interleaved over {repeat} rounds (Mitsuba's gradient
-is timed again beside the height map's); the ratios are of the medians. CPU ms: the process's
+`dr.sync_thread`), each row's pair in turn over {repeat} rounds, each turn {BURST} calls in a
+row of which the first {SWITCH} are not timed: after the other renderer's call a call is
+slower (the other's threads still spin), {switch} (Mitsuba's gradient is timed again beside
+the height map's); Mitsuba's forward runs without an AD graph (`dr.suspend_grad`). The
+ratios are of the medians. CPU ms: the process's
 CPU time per call (medians; both pools' threads): the work done, which other work on the
 machine moves less than the wall time (but still: a busy neighbour slows a thread). Aim:
 jaxskin ≤ 0.5× Mitsuba for the forward and for forward + gradient. (The issue's own
