@@ -48,12 +48,22 @@ What made the difference (each measured on its own in the commits that made it):
   `jax.device_put` (`jnp.asarray` of a numpy array compiles a program per shape): a second
   `jaxskin render hand` loads 18 programs from the compilation cache instead of 50.
 
-Tried and not kept: the hand's bump normals made only at the texels the view reads (a
-list of texels, their forward differences and the samples' corners gathered from it): the
-bump and sampling took 9.0 ms against 4.3 at the default 512² texture and 8.0 against 8.7
-at 1024² (the view at one sample per pixel reads 31 % of the texels, and the gathers cost
-what the smaller list saves). Normals kept as three planes through the sampling: 1–2 ms of
-the 1024² bump, not worth a second layout.
+- **The bump where the samples read it** (second session): where a view's listed samples
+  have fewer bilinear corners than the texture has texels (the like-for-like hand of
+  `bench_mitsuba.py`: a 1024² texture, 512² samples), the bump normals are made at those
+  corner texels only (`texture.bumped_at`), from the fixed maps gathered there once per view
+  and the heights gathered per frame; elsewhere (the default hand: 2 × 2 samples a pixel)
+  over the whole texture, which is less work there. The covered pixels are averaged,
+  exposed and sRGB-encoded as a list and placed in a `lax.cond` branch, so that XLA:CPU
+  does not fuse the shading and the sRGB curve into the gather that places them (it then
+  computed them per pixel and channel of the image, in one thread): the default Blinn hand
+  11.2 → 7.0 ms, the like-for-like hand 8.1 → 5.7 ms in the same runs.
+
+Tried and not kept: the bump at a list of the texels the view reads, gathering every input
+per frame (the texels, their forward differences, the samples' corners): 9.0 ms against 4.3
+at the default 512² texture, 8.0 against 8.7 at 1024² (the gathers cost what the smaller
+list saves; the kept form gathers only the heights per frame). Normals kept as three planes
+through the sampling: 1–2 ms of the 1024² bump, not worth a second layout.
 
 What users see: the renders' 8-bit values are those of e1e6641 but for rounding in the
 last bit of float32 (XLA fuses the written-out sums differently). `jaxskin render` beside
