@@ -354,8 +354,9 @@ def _render(config: SceneConfig, params: dict, arrays: dict, output: str = "disp
     # averaged in linear light, exposed, then encoded.
     # Blinn, Lafortune: shade where the camera looks, the bumped normal map sampled at the
     # view's samples on the mesh (`jaxskin.samples`: fewer than the texels), in the
-    # object's frame. The bump is computed at the texels those samples read only (their
-    # bilinear corners, `texture.bumped_at`): the same normals there, a quarter of the work.
+    # object's frame. Where the samples' bilinear corners are fewer than the texels, the
+    # bump is computed at those corner texels only (`texture.bumped_at`, `corner_arrays`):
+    # the same normals there, for a quarter of the work at a 1024² texture and 512² view.
     def to_list(texture_image):
         return sample_corners(texture_image, arrays["list_corners"], arrays["list_tex"],
                               arrays["list_on"], table)
