@@ -709,6 +709,7 @@ def test_a_jpeg_target_is_warned_about(tmp_path, capsys):
                 "give a PNG or TIFF"), said
 
 
+@pytest.mark.optimised  # 30 LM steps at 64²: 47 s of CPU unoptimised, 28 s optimised
 @pytest.mark.parametrize("key, truth", [("layer.blush.thickness_mm", 0.04),
                                         ("skin.melanin", 0.3)])
 def test_a_scalar_that_starts_at_the_end_of_its_range_is_fitted(key, truth):
