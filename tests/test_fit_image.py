@@ -408,10 +408,17 @@ def _blocks_and_exact(overrides, gain):
 
     J = np.asarray(jax.jit(jax.vmap(along))(jnp.asarray(chosen)))  # (40, 2, H, W, 3)
     exact = np.einsum("tlhwc,tmhwc->tlm", J, J)
-    c0 = render.texture_colour(sc.config, p, a)
-    _, slope = fi._texel.display_slope(sc.config, p, a, c0)
-    B, _ = fi.texel_blocks(sc.config, p, a, names, [p[n] for n in names], slope ** 2,
-                           fi.blur_gain(sc.config, a) if gain else None)
+
+    # One program, as `map_bounds` runs them (op by op, each of ~250 operations and the
+    # shading's lax.map compiled a program of its own: 10-20 s of the test).
+    @jax.jit
+    def blocks(p, a, gain):
+        c0 = render.texture_colour(sc.config, p, a)
+        _, slope = fi._texel.display_slope(sc.config, p, a, c0)
+        return fi.texel_blocks(sc.config, p, a, names, [p[n] for n in names], slope ** 2,
+                               gain)[0]
+
+    B = blocks(p, a, fi.blur_gain(sc.config, a) if gain else None)
     return np.asarray(B)[chosen], exact
 
 
