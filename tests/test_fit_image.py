@@ -109,17 +109,22 @@ def test_fit_image_command_writes_a_scene_that_renders_the_fit(tmp_path):
 @pytest.mark.slow
 def test_written_scene_reproduces_the_fitted_params(tmp_path):
     """`fit` then the files the command writes: the scene's render equals the render of the
-    fit's params (maps as float32 arrays) to the 16-bit quantisation of the map (< 1e-3)."""
+    fit's params (maps as float32 arrays) to the 16-bit quantisation of the map (< 1e-3).
+    The fit is the command test's (a blush map and the light's intensity from the same
+    start): its programs load from the run's compilation cache instead of compiling."""
     target = _noisy(load_scene("makeup", FACE), 0.0)
-    start = _face_without({"lipstick"}, ["layer.lipstick.thickness_mm=0.003"])
-    keys = fi.fit_keys(start, "layer.lipstick.map")
+    start = _face_without({"blush"}, ["layer.blush.thickness_mm=0.005"])
+    keys = fi.fit_keys(start, "layer.blush.map,light.intensity")
     w = fi.weights(start.config, start.params)
     r = fi.fit(start.config, start.params, target, w, keys, steps=5)
     tmask = np.asarray(render.prepare(start.config).arrays["mask"])
+    assert keys[0].key == "layer.blush.map"
     grey, scalar = fi.map_image(r, keys[0], tmask)
-    maps.write_grey16(grey, tmp_path / "lip.png")
+    maps.write_grey16(grey, tmp_path / "blush.png")
     (tmp_path / "s.toml").write_text(scene_toml(
-        start, {"layer.lipstick.thickness_mm": scalar}, {"layer.lipstick.map": "lip.png"}))
+        start, {"layer.blush.thickness_mm": scalar,
+                "light.intensity": r.values["light.intensity"]},
+        {"layer.blush.map": "blush.png"}))
     again = load_scene(tmp_path / "s.toml")
     image = np.asarray(render.render(again.config, again.params))
     assert np.abs(image - r.image).max() < 1e-3
