@@ -152,18 +152,19 @@ def test_resampled_nist_fits_within_the_aim(lo, hi, step):
 
 # --- The command: the coverage rule, the mode in the outputs, bad input.
 
-@pytest.mark.slow  # one compile of the fit for its grid: ~25 s under load
+@pytest.mark.slow
 def test_fit_skin_skips_a_spectrum_that_does_not_cover_400_700_and_records_the_mode(
         tmp_path, capsys):
     """A table where spectrum 'short' has readings from 410 nm only (empty cells below):
-    named and skipped in one warning line; the other fitted, its row saying the mode."""
+    named and skipped in one warning line; the other fitted, its row saying the mode.
+    (10 nm, 4 starts, SCI: the program the SCI test above compiled for its fit, reused.)"""
     names, wl, R = _resampled(380, 780, 10, subjects=(42,))
     rows = ["wavelength_nm,forearm,short"] + [
         f"{w:g},{r:.4f}," + ("" if w < 410 else f"{r:.4f}") for w, r in zip(wl, R[0], strict=True)]
     src = tmp_path / "two.csv"
     src.write_text("\n".join(rows) + "\n")
     out = tmp_path / "out"
-    code = main(["fit-skin", str(src), "-o", str(out), "--starts", "1", "--specular",
+    code = main(["fit-skin", str(src), "-o", str(out), "--starts", "4", "--specular",
                  "included", "--no-report"])
     err = capsys.readouterr().err
     assert code == 0
