@@ -2,7 +2,6 @@
 
 import dataclasses
 import json
-import subprocess
 import sys
 import types
 from pathlib import Path
@@ -257,7 +256,7 @@ def test_cli_ignore_skips_an_instruments_extra_columns(tmp_path, capsys):
         assert mine[key] == plain[key], key
 
 
-def test_cli_bad_file_writes_nothing_and_exits_2(tmp_path):
+def test_cli_bad_file_writes_nothing_and_exits_2(tmp_path, capsys):
     good = ROOT / "data" / "measurements" / "foundation_beige.csv"
     bad = tmp_path / "bad.csv"
     lines = good.read_text().splitlines(keepends=True)
@@ -266,14 +265,10 @@ def test_cli_bad_file_writes_nothing_and_exits_2(tmp_path):
     lines[header + 1] = ",".join([cells[0], cells[1], "x", *cells[3:]])  # R at 10 µm
     bad.write_text("".join(lines))
     out = tmp_path / "out"
-    proc = subprocess.run(
-        [sys.executable, "-m", "jaxskin.cli", "calibrate", str(good), str(bad), "-o", str(out)],
-        capture_output=True,
-        text=True,
-    )
-    assert proc.returncode == 2
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and "Traceback" not in proc.stderr
+    assert main(["calibrate", str(good), str(bad), "-o", str(out)]) == 2  # in this process
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err
     assert lines[0].startswith(f"jaxskin: error: {bad}:{header + 2}: column 'R_0.01mm'")
     assert not out.exists()
 

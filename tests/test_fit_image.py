@@ -109,17 +109,22 @@ def test_fit_image_command_writes_a_scene_that_renders_the_fit(tmp_path):
 @pytest.mark.slow
 def test_written_scene_reproduces_the_fitted_params(tmp_path):
     """`fit` then the files the command writes: the scene's render equals the render of the
-    fit's params (maps as float32 arrays) to the 16-bit quantisation of the map (< 1e-3)."""
+    fit's params (maps as float32 arrays) to the 16-bit quantisation of the map (< 1e-3).
+    The fit is the command test's (a blush map and the light's intensity from the same
+    start): its programs load from the run's compilation cache instead of compiling."""
     target = _noisy(load_scene("makeup", FACE), 0.0)
-    start = _face_without({"lipstick"}, ["layer.lipstick.thickness_mm=0.003"])
-    keys = fi.fit_keys(start, "layer.lipstick.map")
+    start = _face_without({"blush"}, ["layer.blush.thickness_mm=0.005"])
+    keys = fi.fit_keys(start, "layer.blush.map,light.intensity")
     w = fi.weights(start.config, start.params)
     r = fi.fit(start.config, start.params, target, w, keys, steps=5)
     tmask = np.asarray(render.prepare(start.config).arrays["mask"])
+    assert keys[0].key == "layer.blush.map"
     grey, scalar = fi.map_image(r, keys[0], tmask)
-    maps.write_grey16(grey, tmp_path / "lip.png")
+    maps.write_grey16(grey, tmp_path / "blush.png")
     (tmp_path / "s.toml").write_text(scene_toml(
-        start, {"layer.lipstick.thickness_mm": scalar}, {"layer.lipstick.map": "lip.png"}))
+        start, {"layer.blush.thickness_mm": scalar,
+                "light.intensity": r.values["light.intensity"]},
+        {"layer.blush.map": "blush.png"}))
     again = load_scene(tmp_path / "s.toml")
     image = np.asarray(render.render(again.config, again.params))
     assert np.abs(image - r.image).max() < 1e-3
@@ -408,10 +413,17 @@ def _blocks_and_exact(overrides, gain):
 
     J = np.asarray(jax.jit(jax.vmap(along))(jnp.asarray(chosen)))  # (40, 2, H, W, 3)
     exact = np.einsum("tlhwc,tmhwc->tlm", J, J)
-    c0 = render.texture_colour(sc.config, p, a)
-    _, slope = fi._texel.display_slope(sc.config, p, a, c0)
-    B, _ = fi.texel_blocks(sc.config, p, a, names, [p[n] for n in names], slope ** 2,
-                           fi.blur_gain(sc.config, a) if gain else None)
+
+    # One program, as `map_bounds` runs them (op by op, each of ~250 operations and the
+    # shading's lax.map compiled a program of its own: 10-20 s of the test).
+    @jax.jit
+    def blocks(p, a, gain):
+        c0 = render.texture_colour(sc.config, p, a)
+        _, slope = fi._texel.display_slope(sc.config, p, a, c0)
+        return fi.texel_blocks(sc.config, p, a, names, [p[n] for n in names], slope ** 2,
+                               gain)[0]
+
+    B = blocks(p, a, fi.blur_gain(sc.config, a) if gain else None)
     return np.asarray(B)[chosen], exact
 
 
@@ -709,6 +721,7 @@ def test_a_jpeg_target_is_warned_about(tmp_path, capsys):
                 "give a PNG or TIFF"), said
 
 
+@pytest.mark.optimised  # 30 LM steps at 64²: 47 s of CPU unoptimised, 28 s optimised
 @pytest.mark.parametrize("key, truth", [("layer.blush.thickness_mm", 0.04),
                                         ("skin.melanin", 0.3)])
 def test_a_scalar_that_starts_at_the_end_of_its_range_is_fitted(key, truth):

@@ -1,7 +1,6 @@
 """What other tools read: 16-bit PNG, linear OpenEXR and alpha from `jaxskin render`."""
 
 import subprocess
-import sys
 
 import imageio.v3 as iio
 import numpy as np
@@ -14,12 +13,15 @@ SMALL = ["texture.size=64", "camera.size=32"]
 
 
 def _render(tmp_path, *options):
+    """`jaxskin render face` at SMALL sizes, in this process (the command's `main`: the
+    module's renders share their compiled programs instead of each starting a process)."""
+    from jaxskin.cli import main
+
     out = tmp_path / "out"
-    args = [sys.executable, "-m", "jaxskin.cli", "render", "face", "-o", str(out)]
+    args = ["render", "face", "-o", str(out)]
     for o in SMALL:
         args += ["-D", o]
-    proc = subprocess.run([*args, *options], capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stderr
+    assert main([*args, *options]) == 0
     return out
 
 

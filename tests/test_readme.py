@@ -75,13 +75,18 @@ def test_readme_python_examples_run(tmp_path, monkeypatch):
 
 
 @pytest.mark.slow
-def test_readme_shell_examples_run(tmp_path):
-    """Each line runs in an empty folder with the environment's `jaxskin`; renders get tiny
-    sizes appended (-D wins in order). Files the examples name are made first: the README's
-    scene file as my_scene.toml, a Lafortune file at out/skin_fit.json (the fit-brdf example
-    comes later), the example measurements at data/measurements/, the BRDF samples at
-    data/brdf/, the skin spectra at data/spectra/ (the paths as in a checkout). The benchmark scripts take
-    minutes: for those lines the script is imported and must have `main` (tests/test_benchmarks_smoke.py runs their parts)."""
+def test_readme_shell_examples_run(tmp_path, capsys, monkeypatch):
+    """Each line runs in an empty folder; renders get tiny sizes appended (-D wins in
+    order). Files the examples name are made first: the README's scene file as
+    my_scene.toml, a Lafortune file at out/skin_fit.json (the fit-brdf example comes later),
+    the example measurements at data/measurements/, the BRDF samples at data/brdf/, the skin
+    spectra at data/spectra/ (the paths as in a checkout). The benchmark scripts take
+    minutes: for those lines the script is imported and must have `main`
+    (tests/test_benchmarks_smoke.py runs their parts). `jaxskin list` runs as the
+    environment's `jaxskin` script, a process of its own; the other lines call the same
+    `main` in this process (a process each cost 1-2 s of start-up and a reload of its
+    programs: the command line is the same, and their exit codes and files are checked)."""
+    from jaxskin.cli import main
     from jaxskin.formats import write_lafortune
     from jaxskin.shading import lafortune
 
@@ -93,7 +98,8 @@ def test_readme_shell_examples_run(tmp_path):
     shutil.copytree(ROOT / "data" / "brdf", tmp_path / "data" / "brdf")
     shutil.copytree(ROOT / "data" / "spectra", tmp_path / "data" / "spectra")
     shutil.copytree(ROOT / "data" / "textures", tmp_path / "data" / "textures")
-    ran = 0
+    monkeypatch.chdir(tmp_path)
+    ran, processes = 0, 0
     for line in shell_examples():
         words = shlex.split(line, comments=True)
         if words[0] == ".venv/bin/python" and words[1].startswith("benchmarks/"):
@@ -107,16 +113,25 @@ def test_readme_shell_examples_run(tmp_path):
             assert callable(module.main), line
             continue
         if words[0] == "jaxskin":
-            argv = [str(JAXSKIN), *words[1:]]
+            argv = words[1:]
         elif words[:3] == ["python", "-m", "jaxskin"]:
-            argv = [sys.executable, *words[1:]]
+            argv = words[3:]
         else:
             raise AssertionError(f"README command not handled by this test: {line}")
         if "render" in words:
             argv += SMALL
-        proc = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, timeout=300)
-        assert proc.returncode == 0, (line, proc.stderr)
-        for written in re.findall(r"^  (\S+)$", proc.stdout, re.M):
+        if argv == ["list"]:  # the script itself, as a shell runs it
+            proc = subprocess.run([str(JAXSKIN), *argv], cwd=tmp_path, capture_output=True,
+                                  text=True, timeout=300)
+            code, out, err = proc.returncode, proc.stdout, proc.stderr
+            assert "scene" in out, out
+            processes += 1
+        else:
+            code = main(argv)
+            out, err = capsys.readouterr()
+        assert code == 0, (line, err)
+        for written in re.findall(r"^  (\S+)$", out, re.M):
             assert (tmp_path / written).stat().st_size > 0, (line, written)
         ran += 1
     assert ran >= 5  # the main command's render and the README's four example lines
+    assert processes == 1  # `jaxskin list` is in the README: the script ran once

@@ -91,9 +91,15 @@ def blur_gain(config, arrays):
     inland = np.unravel_index(np.argmax(distance_transform_edt(mask)), mask.shape)
     delta = np.zeros((*mask.shape, 3), np.float32)
     delta[inland] = 1.0
-    out = sss.blur(jnp.asarray(delta), render.prepare(config).texel_mm, arrays["mask"],
-                   sp.sss, norm=arrays.get("sss_norm"), kernels=arrays.get("sss_kernels"))
-    return jnp.sqrt(jnp.sum(out * out, axis=(0, 1)))
+    texel_mm = render.prepare(config).texel_mm
+
+    @jax.jit  # one program: op by op, each of the blur's operations compiled its own
+    def gain(delta, mask, norm, kernels):
+        out = sss.blur(delta, texel_mm, mask, sp.sss, norm=norm, kernels=kernels)
+        return jnp.sqrt(jnp.sum(out * out, axis=(0, 1)))
+
+    return gain(jnp.asarray(delta), arrays["mask"], arrays.get("sss_norm"),
+                arrays.get("sss_kernels"))
 
 
 def texel_jacobian(config, params: dict, arrays, names, gain=None):
@@ -151,13 +157,17 @@ def map_bounds(config, params: dict, names, w, sigma: float) -> dict:
     `inf` where no pixel sees it. Returns name → `(Ht, Wt)` relative bounds (float64)."""
     arrays = render.prepare(config).arrays
     p = dict(params)
-    c0 = render.texture_colour(config, p, arrays)
-    _, slope = display_slope(config, p, arrays, c0)
-    d = slope ** 2 * jnp.asarray(w, jnp.float32)[..., None] / sigma ** 2
     tangents = [jnp.asarray(p[k], jnp.float32) for k in names]
-    B, _ = jax.jit(texel_blocks, static_argnums=(0, 3))(
-        config, p, arrays, tuple(names), tangents, d, blur_gain(config, arrays),
-        tuple(jnp.asarray(v) for v in view_matrix(config)))
+
+    @jax.jit  # one program (op by op, the shading compiled hundreds of small ones)
+    def blocks(p, arrays, w, tangents, gain, view):
+        c0 = render.texture_colour(config, p, arrays)
+        _, slope = display_slope(config, p, arrays, c0)
+        d = slope ** 2 * w[..., None] / sigma ** 2
+        return texel_blocks(config, p, arrays, tuple(names), tangents, d, gain, view)[0]
+
+    B = blocks(p, arrays, jnp.asarray(w, jnp.float32), tangents, blur_gain(config, arrays),
+               tuple(jnp.asarray(v) for v in view_matrix(config)))
     B = np.asarray(B, np.float64)
     L = len(names)
     diag = np.diagonal(B, axis1=1, axis2=2)
