@@ -99,24 +99,28 @@ name = "tiny_hand"
 [mesh]
 file = "hand"
 [texture]
-size = 64
+size = {texture}
 [camera]
-size = 64
-supersample = 2
+size = {camera}
+supersample = {k}
 """
 
 
-def test_the_editor_turns_a_blinn_hand_without_a_new_program(tmp_path):
+@pytest.mark.parametrize("texture,camera,k,corners", [(64, 64, 2, False), (128, 24, 1, True)])
+def test_the_editor_turns_a_blinn_hand_without_a_new_program(tmp_path, texture, camera, k,
+                                                             corners):
     """The render's list is as long as the samples on the mesh, which a turn changes; the
     editor lists every sample instead, so a turn or a zoom compiles nothing new, and each
-    image is still `jaxskin render`'s."""
+    image is still `jaxskin render`'s: with the whole texture's bump, and with the bump at
+    the samples' corners (a texture with more texels than the view's samples' corners)."""
     pytest.importorskip("aiohttp", reason="the editor needs aiohttp (the edit extra)")
     from jaxskin.editor import Session
 
-    (tmp_path / "tiny_hand.toml").write_text(HAND)
+    (tmp_path / "tiny_hand.toml").write_text(HAND.format(texture=texture, camera=camera, k=k))
     (tmp_path / "out").mkdir()
     s = Session(str(tmp_path / "tiny_hand.toml"), tmp_path / "out")
     s.render()
+    assert ("corner_texels" in s.arrays(s.scene.config)) == corners
     lengths = set()
     for changes in ({"camera.rotate": [10.0, 25.0, 0.0]}, {"camera.zoom": 2.0},
                     {"camera.rotate": [-40.0, 60.0, 0.0], "camera.zoom": 1.0}):
