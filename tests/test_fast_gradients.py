@@ -3,6 +3,8 @@ cotangents (`layered._cotangents`) and the view sampling's transpose table
 (`view.transpose_table`), against JAX's autodiff of the plain forward in float64, at ordinary
 and stiff points; forward mode (jvp, jacfwd, vmap) through `linear.linear_call` kept."""
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -143,6 +145,13 @@ def _check_cotangents(blurred, per_texel_skin, point, ways):
             assert float(jnp.max(jnp.abs(c - e))) <= 1e-10 * scale, name
 
 
+@functools.cache
+def _colours_jitted(blurred):
+    """`_colours`, jitted once per `blurred` for the module: the ordinary and the stiff
+    point share its programs (check_grads' jvp and vjp) instead of running op by op."""
+    return jax.jit(lambda *a: layered._colours(GRID, blurred, *a))
+
+
 @pytest.mark.parametrize("point", ["ordinary", "stiff"])
 @pytest.mark.parametrize("blurred", [False, True], ids=["unblurred", "blurred"])
 def test_colours_check_grads(x64, blurred, point):
@@ -151,11 +160,9 @@ def test_colours_check_grads(x64, blurred, point):
     args = _spectral_inputs(point, per_texel_skin=False, P=24, L=3, seed=2)
     scales = [1e-3, 0.01, 0.01, 0.01, 0.5, 0.5, 0.01]
 
-    def f(*a):
-        return layered._colours(GRID, blurred, *a)
-
+    f = _colours_jitted(blurred)
     check_grads_scaled(f, list(args), scales, order=1, eps=1e-4, atol=1e-7, rtol=1e-5)
-    grads = jax.grad(lambda *a: jnp.sum(f(*a)), argnums=tuple(range(7)))(*args)
+    grads = jax.jit(jax.grad(lambda *a: jnp.sum(f(*a)), argnums=tuple(range(7))))(*args)
     assert all(bool(jnp.all(jnp.isfinite(x))) for x in grads)
 
 
