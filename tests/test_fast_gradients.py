@@ -229,6 +229,7 @@ def test_view_transpose_table_equals_autodiff(x64, scene):
     image = jnp.asarray(rng.uniform(size=(*a["mask"].shape, 3)))
     W = jnp.asarray(rng.normal(size=(*a["view_mask"].shape, 3)))
 
+    @jax.jit  # (each program whole, not op by op)
     def loss(image, table):
         return jnp.sum(W * view.sample_padded(image, a["pad"], jnp.asarray(a["tex"], jnp.float64),
                                               a["view_mask"], p.view.wrap_x, table))
@@ -237,8 +238,9 @@ def test_view_transpose_table_equals_autodiff(x64, scene):
     fast, plain = jax.grad(loss)(image, table), jax.grad(loss)(image, None)
     assert float(jnp.abs(plain).max()) > 0
     np.testing.assert_allclose(fast, plain, rtol=0, atol=1e-13)
-    check_grads_scaled(lambda im: view.sample_padded(im, a["pad"], a["tex"], a["view_mask"],
-                                                     p.view.wrap_x, table),
+    check_grads_scaled(jax.jit(lambda im: view.sample_padded(im, a["pad"], a["tex"],
+                                                             a["view_mask"], p.view.wrap_x,
+                                                             table)),
                        [image], [0.1], order=1)
 
 
@@ -264,10 +266,12 @@ def test_the_pixel_table_is_sampling_then_averaging(x64, scene):
     W_ = jnp.asarray(rng.normal(size=(H, W, 3)))
     tex = jnp.asarray(a["tex"], jnp.float64)
 
+    @jax.jit  # (each program whole, not op by op)
     def two_steps(im):
         return view.downsample(view.sample_padded(im, a["pad"], tex, a["view_mask"],
                                                   p.view.wrap_x), k)
 
+    @jax.jit
     def one_map(im):
         return view.view_pixels(im, table, (H, W))
 
@@ -276,6 +280,7 @@ def test_the_pixel_table_is_sampling_then_averaging(x64, scene):
     plain = jax.grad(lambda im: jnp.sum(W_ * two_steps(im)))(image)
     np.testing.assert_allclose(fast, plain, rtol=0, atol=1e-6 * float(jnp.abs(plain).max()))
 
+    @jax.jit
     def plain_map(im):  # the forward table applied with plain JAX ops: JAX transposes it
         flat = im.reshape(-1, 3)
         w = jnp.asarray(t["pix_w"], jnp.float64)
@@ -305,9 +310,9 @@ def test_layer_S_K_cotangents_equal_autodiff_of_km_layer(x64):
                         rng.uniform(0, 0.05, 11)])[:, None]
     S, K, X = (jnp.asarray(a, jnp.float64) for a in (S, K, X))
     aR, aT = (jnp.asarray(rng.normal(size=(X.shape[0], n))) for _ in range(2))
-    _, vjp = jax.vjp(lambda s, k: km.layer(s, k, X), S, K)
-    dS, dK = vjp((aR, aT))
-    parts = km.layer_parts(S, K, X)
-    for got, want in zip(layered._layer_SK(S, K, X, parts, aR, aT), (dS, dK), strict=True):
+    dS, dK = jax.jit(lambda S, K: jax.vjp(lambda s, k: km.layer(s, k, X), S, K)[1]((aR, aT)))(
+        S, K)  # (each side one program, not op by op)
+    ours = jax.jit(lambda S, K: layered._layer_SK(S, K, X, km.layer_parts(S, K, X), aR, aT))
+    for got, want in zip(ours(S, K), (dS, dK), strict=True):
         assert bool(jnp.all(jnp.isfinite(got)))
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-11 * float(jnp.abs(want).max()))
