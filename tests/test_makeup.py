@@ -2,6 +2,7 @@
 highlights, against independent forms; exactly no makeup at zero thickness; what a scene
 leaves out; gradients (float64) of a whole makeup render; scene errors."""
 
+import functools
 import subprocess
 import sys
 
@@ -69,6 +70,15 @@ def test_uniform_light_and_layers_make_the_blur_a_no_op(x64, three_materials):
     np.testing.assert_allclose(blurred, exact, rtol=1e-14)  # measured 1.0e-15
 
 
+@functools.partial(jax.jit, static_argnums=0)  # the three cases share its programs
+def _radiance_over_bare(grid, X, S, K, skin_R, bare):
+    """One texel facing the light, its blurred light the bare skin's (`bare`)."""
+    N = jnp.array([[0.0, 0.0, 1.0]], X.dtype)
+    return layered.radiance(grid, N, N[0], N[0], 0.3, 0.7, skin_R, 0.3, 0.0, S[None],
+                            K[None], X, np.array([0.3]), np.array([0.0]),
+                            blur=lambda c: jnp.broadcast_to(bare, c.shape))[0]
+
+
 @pytest.mark.parametrize("name, s_scale, k_scale, X", [
     ("eyeshadow_taupe", 0.1, 10.0, 0.003), ("blush_rose", 0.1, 10.0, 0.03),
     ("blush_rose", 0.01, 50.0, 0.003)])
@@ -87,12 +97,9 @@ def test_light_from_bare_neighbours_leaves_a_strong_absorber_without_negative_li
     K = spectral.resample(mat.K, mat.wavelength_nm, grid) * k_scale
     skin_R = np.asarray(formats.nist_reflectance(12, grid), np.float64)
     bare = skin_R @ grid.rgb_matrix  # E = 0.3 + 0.7 = 1 below: the bare skin's light
-    N = jnp.array([[0.0, 0.0, 1.0]])
 
     def radiance(X):
-        return layered.radiance(grid, N, N[0], N[0], 0.3, 0.7, skin_R, 0.3, 0.0, S[None],
-                                K[None], X, np.array([0.3]), np.array([0.0]),
-                                blur=lambda c: jnp.broadcast_to(bare, c.shape))[0]
+        return _radiance_over_bare(grid, X, S, K, skin_R, bare)
 
     out = radiance(jnp.array([[X]]))
     check_grads_scaled(radiance, (jnp.array([[X]]),), (X,), order=1)
