@@ -384,8 +384,9 @@ def test_python_numbers_as_params_reuse_the_compiled_render(x64):
     """A Python float in params traces as a weakly typed value: every new one would compile
     `_render` again (0.7-0.8 s on the 32² hand). Numbers become
     arrays of the other params' dtype: float32 scene params keep a float32 image, float64
-    ones (under x64) a float64 image, and new values reuse the program."""
-    s = load_scene("hand", ["camera.size=24", "texture.size=24"])
+    ones (under x64) a float64 image, and new values reuse the program. (The hand at the
+    size test_render_checks_missing_keys_... renders it: the programs are compiled once.)"""
+    s = load_scene("hand", ["texture.size=32", "camera.size=16"])
     first = render.render(s.config, s.params)
     assert first.dtype == jnp.float32
     size = render._render._cache_size()
