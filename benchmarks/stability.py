@@ -12,6 +12,7 @@ be 0; tests/test_stability.py fails otherwise) and the largest float32 error aga
 
 from __future__ import annotations
 
+import functools
 import itertools
 import sys
 from pathlib import Path
@@ -147,17 +148,21 @@ def cosmetics_cases(N, L, large=False):
     X = np.stack([np.repeat(thick, len(N) // len(thick) + 1)[:len(N)]] * 3)
     X[1] = X[1][::-1]
     out = []
+
+    def shade(n, l_, x, S, K):
+        # S and K are arguments, not constants, so that the four cases are one program;
+        # their gradients are not asked for (∂R/∂K → −∞ as K → 0 under a thick layer)
+        dt = n.dtype  # a light direction per texel, grazing ones included
+        S, K = jax.lax.stop_gradient(S), jax.lax.stop_gradient(K)
+        return layered.radiance(grid, n, l_, jnp.asarray([0.0, 0.0, 1.0], dt), 0.25, 0.9,
+                                jnp.asarray(skin_R, dt), 0.3, 0.18, S, K, x,
+                                jnp.asarray([0.45, 0.35, 0.2], dt),
+                                jnp.asarray([0.05, 0.05, 0.3], dt))
+
     for label, s_scale, k_scale in [("ordinary", 1.0, 1.0), ("S → 0", 1e-9, 1.0),
                                     ("K → 0", 1.0, 1e-9), ("K/S 1e6", 1e-3, 1e3)]:
-        def shade(n, l_, x, ss=s_scale, kk=k_scale):
-            dt = n.dtype  # a light direction per texel, grazing ones included
-            return layered.radiance(grid, n, l_, jnp.asarray([0.0, 0.0, 1.0], dt), 0.25,
-                                    0.9, jnp.asarray(skin_R, dt), 0.3, 0.18,
-                                    jnp.asarray(S0 * ss, dt), jnp.asarray(K0 * kk, dt), x,
-                                    jnp.asarray([0.45, 0.35, 0.2], dt),
-                                    jnp.asarray([0.05, 0.05, 0.3], dt))
         out.append((f"layered.radiance ({label}; thickness 0–10 mm, grazing, n_z → 0)",
-                    shade, [N, L, X]))
+                    shade, [N, L, X, S0 * s_scale, K0 * k_scale]))
     for n in (64, 512, 2048) if large else (64, 512):
         E = np.zeros((n, n, 3))
         E[n // 2, n // 2] = 1.0  # a point of light
@@ -188,6 +193,20 @@ def cosmetics_cases(N, L, large=False):
     return out
 
 
+@functools.cache
+def _value_and_grads(fn):
+    """`fn`'s value and the gradient of its sum with respect to every argument, as one
+    jitted program, as the renderer runs them (op by op, a stage took up to 25 s): the
+    value is the one the gradient's forward pass computes (every custom rule in jaxskin
+    recomputes its primal with the plain function), so it is not compiled twice. Cached
+    per function: stages that share one (the layered cases) share its programs."""
+    def value_and_grads(*a):
+        value, pullback = jax.vjp(fn, *a)
+        return value, pullback(jnp.ones_like(value))  # = jax.grad of jnp.sum(fn)
+
+    return jax.jit(value_and_grads)
+
+
 def run(stage, fn, inputs):
     """Non-finite counts and the float32 error for one stage."""
     row = {"stage": stage, "cases": int(np.prod(np.shape(inputs[0])[:1] or [1]))}
@@ -195,10 +214,7 @@ def run(stage, fn, inputs):
     for dtype in (jnp.float32, jnp.float64):
         with jax.enable_x64(dtype == jnp.float64):
             args = [jnp.asarray(a, dtype) for a in inputs]
-            # jitted, as the renderer runs them (op by op, a stage took up to 25 s)
-            value = jax.jit(fn)(*args)
-            grads = jax.jit(jax.grad(lambda *a: jnp.sum(fn(*a)),
-                                     argnums=tuple(range(len(args)))))(*args)
+            value, grads = _value_and_grads(fn)(*args)
             name = "f32" if dtype == jnp.float32 else "f64"
             row[f"nonfinite_{name}"] = int(np.sum(~np.isfinite(np.asarray(value))))
             row[f"nonfinite_grad_{name}"] = int(sum(np.sum(~np.isfinite(np.asarray(g)))

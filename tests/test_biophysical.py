@@ -149,12 +149,17 @@ POINTS = [bp.DEFAULT, bp.Skin(*(lo for lo, _ in bp.RANGES.values())),
           bp.Skin(0.5, 0.0, 0.001, 1.0, 0.15, 0.5), bp.Skin(0.005, 1.0, 0.1, 0.0, 0.01, 6.0)]
 
 
+@jax.jit  # once for the module (the chromophores an argument): the points share its programs
+def _reflectance(c, *values):
+    return bp.reflectance(c, bp.Skin(*values))
+
+
 @pytest.mark.parametrize("point", POINTS)
 def test_gradients(x64, point):
     c = bp.Chromophores(*(jnp.asarray(a) for a in chrom()))
 
     def f(*values):
-        return bp.reflectance(c, bp.Skin(*values))
+        return _reflectance(c, *values)
 
     scales = [0.05 * (hi - lo) for lo, hi in bp.RANGES.values()]
     check_grads_scaled(f, list(point), scales, order=1, eps=1e-4)

@@ -140,7 +140,8 @@ def test_blur_gradients(x64, method):
     E = rng.uniform(0, 1, (12, 14, 3))
     mask = np.ones((12, 14), bool)
     mask[:2] = False
-    check_grads_scaled(lambda e: sss.blur(e, 0.4, mask, method=method), [E], [1.0], order=2)
+    check_grads_scaled(jax.jit(lambda e: sss.blur(e, 0.4, mask, method=method)), [E], [1.0],
+                       order=2)  # jitted: one program each way, not op by op
 
 # ------------------------------------------------------------------ Kelemen
 
@@ -154,6 +155,11 @@ def test_kelemen_at_normal_incidence_by_hand(x64):
                                rtol=1e-15)  # measured 0
 
 
+# Jitted once for the module (V an argument): check_grads' programs compile once for the
+# four cases, not op by op.
+_kelemen = jax.jit(lambda n, l_, v, r: kelemen.specular(n, l_, v, r, 0.18))
+
+
 @pytest.mark.parametrize("case", ["ordinary", "grazing half vector", "rough", "smooth"])
 def test_kelemen_gradients(x64, case):
     N = np.array([0.1, 0.0, 1.0]) / np.hypot(0.1, 1.0)
@@ -162,7 +168,7 @@ def test_kelemen_gradients(x64, case):
     L = np.array(L) / np.linalg.norm(L)
     V = np.array([-0.3, 0.0, 0.95]) / np.hypot(0.3, 0.95)
     m = {"rough": 0.8, "smooth": 0.05}.get(case, 0.3)
-    check_grads_scaled(lambda n, l_, r: kelemen.specular(n, l_, V, r, 0.18), [N, L, m],
+    check_grads_scaled(lambda n, l_, r: _kelemen(n, l_, V, r), [N, L, m],
                        [1e-3, 1e-3, 0.01], eps=1e-4)
 
 
@@ -317,7 +323,7 @@ def test_layer_gradients_wrt_thickness_and_materials(x64, three_materials):
     _, S, K = three_materials
     X = np.random.default_rng(2).uniform(0.0, 0.2, (3, 2, 3))
     X[0, 0, 0] = 0.0  # an edge of a cosmetic map
-    check_grads_scaled(lambda s, k, x: cosmetics.layers(s, k, x).R, [S, K, X],
+    check_grads_scaled(jax.jit(lambda s, k, x: cosmetics.layers(s, k, x).R), [S, K, X],
                        [S, K, 0.05], order=1)
 
 

@@ -3,6 +3,8 @@ cotangents (`layered._cotangents`) and the view sampling's transpose table
 (`view.transpose_table`), against JAX's autodiff of the plain forward in float64, at ordinary
 and stiff points; forward mode (jvp, jacfwd, vmap) through `linear.linear_call` kept."""
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -143,6 +145,13 @@ def _check_cotangents(blurred, per_texel_skin, point, ways):
             assert float(jnp.max(jnp.abs(c - e))) <= 1e-10 * scale, name
 
 
+@functools.cache
+def _colours_jitted(blurred):
+    """`_colours`, jitted once per `blurred` for the module: the ordinary and the stiff
+    point share its programs (check_grads' jvp and vjp) instead of running op by op."""
+    return jax.jit(lambda *a: layered._colours(GRID, blurred, *a))
+
+
 @pytest.mark.parametrize("point", ["ordinary", "stiff"])
 @pytest.mark.parametrize("blurred", [False, True], ids=["unblurred", "blurred"])
 def test_colours_check_grads(x64, blurred, point):
@@ -151,11 +160,9 @@ def test_colours_check_grads(x64, blurred, point):
     args = _spectral_inputs(point, per_texel_skin=False, P=24, L=3, seed=2)
     scales = [1e-3, 0.01, 0.01, 0.01, 0.5, 0.5, 0.01]
 
-    def f(*a):
-        return layered._colours(GRID, blurred, *a)
-
+    f = _colours_jitted(blurred)
     check_grads_scaled(f, list(args), scales, order=1, eps=1e-4, atol=1e-7, rtol=1e-5)
-    grads = jax.grad(lambda *a: jnp.sum(f(*a)), argnums=tuple(range(7)))(*args)
+    grads = jax.jit(jax.grad(lambda *a: jnp.sum(f(*a)), argnums=tuple(range(7))))(*args)
     assert all(bool(jnp.all(jnp.isfinite(x))) for x in grads)
 
 
@@ -222,6 +229,7 @@ def test_view_transpose_table_equals_autodiff(x64, scene):
     image = jnp.asarray(rng.uniform(size=(*a["mask"].shape, 3)))
     W = jnp.asarray(rng.normal(size=(*a["view_mask"].shape, 3)))
 
+    @jax.jit  # (each program whole, not op by op)
     def loss(image, table):
         return jnp.sum(W * view.sample_padded(image, a["pad"], jnp.asarray(a["tex"], jnp.float64),
                                               a["view_mask"], p.view.wrap_x, table))
@@ -230,8 +238,9 @@ def test_view_transpose_table_equals_autodiff(x64, scene):
     fast, plain = jax.grad(loss)(image, table), jax.grad(loss)(image, None)
     assert float(jnp.abs(plain).max()) > 0
     np.testing.assert_allclose(fast, plain, rtol=0, atol=1e-13)
-    check_grads_scaled(lambda im: view.sample_padded(im, a["pad"], a["tex"], a["view_mask"],
-                                                     p.view.wrap_x, table),
+    check_grads_scaled(jax.jit(lambda im: view.sample_padded(im, a["pad"], a["tex"],
+                                                             a["view_mask"], p.view.wrap_x,
+                                                             table)),
                        [image], [0.1], order=1)
 
 
@@ -257,10 +266,12 @@ def test_the_pixel_table_is_sampling_then_averaging(x64, scene):
     W_ = jnp.asarray(rng.normal(size=(H, W, 3)))
     tex = jnp.asarray(a["tex"], jnp.float64)
 
+    @jax.jit  # (each program whole, not op by op)
     def two_steps(im):
         return view.downsample(view.sample_padded(im, a["pad"], tex, a["view_mask"],
                                                   p.view.wrap_x), k)
 
+    @jax.jit
     def one_map(im):
         return view.view_pixels(im, table, (H, W))
 
@@ -269,6 +280,7 @@ def test_the_pixel_table_is_sampling_then_averaging(x64, scene):
     plain = jax.grad(lambda im: jnp.sum(W_ * two_steps(im)))(image)
     np.testing.assert_allclose(fast, plain, rtol=0, atol=1e-6 * float(jnp.abs(plain).max()))
 
+    @jax.jit
     def plain_map(im):  # the forward table applied with plain JAX ops: JAX transposes it
         flat = im.reshape(-1, 3)
         w = jnp.asarray(t["pix_w"], jnp.float64)
@@ -298,9 +310,9 @@ def test_layer_S_K_cotangents_equal_autodiff_of_km_layer(x64):
                         rng.uniform(0, 0.05, 11)])[:, None]
     S, K, X = (jnp.asarray(a, jnp.float64) for a in (S, K, X))
     aR, aT = (jnp.asarray(rng.normal(size=(X.shape[0], n))) for _ in range(2))
-    _, vjp = jax.vjp(lambda s, k: km.layer(s, k, X), S, K)
-    dS, dK = vjp((aR, aT))
-    parts = km.layer_parts(S, K, X)
-    for got, want in zip(layered._layer_SK(S, K, X, parts, aR, aT), (dS, dK), strict=True):
+    dS, dK = jax.jit(lambda S, K: jax.vjp(lambda s, k: km.layer(s, k, X), S, K)[1]((aR, aT)))(
+        S, K)  # (each side one program, not op by op)
+    ours = jax.jit(lambda S, K: layered._layer_SK(S, K, X, km.layer_parts(S, K, X), aR, aT))
+    for got, want in zip(ours(S, K), (dS, dK), strict=True):
         assert bool(jnp.all(jnp.isfinite(got)))
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-11 * float(jnp.abs(want).max()))

@@ -74,11 +74,17 @@ def test_sample_without_wrap_and_downsample(x64):
     mask = np.ones((6, 4), bool)
     mask[1, 1] = False
     image = rng.uniform(0, 1, (8, 8, 3))
-    check_grads_scaled(lambda im: view.downsample(view.sample(im, tex, mask, False), 2),
+    check_grads_scaled(jax.jit(lambda im: view.downsample(view.sample(im, tex, mask, False), 2)),
                        [image], [1.0], order=1)
 
 
 # ------------------------------------------------------------------ shading extremes
+
+
+# Jitted once for the module (the fixed vectors arguments, not constants): check_grads'
+# programs compile once for all the points of a test, not op by op.
+_kelemen = jax.jit(lambda n, l_, v, r: kelemen.specular(n, l_, v, r, 0.18))
+_blinn = jax.jit(lambda n, l_, v, s: blinn.shade(n, l_, v, 0.2, 0.5, 0.2, s))
 
 
 @pytest.mark.parametrize("case", ["near the cut-off", "roughness 0.02", "roughness 0.005"])
@@ -93,7 +99,7 @@ def test_kelemen_extremes(x64, case):
     else:
         L, V = unit([np.tan(np.radians(0.5)) * 2, 0, 1.0]), N
         m = float(case.split()[1])
-    check_grads_scaled(lambda n, l_, r: kelemen.specular(n, l_, V, r, 0.18), [N, L, m],
+    check_grads_scaled(lambda n, l_, r: _kelemen(n, l_, V, r), [N, L, m],
                        [1e-4, 1e-4, m * 1e-3], order=1, eps=1e-3)
 
 
@@ -101,7 +107,7 @@ def test_kelemen_extremes(x64, case):
 def test_blinn_shininess_extremes(x64, shininess):
     N, V = unit([0.0, 0.1, 1.0]), unit([0.2, 0.0, 1.0])
     L = unit([-0.1, -0.05, 1.0]) if shininess > 1 else unit([0.7, 0.2, 0.5])
-    check_grads_scaled(lambda n, l_, s: blinn.shade(n, l_, V, 0.2, 0.5, 0.2, s), [N, L, shininess],
+    check_grads_scaled(lambda n, l_, s: _blinn(n, l_, V, s), [N, L, shininess],
                        [1e-4, 1e-4, shininess * 1e-3], order=1, eps=1e-3)
 
 
@@ -113,7 +119,7 @@ def test_sss_blur_across_texel_sizes(x64, texel_mm):
     E = rng.uniform(0, 1, (9, 11, 3))
     mask = np.ones((9, 11), bool)
     mask[:, :2] = False
-    check_grads_scaled(lambda e: sss.blur(e, texel_mm, mask), [E], [1.0], order=1)
+    check_grads_scaled(jax.jit(lambda e: sss.blur(e, texel_mm, mask)), [E], [1.0], order=1)
 
 
 # ------------------------------------------------------------------ layered radiance

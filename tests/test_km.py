@@ -195,6 +195,21 @@ RATIOS = [0.0, 1e-9, 1e-2, 1.0, 1e3]  # K/S
 SXS = [0.0, 1e-6, 0.3, 1.0, 10.0, 1e4]  # S·X
 
 
+# The functions the gradient tests check, jitted once for the module: every point has the
+# same shapes, so check_grads' programs (jvp, vjp and their second order) compile once, not
+# op by op at each of the 30 points.
+_layer = jax.jit(lambda s, k, x: jnp.stack(km.layer(s, k, x)))
+_layer_flat = jax.jit(lambda a: jnp.stack(km.layer(*a)))
+_over = jax.jit(km.over)
+_r_inf = jax.jit(km.r_inf)
+
+
+@jax.jit
+def _stack_over(S, K, X):
+    s = km.stack(*km.layer(S, K, X))
+    return jnp.stack([*s, km.over(s.R, s.T, 0.45, s.R_back)])
+
+
 @pytest.mark.parametrize("ratio, SX", list(itertools.product(RATIOS, SXS)))
 def test_layer_gradients(x64, ratio, SX):
     args = f64(S_REF, ratio * S_REF, SX / S_REF)
@@ -202,15 +217,15 @@ def test_layer_gradients(x64, ratio, SX):
     # 1/(S X²) (z² = X²K(K + 2S)); at X = 0, on the scale 1/S.
     K_natural = 1e-3 * S_REF / (1.0 + SX * SX)
     scales = [S_REF, max(ratio * S_REF, K_natural), max(SX, 1e-3) / S_REF]
-    check_grads_scaled(lambda s, k, x: jnp.stack(km.layer(s, k, x)), args, scales)
-    grads = jax.jacrev(lambda a: jnp.stack(km.layer(*a)))(jnp.stack(args))
+    check_grads_scaled(_layer, args, scales)
+    grads = jax.jacrev(_layer_flat)(jnp.stack(args))
     assert bool(jnp.all(jnp.isfinite(grads)))
 
 
 @pytest.mark.parametrize("ratio", [1e-9, 1e-2, 1.0, 1e3])
 def test_r_inf_gradients(x64, ratio):
     # Steps relative to K stay inside K > 0, where R∞ is analytic (branch point at K = 0).
-    check_grads_scaled(km.r_inf, f64(S_REF, ratio * S_REF), [S_REF, ratio * S_REF])
+    check_grads_scaled(_r_inf, f64(S_REF, ratio * S_REF), [S_REF, ratio * S_REF])
 
 
 def test_r_inf_gradient_at_k_zero(x64):
@@ -227,7 +242,7 @@ def test_r_inf_gradient_at_k_zero(x64):
     [(0.3, 0.5, 0.4), (0.0, 1.0, 0.5), (0.2, 0.0, 0.9), (0.6, 0.3, 0.0), (0.5, 0.5, 0.999)],
 )
 def test_over_gradients(x64, R0, T, Rg):
-    check_grads(km.over, f64(R0, T, Rg), order=2, modes=("fwd", "rev"), eps=1e-6)
+    check_grads(_over, f64(R0, T, Rg), order=2, modes=("fwd", "rev"), eps=1e-6)
 
 
 @pytest.mark.parametrize("ratio, SX", [(1.0, 1.0), (0.0, 0.0), (1e-9, 1e4), (1e3, 1e-6)])
@@ -236,12 +251,7 @@ def test_stack_gradients_through_layers(x64, ratio, SX):
     base = f64([S_REF, 5.0, 0.5], [ratio * S_REF, 1.0, 2.0], [SX / S_REF, 0.1, 0.3])
     K_natural = 1e-3 * base[0] / (1.0 + (base[0] * base[2]) ** 2)  # see test_layer_gradients
     scales = [base[0], jnp.maximum(base[1], K_natural), jnp.maximum(base[2], 1e-3)]
-
-    def f(S, K, X):
-        s = km.stack(*km.layer(S, K, X))
-        return jnp.stack([*s, km.over(s.R, s.T, 0.45, s.R_back)])
-
-    check_grads_scaled(f, base, scales)
+    check_grads_scaled(_stack_over, base, scales)
 
 
 @pytest.mark.parametrize("dtype, X", [(jnp.float32, 2e19), (jnp.float32, 1e30),

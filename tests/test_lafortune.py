@@ -48,14 +48,17 @@ POINTS = [
 ]
 
 
+@jax.jit  # once for the module: the points share check_grads' programs, not op by op
+def _brdf(diffuse, Cxy, Cz, n, u, v):
+    return L.brdf(L.Lafortune(diffuse, Cxy, Cz, n), u, v)
+
+
 @pytest.mark.parametrize("name, u, v, n_scale", POINTS, ids=[p[0] for p in POINTS])
 def test_gradients_wrt_lobes_and_directions(x64, name, u, v, n_scale):
     p = L.skin(jnp.float64)
     n = p.n * n_scale
 
-    def f(diffuse, Cxy, Cz, n, u, v):
-        return L.brdf(L.Lafortune(diffuse, Cxy, Cz, n), u, v)
-
+    f = _brdf
     args = [p.diffuse, p.Cxy, p.Cz, n, u, v]
     scales = [0.1, 0.1, 0.1, n / 100, 1e-3, 1e-3]
     check_grads_scaled(f, args, scales, eps=1e-4)

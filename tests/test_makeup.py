@@ -2,6 +2,7 @@
 highlights, against independent forms; exactly no makeup at zero thickness; what a scene
 leaves out; gradients (float64) of a whole makeup render; scene errors."""
 
+import functools
 import subprocess
 import sys
 
@@ -43,8 +44,9 @@ def test_no_blur_is_the_exact_spectral_over_plus_highlights(x64, three_materials
     X[1, 0, 0] = 0.0
     skin_R = formats.nist_reflectance(12, grid)
     L, V = unit([0.3, 0.2, 1.0]), unit([0.0, 0.0, 1.0])
-    out = layered.radiance(grid, jnp.asarray(N), L, V, 0.25, 0.9, skin_R, 0.3, 0.0, S, K,
-                           jnp.asarray(X), np.full(3, 0.3), np.zeros(3))
+    out = jax.jit(layered.radiance, static_argnums=0)(  # one program, not op by op
+        grid, jnp.asarray(N), L, V, 0.25, 0.9, skin_R, 0.3, 0.0, S, K, jnp.asarray(X),
+        np.full(3, 0.3), np.zeros(3))
     E = 0.25 + 0.9 * L[2]
     for i, j in np.ndindex(2, 3):
         R, T = km.layer(S, K, X[:, i, j, None])
@@ -64,9 +66,19 @@ def test_uniform_light_and_layers_make_the_blur_a_no_op(x64, three_materials):
     args = (grid, jnp.asarray(N), unit([0.2, 0.1, 1.0]), unit([0, 0, 1.0]), 0.3, 0.8,
             formats.nist_reflectance(40, grid), 0.3, 0.18, S, K, jnp.asarray(X),
             np.full(3, 0.3), np.full(3, 0.1))
-    exact = layered.radiance(*args)
-    blurred = layered.radiance(*args, blur=lambda c: sss.blur(c, 0.5))
+    radiance = jax.jit(layered.radiance, static_argnums=(0, 14))  # not op by op
+    exact = radiance(*args, None)
+    blurred = radiance(*args, lambda c: sss.blur(c, 0.5))
     np.testing.assert_allclose(blurred, exact, rtol=1e-14)  # measured 1.0e-15
+
+
+@functools.partial(jax.jit, static_argnums=0)  # the three cases share its programs
+def _radiance_over_bare(grid, X, S, K, skin_R, bare):
+    """One texel facing the light, its blurred light the bare skin's (`bare`)."""
+    N = jnp.array([[0.0, 0.0, 1.0]], X.dtype)
+    return layered.radiance(grid, N, N[0], N[0], 0.3, 0.7, skin_R, 0.3, 0.0, S[None],
+                            K[None], X, np.array([0.3]), np.array([0.0]),
+                            blur=lambda c: jnp.broadcast_to(bare, c.shape))[0]
 
 
 @pytest.mark.parametrize("name, s_scale, k_scale, X", [
@@ -87,12 +99,9 @@ def test_light_from_bare_neighbours_leaves_a_strong_absorber_without_negative_li
     K = spectral.resample(mat.K, mat.wavelength_nm, grid) * k_scale
     skin_R = np.asarray(formats.nist_reflectance(12, grid), np.float64)
     bare = skin_R @ grid.rgb_matrix  # E = 0.3 + 0.7 = 1 below: the bare skin's light
-    N = jnp.array([[0.0, 0.0, 1.0]])
 
     def radiance(X):
-        return layered.radiance(grid, N, N[0], N[0], 0.3, 0.7, skin_R, 0.3, 0.0, S[None],
-                                K[None], X, np.array([0.3]), np.array([0.0]),
-                                blur=lambda c: jnp.broadcast_to(bare, c.shape))[0]
+        return _radiance_over_bare(grid, X, S, K, skin_R, bare)
 
     out = radiance(jnp.array([[X]]))
     check_grads_scaled(radiance, (jnp.array([[X]]),), (X,), order=1)

@@ -60,11 +60,21 @@ POINTS = {
 }
 
 
+# Jitted once for the module (N and V arguments, not constants): check_grads' programs
+# compile once for all the points instead of op by op (the checks are the same).
+_blinn = jax.jit(lambda N, V, m, b, s, sh, l_: blinn.shade(N, l_, V, m, b, s, sh))
+
+
+@jax.jit
+def _lafortune(diffuse, N, V, Cxy, Cz, n, l_):
+    return lafortune.shade(lafortune.Lafortune(diffuse, Cxy, Cz, n), N, l_, V)
+
+
 @pytest.mark.parametrize("name", POINTS)
 def test_blinn_gradients(x64, name):
     N, L, n = POINTS[name]
     V = np.array([0.0, 0.0, 1.0])
-    check_grads_scaled(lambda m, b, s, sh, l_: blinn.shade(N, l_, V, m, b, s, sh),
+    check_grads_scaled(lambda m, b, s, sh, l_: _blinn(N, V, m, b, s, sh, l_),
                        [0.2, 0.5, 0.2, n, L], [0.05, 0.05, 0.05, n / 100, 1e-3], eps=1e-4)
 
 
@@ -75,7 +85,7 @@ def test_lafortune_shade_gradients(x64, name):
     p = lafortune.skin(jnp.float64)
 
     def f(Cxy, Cz, n, l_):
-        return lafortune.shade(lafortune.Lafortune(p.diffuse, Cxy, Cz, n), N, l_, V)
+        return _lafortune(p.diffuse, N, V, Cxy, Cz, n, l_)
 
     check_grads_scaled(f, [p.Cxy, p.Cz, p.n, L], [0.05, 0.05, 1.0, 1e-3], eps=1e-4)
 
@@ -113,7 +123,8 @@ def test_view_sampling_gradient(x64):
     tex = jnp.asarray(np.random.default_rng(0).uniform(1, 7, (5, 6, 2)))
     mask = jnp.ones((5, 6), bool).at[0, 0].set(False)
     image = jnp.asarray(np.random.default_rng(1).uniform(0, 1, (8, 8, 3)))
-    check_grads_scaled(lambda im: sample(im, tex, mask, True), [image], [1.0], order=2)
+    check_grads_scaled(jax.jit(lambda im: sample(im, tex, mask, True)), [image], [1.0],
+                       order=2)
 
 
 def test_a_blinn_scene_traces_no_lafortune_and_the_overview_no_furrows(small_hand, monkeypatch):
@@ -373,8 +384,9 @@ def test_python_numbers_as_params_reuse_the_compiled_render(x64):
     """A Python float in params traces as a weakly typed value: every new one would compile
     `_render` again (0.7-0.8 s on the 32² hand). Numbers become
     arrays of the other params' dtype: float32 scene params keep a float32 image, float64
-    ones (under x64) a float64 image, and new values reuse the program."""
-    s = load_scene("hand", ["camera.size=24", "texture.size=24"])
+    ones (under x64) a float64 image, and new values reuse the program. (The hand at the
+    size test_render_checks_missing_keys_... renders it: the programs are compiled once.)"""
+    s = load_scene("hand", ["texture.size=32", "camera.size=16"])
     first = render.render(s.config, s.params)
     assert first.dtype == jnp.float32
     size = render._render._cache_size()

@@ -67,6 +67,7 @@ def test_the_pixel_mean_is_gradient_checked(x64):
     t = sample_list(tex, shaded, 2)
     values = jnp.asarray(np.random.default_rng(4).normal(size=(t["list_on"].size, 3)))
 
+    @jax.jit  # one program each way, not op by op
     def f(v):
         return to_pixels(v, t, (5, 7)) ** 2
 
@@ -158,7 +159,8 @@ def test_sampling_at_known_corners_is_sampling_the_padded_image(wrap_x, x64):
     ours = sample_corners(image, corners, t["list_tex"], t["list_on"], table)
     theirs = sample_padded(image, pad, t["list_tex"], t["list_on"], wrap_x)
     np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-15)
-    check_grads(lambda im: sample_corners(im, corners, t["list_tex"], t["list_on"], table) ** 2,
+    check_grads(jax.jit(lambda im: sample_corners(im, corners, t["list_tex"], t["list_on"],
+                                                  table) ** 2),
                 (image,), order=1, modes=("fwd", "rev"))
 
 
