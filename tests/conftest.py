@@ -21,9 +21,24 @@ from pathlib import Path
 # of their own (`user_process` below). JAXSKIN_TEST_OPTIMISE=1 compiles as users do.
 if os.environ.get("JAXSKIN_TEST_OPTIMISE", "") in ("", "0"):
     os.environ["XLA_FLAGS"] = (f"{os.environ.get('XLA_FLAGS', '')} "
-                               "--xla_cpu_use_fusion_emitters=false").strip()
+                               "--xla_cpu_use_fusion_emitters=false").strip()  # EMITTERS
 
 import jax  # noqa: E402
+
+EMITTERS = "--xla_cpu_use_fusion_emitters=false"
+
+
+def user_process(code: str) -> str:
+    """Run the Python `code` in a process that compiles as a user's does (XLA's default
+    fusion emitters), for a test of exact bytes; its standard output. The module's -O0
+    setting (`_compile_fast`) is inherited."""
+    import subprocess
+    import sys
+    flags = os.environ.get("XLA_FLAGS", "").replace(EMITTERS, "").strip()
+    r = subprocess.run([sys.executable, "-c", code], env={**os.environ, "XLA_FLAGS": flags},
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    return r.stdout
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 

@@ -264,7 +264,8 @@ def test_a_sweep_sharded_over_two_devices_matches_one_device(tmp_path, capsys):
     a sweep of 5 (padded to 8, 4 per device) writes the bytes this one-device process does."""
     args = ["render", "hand", *SMALL, "--sweep", "material.melanin=0.1:0.9:5"]
     assert main([*args, "-o", str(tmp_path / "one")]) == 0
-    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
+    flags = f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=2"
+    env = {**os.environ, "XLA_FLAGS": flags.strip()}  # compiled as this process compiles
     proc = subprocess.run([sys.executable, "-c", SHARDED, *args, "-o", str(tmp_path / "two")],
                           env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr

@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from conftest import check_grads_scaled
+from conftest import check_grads_scaled, user_process
 
 from jaxskin import formats, km, render, skin, spectral, sss
 from jaxskin.io import InputError, data_dir
@@ -141,18 +141,30 @@ def test_highlights_bottom_to_top(x64, three_materials):
     np.testing.assert_allclose(out[0], expected, rtol=1e-8)
 
 
+ZERO_THICKNESS = """
+import sys
+import numpy as np
+from jaxskin import render
+from jaxskin.scene import load_scene
+zero = [f"layer.{layer.name}.thickness_mm=0" for layer in load_scene("makeup").layers]
+common = sys.argv[1:]
+made_up, bare = load_scene("makeup", common + zero), load_scene("face", common)
+a = np.asarray(render.render(made_up.config, made_up.params))
+b = np.asarray(render.render(bare.config, bare.params))
+with_makeup = load_scene("makeup", common)
+print(np.array_equal(a, b),
+      np.abs(np.asarray(render.render(with_makeup.config, with_makeup.params)) - b).max())
+"""
+
+
 @pytest.mark.parametrize("sss_on", ["true", "false"])
 def test_zero_thickness_gives_exactly_the_no_makeup_image(sss_on):
-    zero = [f"layer.{layer.name}.thickness_mm=0" for layer in load_scene("makeup").layers]
+    """The same bytes as a user's compiler gives them (in a process that compiles so:
+    conftest's `user_process`), and makeup of its thickness far from them."""
     common = [*SMALL, f"sss.enabled={sss_on}"]
-    made_up = load_scene("makeup", common + zero)
-    bare = load_scene("face", common)
-    a = np.asarray(render.render(made_up.config, made_up.params))
-    b = np.asarray(render.render(bare.config, bare.params))
-    assert np.array_equal(a, b)
-    with_makeup = load_scene("makeup", common)
-    assert np.abs(np.asarray(render.render(with_makeup.config, with_makeup.params)) - b).max() \
-        > 0.05
+    equal, far = user_process(f"import sys\nsys.argv[1:] = {common!r}\n{ZERO_THICKNESS}").split()
+    assert equal == "True"
+    assert float(far) > 0.05
 
 
 def test_what_a_scene_does_not_need_is_not_traced(monkeypatch):
