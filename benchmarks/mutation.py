@@ -162,6 +162,10 @@ MUTANTS = [
     Mutant("layered-no-skin-interreflection", "jaxskin/shading/layered.py",
            "g = 1.0 / (1.0 - top.R_back * skin_R)", "g = 1.0",
            _k("tests/test_makeup.py", "exact_spectral_over")),
+    # the same line in the CPU's chunked form (`_spectra_skipping`), which a CPU run renders
+    Mutant("layered-no-skin-interreflection-cpu", "jaxskin/shading/layered.py",
+           "g = 1.0 / (1.0 - Rb * skin_R)", "g = 1.0",
+           _k("tests/test_makeup.py", "exact_spectral_over")),
     Mutant("layered-highlight-dimmed-once-not-twice", "jaxskin/shading/layered.py",
            "T2 = T_l[i] * T_l[i]", "T2 = T_l[i]", _k("tests/test_makeup.py", "highlights")),
     Mutant("layered-no-ambient", "jaxskin/shading/layered.py",
