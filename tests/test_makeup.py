@@ -36,16 +36,21 @@ def _flat(shape, X_values):
     return N, X
 
 
-def test_no_blur_is_the_exact_spectral_over_plus_highlights(x64, three_materials):
+@pytest.mark.parametrize("form", ["cpu", "gpu"])
+def test_no_blur_is_the_exact_spectral_over_plus_highlights(x64, three_materials, form,
+                                                            monkeypatch):
     """Without SSS and highlights (ρ_s = 0) a texel's colour is E · to_rgb(over(stack,
-    skin)), with the stack composed here by km.compose bottom up (an independent order)."""
+    skin)), with the stack composed here by km.compose bottom up (an independent order).
+    Both forms: the CPU's chunked one and the plain one a GPU traces."""
+    if form == "gpu":
+        monkeypatch.setattr(layered, "_cpu_form", lambda name: False)
     grid, S, K = three_materials
     N, X = _flat((2, 3), [0.01, 0.03, 0.02])
     X[1, 0, 0] = 0.0
     skin_R = formats.nist_reflectance(12, grid)
     L, V = unit([0.3, 0.2, 1.0]), unit([0.0, 0.0, 1.0])
-    out = jax.jit(layered.radiance, static_argnums=0)(  # one program, not op by op
-        grid, jnp.asarray(N), L, V, 0.25, 0.9, skin_R, 0.3, 0.0, S, K, jnp.asarray(X),
+    out = jax.jit(lambda *a: layered.radiance(grid, *a))(  # one program, not op by op
+        jnp.asarray(N), L, V, 0.25, 0.9, skin_R, 0.3, 0.0, S, K, jnp.asarray(X),
         np.full(3, 0.3), np.zeros(3))
     E = 0.25 + 0.9 * L[2]
     for i, j in np.ndindex(2, 3):
