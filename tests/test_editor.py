@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import assert_same_bytes
 
 aiohttp = pytest.importorskip("aiohttp", reason="the editor needs aiohttp (the edit extra)")
 from aiohttp.test_utils import TestClient, TestServer  # noqa: E402
@@ -173,8 +174,7 @@ def test_a_turn_or_a_zoom_renders_as_the_cli_without_a_new_program(session):
             assert new == (1 if "camera.projection" in changes else 0), changes
             sc = session.scene
             expected = np.asarray(render.render(sc.config, sc.params))
-            assert np.array_equal(images[-1], np.round(np.clip(expected, 0, 1) * 255)
-                                  .astype(np.uint8)), changes
+            assert_same_bytes(images[-1], np.round(np.clip(expected, 0, 1) * 255), changes)
         return images
     images = serve(session, body)
     assert all(np.abs(a.astype(int) - b).mean() > 5 for a, b in zip(images[:-1], images[1:], strict=True))
