@@ -10,8 +10,10 @@ wait for").
 The list is padded to a multiple of a sixteenth of the view's samples (the padding is
 marked off, shaded as background and read by no pixel), so that a turn or a zoom, which
 changes the count, changes the arrays' shapes, and so the compiled program, rarely.
-Both directions of the pixel average are gathers (`_to_pixels`): XLA:CPU's scatter-add is
-slow (see `view.transpose_table`).
+The pixels that show a listed sample (the covered pixels) are averaged, then placed in the
+image, as two lists (`to_covered`, `place`): the renderer exposes and encodes them between.
+Both steps are gathers in both directions (`_gather_mean`): XLA:CPU's scatter-add is slow
+(see `view.transpose_table`).
 """
 
 from __future__ import annotations
