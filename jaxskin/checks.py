@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import contextlib
 
+import numpy as np
+
 from .io import InputError
 
-__all__ = ["check_scene", "reading"]
+__all__ = ["BODY_MM", "check_scene", "reading", "size_warning"]
 
 
 @contextlib.contextmanager
@@ -44,9 +46,34 @@ def check_scene(sc, count: int, overrides=()) -> list:
         raise InputError(e.message, f"-D {item}", key=e.key) from None
 
 
-def _check_scene(sc, count: int) -> list:
-    import numpy as np
+# What a mesh of a body or a part of one measures across (its bounding box's longest side):
+# a lip or an eyelid patch 20 mm and more, a whole body under 2.5 m. Outside, `mesh.unit_mm`
+# is most likely wrong (a scan in metres read as millimetres), and the subsurface scattering,
+# whose profile is in mm (0.08–2.7 mm, `jaxskin.sss`), is off by as much.
+BODY_MM = (20.0, 2500.0)
+UNITS = {"metres": 1000.0, "centimetres": 10.0, "millimetres": 1.0, "inches": 25.4}
 
+
+def size_warning(name: str, extent: float, unit_mm: float) -> str | None:
+    """A warning line when a mesh `extent` mesh units across is no body's size at
+    `mesh.unit_mm = unit_mm`, naming the unit that makes it one (the closest to a head's
+    250 mm); None when it is one (`BODY_MM`)."""
+    across = unit_mm * float(extent)
+    lo, hi = BODY_MM
+    if lo <= across <= hi or not across > 0:
+        return None
+    fits = {unit: mm for unit, mm in UNITS.items() if lo <= mm * extent <= hi}
+    line = (f"mesh.unit_mm = {unit_mm:g}: {name} is {across:.3g} mm across, no body's or "
+            f"body part's size ({lo:g}-{hi:g} mm); the skin's subsurface scattering is "
+            "computed in mm from it")
+    if not fits:
+        return line + "; set mesh.unit_mm to the millimetres one mesh unit is"
+    unit = min(fits, key=lambda u: abs(np.log(fits[u] * extent / 250.0)))
+    return (line + f". In {unit}? mesh.unit_mm = {fits[unit]:g} makes it "
+            f"{fits[unit] * extent:.3g} mm")
+
+
+def _check_scene(sc, count: int) -> list:
     from . import cosmetics, maps, resources
     from .mesh import BUILTIN as MESHES
     from .mesh import load_mesh, missing_uv
@@ -67,6 +94,12 @@ def _check_scene(sc, count: int) -> list:
         inputs.append(mesh_name)
     if config.texture.projection == "uv" and mesh.uv is None:
         raise InputError(missing_uv(mesh_name), sc.source, key="mesh.projection")
+    sp = config.spectral
+    if sp is not None and sp.sss is not None and not sp.texel_mm:  # mm from the mesh
+        line = size_warning(mesh_name, np.ptp(mesh.vertices, axis=0).max(), sp.unit_mm)
+        if line is not None:
+            import warnings
+            warnings.warn(line, stacklevel=2)
     for i, e in enumerate(config.texture.edits):
         if e.vertex is not None and e.vertex >= len(mesh.vertices):
             raise InputError(f"vertex {e.vertex} does not exist; the mesh has "
@@ -84,7 +117,6 @@ def _check_scene(sc, count: int) -> list:
             raise InputError("every term is zero (diffuse and all lobes): this material "
                              "reflects no light; expected a fit from jaxskin fit-brdf",
                              config.brdf)
-    sp = config.spectral
     for map_key, (_, image_key) in SKIN_MAPS.items():
         image = sp.image_of(map_key) if sp is not None else None
         if image is not None:

@@ -386,3 +386,63 @@ def test_the_uv_maps_tangent_map_is_the_analytic_one():
         want = np.array([[100.0, 0, 0], [0, -100.0, 0]]) @ R.T
         np.testing.assert_allclose(tmap.vector_map, np.broadcast_to(want, (3, 2, 3)),
                                    rtol=0, atol=1e-9 * 100 / leg)
+
+
+# --- a scan's units ------------------------------------------------------------------------
+
+@pytest.mark.parametrize("extent, unit_mm, expected", [
+    (0.23, 1.0, "head.obj is 0.23 mm across, no body's or body part's size (20-2500 mm); "
+                "the skin's subsurface scattering is computed in mm from it. In metres? "
+                "mesh.unit_mm = 1000 makes it 230 mm"),
+    (17.7, 1.0, "In centimetres? mesh.unit_mm = 10 makes it 177 mm"),
+    (230.0, 1000.0, "head.obj is 2.3e+05 mm across, no body's or body part's size "
+                    "(20-2500 mm); the skin's subsurface scattering is computed in mm from "
+                    "it. In millimetres? mesh.unit_mm = 1 makes it 230 mm"),
+    (9.0, 1.0, "In inches? mesh.unit_mm = 25.4 makes it 229 mm"),
+    (1e-5, 1.0, "; set mesh.unit_mm to the millimetres one mesh unit is"),
+    (17.7, 10.0, None), (1.8, 1000.0, None), (0.02, 1000.0, None), (2.5, 1000.0, None),
+], ids=["metres", "centimetres", "millimetres-read-as-metres", "inches", "none-fits", "face",
+        "body", "lip-patch", "2.5-m"])
+def test_a_mesh_of_no_bodys_size_is_warned_with_the_unit_that_fits(extent, unit_mm,
+                                                                     expected):
+    """The sizes by hand: 0.23 m × 1000 = 230 mm, 17.7 cm × 10 = 177 mm, 9 in × 25.4 =
+    228.6 mm; of the units that fit, the one nearest a head's 250 mm (17.7 in metres would
+    be 17.7 m, outside)."""
+    from jaxskin.checks import size_warning
+
+    got = size_warning("head.obj", extent, unit_mm)
+    if expected is None:
+        assert got is None
+    else:
+        assert got is not None and got.startswith(f"mesh.unit_mm = {unit_mm:g}: ")
+        assert got.endswith(expected), got
+
+
+def test_a_scan_in_metres_is_warned_only_where_its_size_is_read(tmp_path, capsys):
+    """The shipped face (cm) said to be in mm: the spectral face's render warns once and
+    still renders; with `sss.texel_mm` set (the size is not read from the mesh), with the
+    blur off, or the Blinn model, nothing is said about it."""
+    import warnings
+
+    from jaxskin.checks import check_scene
+
+    def warned(*extra):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            check_scene(load_scene("face", ["mesh.unit_mm=1", *extra]), 1)
+        return [str(w.message) for w in caught if "mesh.unit_mm" in str(w.message)]
+
+    assert warned("sss.texel_mm=0.2") == []
+    assert warned("sss.enabled=false") == []
+    assert warned("material.model=blinn") == []
+    assert warned("mesh.unit_mm=10") == []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        code, err = render(["render", "face", "-o", str(tmp_path / "out"), *SMALL,
+                            "-D", "mesh.unit_mm=1"], capsys)
+    assert code == 0, err
+    lines = [str(w.message) for w in caught if "mesh.unit_mm" in str(w.message)]
+    assert len(lines) == 1 and lines[0].startswith("mesh.unit_mm = 1: face is 17.7 mm "
+                                                   "across"), lines
+    assert lines[0].endswith("In centimetres? mesh.unit_mm = 10 makes it 177 mm"), lines
+    assert len(list((tmp_path / "out").glob("*.png"))) == 1
