@@ -390,8 +390,9 @@ def test_a_map_that_is_not_square_is_warned_about_once(tmp_path):
     iio.imwrite(tmp_path / "square.png", np.full((201, 200), 40000, np.uint16))
     for name in ("rect", "square"):
         (tmp_path / f"{name}.toml").write_text(
-            '[mesh]\nfile = "face"\nprojection = "uv"\n[material]\nmodel = "spectral"\n'
-            '[texture]\nsize = 64\n[camera]\nsize = 32\n[[layer]]\nname = "blush"\n'
+            '[mesh]\nfile = "face"\nprojection = "uv"\nunit_mm = 10.0\n'
+            '[material]\nmodel = "spectral"\n[texture]\nsize = 64\n[camera]\nsize = 32\n'
+            '[[layer]]\nname = "blush"\n'
             f'material = "blush_rose"\nthickness_mm = 0.03\nimage = "{name}.png"\n')
     rect = load_scene(str(tmp_path / "rect.toml"))
     with pytest.warns(UserWarning, match=r"layer\.blush\.image = .*rect\.png: 300x200 pixels, "
