@@ -41,8 +41,8 @@ What made the difference (each measured on its own in the commits that made it):
   at 1024² 29 → 6 ms CPU (`jnp.cross` and `any()` over the last axis too); the makeup
   face's colour after the blur 18.6 → 1.8 ms and the view's pixel table 30–47 → 7.5 ms CPU.
 - **Blinn and Lafortune shade only the view's samples on the mesh** (`jaxskin.samples`, a
-  list padded to a sixteenth of the view so a turn rarely recompiles; the editor lists every
-  sample so a turn never does), the pixels averaged by gathers both ways, and the samples
+  list padded to a multiple of 1024 samples, a sixteenth of the view before the third
+  session; the editor lists every sample so a turn never recompiles), the pixels averaged by gathers both ways, and the samples
   read their corners' texels directly instead of a padded copy of the texture.
 - **The cosmetics model's spectra in chunks of 4096 texels** on a CPU, a layer skipped where
   a chunk lacks it and computed once per band where it is uniform (the KM stage 222 → 55–62
@@ -64,6 +64,14 @@ What made the difference (each measured on its own in the commits that made it):
   does not fuse the shading and the sRGB curve into the gather that places them (it then
   computed them per pixel and channel of the image, in one thread): the default Blinn hand
   11.2 → 7.0 ms, the like-for-like hand 8.1 → 5.7 ms in the same runs.
+
+- **The list little longer than the samples** (third session): it was padded to a
+  sixteenth of the view's samples so that a turn would rarely change its shape; but a turn,
+  a zoom or a field of view is part of the static configuration a render compiles for
+  anyway (only the editor shares one program between views, and it lists every sample).
+  Padded to a multiple of 1024 instead: the like-for-like hand shades 69,632 rows for its
+  68,665 samples instead of 81,920, its forward 3.5–4.6 → 2.9–3.5 ms in alternating runs of
+  `bench_mitsuba.py` (the height-map gradient 30–31 → 26 ms); the same PNG bytes.
 
 Tried and not kept: the bump at a list of the texels the view reads, gathering every input
 per frame (the texels, their forward differences, the samples' corners): 9.0 ms against 4.3

@@ -7,9 +7,10 @@ listed samples gives the same pixels (the same samples, shaded the same way, sum
 the same k × k block) for a quarter of the work (benchmarks/RESULTS.md, "What users
 wait for").
 
-The list is padded to a multiple of a sixteenth of the view's samples (the padding is
-marked off, shaded as background and read by no pixel), so that a turn or a zoom, which
-changes the count, changes the arrays' shapes, and so the compiled program, rarely.
+The list is padded to a multiple of `STEP` samples (the padding is marked off, shaded as
+background and read by no pixel): little more than the count, since a view's turn, zoom or
+field of view is part of the static configuration that `render` compiles for anyway. (The
+editor, which compiles one program for every view of a scene, lists every sample.)
 The pixels that show a listed sample (the covered pixels) are averaged, then placed in the
 image, as two lists (`to_covered`, `place`): the renderer exposes and encodes them between.
 Both steps are gathers in both directions (`_gather_mean`): XLA:CPU's scatter-add is slow
@@ -28,7 +29,7 @@ from .linear import linear_call
 
 __all__ = ["list_corners", "place", "sample_list", "to_covered", "to_pixels"]
 
-BUCKETS = 16  # the list's length is a multiple of 1/BUCKETS of the view's samples
+STEP = 1024  # the list's length and the covered pixels' count are multiples of STEP
 
 
 def sample_list(tex, shaded, k: int, length: int | None = None) -> dict:
@@ -45,14 +46,14 @@ def sample_list(tex, shaded, k: int, length: int | None = None) -> dict:
 
     The covered pixels are averaged, exposed and encoded as a list too, then placed in the
     image (`to_covered`, `place`). `length`: the list's length (at least the count), and
-    then every pixel is a row; default: the count rounded up to a multiple of 1/`BUCKETS`
-    of the samples, and the covered pixels' of the pixels."""
+    then every pixel is a row; default: the count rounded up to a multiple of `STEP`, and
+    the covered pixels' count too."""
     shaded = np.asarray(shaded, bool)
     kH, kW = shaded.shape
     H, W = kH // k, kW // k
     idx = np.flatnonzero(shaded)
     M = idx.size
-    given, length = length, _bucket(M, shaded.size) if length is None else length
+    given, length = length, _bucket(M) if length is None else length
     if length < M:
         raise ValueError(f"a list of {length} cannot hold {M} samples")
     row, col = idx // kW, idx % kW
@@ -60,7 +61,7 @@ def sample_list(tex, shaded, k: int, length: int | None = None) -> dict:
     covered, row_of = np.unique(pixel, return_inverse=True)
     # a list of a given length (the editor's, every sample): every pixel a row, so that
     # the shapes stay as they are when the view turns
-    P = _bucket(covered.size, H * W) if given is None else H * W
+    P = _bucket(covered.size) if given is None else H * W
     list_index = np.zeros(length, np.int32)  # padding: sample 0 (read, never shown)
     list_index[:M] = idx
     list_tex = np.zeros((length, 2), np.float32)
@@ -80,10 +81,12 @@ def sample_list(tex, shaded, k: int, length: int | None = None) -> dict:
             "covered_pixel": covered_pixel, "pixel_covered": pixel_covered}
 
 
-def _bucket(count: int, total: int) -> int:
-    """`count` rounded up to a multiple of 1/`BUCKETS` of `total` (at least one step)."""
-    step = -(-total // BUCKETS)
-    return max(step, -(-count // step) * step)
+def _bucket(count: int) -> int:
+    """`count` rounded up to a multiple of `STEP` (at least one step). A sixteenth of the
+    view's samples before (a turn then rarely changed the shapes, which a CLI or library
+    render recompiles for anyway): the like-for-like hand of `benchmarks/bench_mitsuba.py`
+    shaded 81,920 rows for 68,665 samples, now 69,632."""
+    return max(STEP, -(-count // STEP) * STEP)
 
 
 def list_corners(list_tex, list_on, pad, shape: tuple[int, int], wrap_x: bool) -> np.ndarray:
