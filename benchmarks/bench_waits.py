@@ -42,8 +42,9 @@ What made the difference (each measured on its own in the commits that made it):
   face's colour after the blur 18.6 → 1.8 ms and the view's pixel table 30–47 → 7.5 ms CPU.
 - **Blinn and Lafortune shade only the view's samples on the mesh** (`jaxskin.samples`, a
   list padded to a multiple of 1024 samples, a sixteenth of the view before the third
-  session; the editor lists every sample so a turn never recompiles), the pixels averaged by gathers both ways, and the samples
-  read their corners' texels directly instead of a padded copy of the texture.
+  session; the editor lists every sample so a turn never recompiles), the pixels averaged
+  by gathers both ways, and the samples read their corners' texels directly instead of a
+  padded copy of the texture.
 - **The cosmetics model's spectra in chunks of 4096 texels** on a CPU, a layer skipped where
   a chunk lacks it and computed once per band where it is uniform (the KM stage 222 → 55–62
   ms CPU under load; bit-equal where a layer is absent).
