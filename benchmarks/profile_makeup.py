@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxskin import maps, render, sss, texture
+from jaxskin import maps, render, skin_texels, sss, texture
 from jaxskin.scene import load_scene
 from jaxskin.shading import kelemen, layered
 from jaxskin.vectors import times3
@@ -74,7 +74,7 @@ def stages(config, params, arrays):
         return n, L, V
 
     N, L, V = run("normals, L, V per texel (gathers)", light_view, normals, params, arrays)
-    skin_R = run("skin reflectance", lambda pr, a: render.skin_reflectance(sp, pr, a, texels),
+    skin_R = run("skin reflectance", lambda pr, a: skin_texels.skin_reflectance(sp, pr, a, texels),
                  params, arrays)
     light = params["light.intensity"] * arrays["lit"] if "lit" in arrays else \
         params["light.intensity"]

@@ -41,6 +41,7 @@ Optics (Bando 2001 §4.2; Huang et al. 2013):
 Pipeline:
 
 - `render`: `render(config, params)`, the pure function of a scene.
+- `skin_texels`: the cosmetics model's skin per texel: its arrays, maps and reflectance.
 - `render_args`: what `render` is given, checked (keys, shapes, ranges, one dtype).
 - `batch`: a render's units of work: an image, its maps, a sweep's padded batch.
 - `checks`: what a scene passes before any render (memory, files, values).

@@ -35,13 +35,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import biophysical, cosmetics, formats, maps, shadow, skin, sss, texture
+from . import cosmetics, maps, shadow, sss, texture
 from .precision import matmul
 from .raster import interpolate
 from .render_args import check_call, check_maps, check_ranges, known_keys, strong
 from .samples import list_corners, place, sample_list, to_covered
-from .scene import BIOPHYSICAL_KEYS, SKIN_MAPS, SceneConfig
+from .scene import SceneConfig
 from .shading import blinn, lafortune, layered
+from .skin_texels import skin_arrays, skin_reflectance, texel_map
 from .vectors import dot, times3, unit
 from .view import (
     PIXEL_TABLE,
@@ -58,9 +59,8 @@ from .view import (
     view_pixels,
 )
 
-__all__ = ["OUTPUTS", "Prepared", "albedo", "decode_srgb", "encode_srgb", "expose", "map_cover",
-           "own_colour", "prepare", "render", "render_prepared", "skin_reflectance", "texel_map",
-           "texture_arrays", "texture_colour", "texture_to_view"]
+__all__ = ["OUTPUTS", "Prepared", "albedo", "decode_srgb", "encode_srgb", "expose", "prepare",
+           "render", "render_prepared", "texture_colour", "texture_to_view"]
 
 OUTPUTS = ("display", "rgba", "linear_rgba")
 SHADOW_MAX = 2048  # texels across the shadow map, at most
@@ -152,12 +152,6 @@ def _prepare(config: SceneConfig) -> Prepared:
     sp, texel_mm = config.spectral, 0.0
     if sp is not None:
         grid = sp.grid
-        if sp.skin == "biophysical":  # μa, μs' of the absorbers on the grid, (6, n)
-            arrays["chromophores"] = jnp.asarray(np.stack(biophysical.chromophores(
-                grid.wavelengths, formats.haemoglobin_table())), jnp.float32)
-        else:
-            arrays["skin"] = jnp.asarray(formats.nist_reflectance(sp.subject, grid),
-                                         jnp.float32)
         texel_mm = sp.texel_mm or sp.unit_mm * s.tmap.texel_size()
         # The model shades the texels on the mesh only, as a list (the rest stay black).
         texels = np.flatnonzero(np.asarray(s.mask))
@@ -179,56 +173,10 @@ def _prepare(config: SceneConfig) -> Prepared:
                      for layer in sp.layers]
             arrays["cover"] = jnp.asarray(np.stack(cover).reshape(len(cover), -1)[:, texels],
                                           jnp.float32)
-        for map_key in SKIN_MAPS:  # e.g. skin.melanin × skin.melanin_image, per texel
-            if sp.image_of(map_key) is not None:
-                factor = cosmetics.image_map(maps.read_grey(sp.image_of(map_key)),
-                                             s.tmap.height, s.tmap.width, 1.0)
-                arrays[map_cover(map_key)] = jnp.asarray(factor.reshape(-1)[texels],
-                                                         jnp.float32)
-        if sp.mask_image is not None:  # the texture's own colour where the skin is not
-            arrays.update(own_colour(sp, s.tmap.height, s.tmap.width, texels))
-        if sp.texture is not None:  # skin.texture: its maps, mask and colour
-            arrays.update(texture_arrays(sp, s.tmap.height, s.tmap.width, texels))
+        arrays.update(skin_arrays(sp, s.tmap.height, s.tmap.width, texels))
     if config.shadow is not None and config.mode != "height":
         arrays["lit"] = _visibility(config, s, view)
     return Prepared(s, view, arrays, texel_mm)
-
-
-def own_colour(sp, height: int, width: int, texels, rgb=None, mask=None) -> dict:
-    """`skin.colour_image` and `skin.mask_image` (or the arrays `rgb (H', W', 3)`, `mask
-    (H', W')`) per texel on the mesh: `own_weight (P,)` (1 − the mask: how much of the
-    texel is the image's colour, not the skin) and `own_R (P, n)` (that colour's smooth
-    spectrum on the grid, `skin_maps.upsample`), both resampled to the texture's size like
-    the skin maps."""
-    from .skin_maps import upsample
-
-    if rgb is None:
-        rgb, _ = maps.read_image(sp.colour_image, "colour image", key="skin.colour_image")
-        mask = maps.read_grey(sp.mask_image, key="skin.mask_image")
-    colour = np.stack([cosmetics.image_map(rgb[..., k], height, width, 1.0)
-                       for k in range(3)], -1).reshape(-1, 3)[texels]
-    mask = cosmetics.image_map(mask, height, width, 1.0).reshape(-1)[texels]
-    return {"own_weight": jnp.asarray(1.0 - mask, jnp.float32),
-            "own_R": jnp.asarray(upsample(colour, sp.grid), jnp.float32)}
-
-
-def texture_arrays(sp, height: int, width: int, texels) -> dict:
-    """`skin.texture`'s maps (`skin_texture.texture_maps`) as the skin maps' arrays, each
-    the fitted value over its scalar's default (so that the scene's scalars, at their
-    defaults, give the fitted values, and scale them otherwise), and its mask and colour
-    as `own_colour`'s."""
-    from .scene import SCHEMA
-    from .skin_texture import texture_maps
-
-    t = texture_maps(sp.texture, sp.texture_fixed)
-    out = own_colour(sp, height, width, texels, t["colour"], t["skin"])
-    for name, map_key in (("melanin", "skin.melanin_fraction_map"),
-                          ("haemoglobin", "skin.haemoglobin_map"),
-                          ("brightness", "skin.brightness_map")):
-        scalar = SKIN_MAPS[map_key][0]
-        factor = cosmetics.image_map(t[name] / SCHEMA[scalar].default, height, width, 1.0)
-        out[map_cover(map_key)] = jnp.asarray(factor.reshape(-1)[texels], jnp.float32)
-    return out
 
 
 def _visibility(config: SceneConfig, s: texture.TextureSetup, view: View):
@@ -541,63 +489,6 @@ def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: d
                               params["skin.roughness"], params["skin.specular"], blur=blur,
                               **layers)
     return to_image(colour)
-
-
-def skin_reflectance(sp, params: dict, arrays: dict, texels=None):
-    """The spectral model's skin reflectance on its grid, `(n,)`: the NIST subject darkened
-    by `skin.melanin` (`jaxskin.skin`), or the biophysical model (`jaxskin.biophysical`) of
-    the `skin.*` parameters (`scene.BIOPHYSICAL_KEYS`). With `texels` (flat indices of the
-    texels on the mesh) and a melanin map (`skin.melanin_map` in the params, or the scene's
-    `skin.melanin_image`), the NIST skin's melanin varies per texel: `(P, n)`; so do the
-    biophysical skin's melanin fraction, haemoglobin and brightness (a factor on its
-    reflectance) with theirs (`scene.SKIN_MAPS`)."""
-    if sp.skin == "biophysical":
-        c = biophysical.Chromophores(*arrays["chromophores"])
-        values = {name: params[BIOPHYSICAL_KEYS[name]] for name in biophysical.PARAMS}
-        for name in ("melanin", "haemoglobin"):  # per texel with a map: (P,), R (P, n)
-            key = f"{BIOPHYSICAL_KEYS[name]}_map"
-            factor = None if texels is None else texel_map(params, key, texels,
-                                                           arrays.get(map_cover(key)))
-            if factor is not None:
-                values[name] = values[name] * factor
-        if any(jnp.ndim(v) for v in values.values()):
-            shape = jnp.broadcast_shapes(*(jnp.shape(v) for v in values.values()))
-            values = {k: jnp.broadcast_to(v, shape) for k, v in values.items()}
-        R = biophysical.reflectance(c, biophysical.Skin(
-            *(values[name] for name in biophysical.PARAMS)))
-        # skin.brightness (× its map): a factor on the reflectance (`jaxskin.skin_maps`)
-        factor = None if texels is None else texel_map(
-            params, "skin.brightness_map", texels, arrays.get(map_cover("skin.brightness_map")))
-        brightness = params["skin.brightness"]
-        R = R * (brightness if factor is None else brightness * factor)[..., None]
-        if "own_R" in arrays and texels is not None:  # skin.mask_image: not skin there
-            w = arrays["own_weight"][:, None].astype(R.dtype)
-            R = (1.0 - w) * R + w * arrays["own_R"].astype(R.dtype)
-        return R
-    melanin = params["skin.melanin"]
-    factor = None if texels is None else texel_map(params, "skin.melanin_map", texels,
-                                                   arrays.get(map_cover("skin.melanin_map")))
-    if factor is not None:  # a melanin map: the skin's spectrum per texel, (P, n)
-        melanin = melanin * factor[:, None]
-    return skin.reflectance(arrays["skin"], melanin, sp.grid)
-
-
-def map_cover(map_key: str) -> str:
-    """The name in `Prepared.arrays` of a skin map loaded from the scene's image
-    (`scene.SKIN_MAPS`): per texel on the mesh, `(P,)`."""
-    return {"skin.melanin_map": "melanin_cover"}.get(
-        map_key, map_key.split(".")[1].removesuffix("_map") + "_cover")
-
-
-def texel_map(params: dict, key: str, texels, default=None):
-    """A per-texel factor for the texels on the mesh, `(P,)`: the texture-space map
-    `params[key]` `(H, W)` when the params carry one (a fit's map, `jaxskin.fitting.image`),
-    else `default` (the scene's map, from its image or regions; or `None`: no map). A map
-    multiplies its scalar, as a scene's image does: `layer.NAME.map` × thickness_mm,
-    `skin.melanin_map` × skin.melanin (biophysical: `skin.melanin_fraction_map`,
-    `skin.haemoglobin_map`)."""
-    value = params.get(key)
-    return default if value is None else value.reshape(-1)[texels]
 
 
 def encode_srgb(linear):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from jaxskin import biophysical, formats, maps, render, skin_maps, spectral
+from jaxskin import biophysical, formats, maps, render, skin_maps, skin_texels, spectral
 from jaxskin.cli import main
 from jaxskin.io import data_dir
 from jaxskin.scene import load_scene
@@ -232,7 +232,7 @@ def test_brightness_keys_render_and_differentiate(tmp_path):
     sc = load_scene("face", [*ov, "material.model=biophysical"])
     assert "skin.brightness" in sc.params
     arrays = render.prepare(sc.config).arrays
-    assert render.map_cover("skin.brightness_map") not in arrays
+    assert skin_texels.map_cover("skin.brightness_map") not in arrays
     half = np.full((16, 16), 0.5)
     maps.write_grey16(half, tmp_path / "b.png")
     with_map = load_scene("face", [*ov, "material.model=biophysical",
@@ -240,8 +240,8 @@ def test_brightness_keys_render_and_differentiate(tmp_path):
     a_map = render.prepare(with_map.config).arrays
     sp = sc.config.spectral
     texels = arrays["texels"]
-    R0 = render.skin_reflectance(sp, sc.params, arrays, texels)
-    R1 = render.skin_reflectance(with_map.config.spectral, with_map.params, a_map, texels)
+    R0 = skin_texels.skin_reflectance(sp, sc.params, arrays, texels)
+    R1 = skin_texels.skin_reflectance(with_map.config.spectral, with_map.params, a_map, texels)
     assert np.allclose(np.asarray(R1), 0.5 * np.asarray(R0), rtol=1e-4)  # 16-bit 0.5
     with jax.enable_x64(True):
         arrays64 = {**arrays, "chromophores": jnp.asarray(arrays["chromophores"],
@@ -250,7 +250,7 @@ def test_brightness_keys_render_and_differentiate(tmp_path):
 
         @jax.jit
         def f(b, m):
-            return render.skin_reflectance(sp, {**base, "skin.brightness": b,
+            return skin_texels.skin_reflectance(sp, {**base, "skin.brightness": b,
                                                 "skin.brightness_map": m}, arrays64, texels)
 
         for b in (0.7, 2.0):  # ordinary, and the range's top
@@ -341,7 +341,7 @@ def test_skin_texture_key_renders_the_texture_and_caches_it(tmp_path, monkeypatc
     sc = load_scene(tmp_path / "s.toml")
     img = np.asarray(render.render(sc.config, sc.params))[..., :3]
     arrays = render.prepare(sc.config).arrays
-    assert render.map_cover("skin.brightness_map") in arrays and "own_R" in arrays
+    assert skin_texels.map_cover("skin.brightness_map") in arrays and "own_R" in arrays
     for cols, texel in ((slice(9, 12), texture[0, 0]), (slice(20, 23), texture[0, -1])):
         px = img[14:18, cols].reshape(-1, 3)  # the face's UVs: u left to right
         de = colour.delta_E(colour.XYZ_to_Lab(colour.sRGB_to_XYZ(px)),

@@ -10,7 +10,7 @@ moves some of its parameters:
   x = lo + (hi − lo) σ(z); `light.direction` is free (the renderer normalises it);
   `material.lafortune`, a Lafortune scene's lobes, with ρd and n through exp.
 - **Maps** (`"map"`): per-texel factors in texture space, `(H, W)` like the texture, that
-  multiply their scalar as a scene's greyscale image does (`render.texel_map`):
+  multiply their scalar as a scene's greyscale image does (`skin_texels.texel_map`):
   `layer.NAME.map` (× the layer's thickness_mm) and `skin.melanin_map` (× skin.melanin),
   kept in [0, the schema's top] by a sigmoid, log-like near 0 (a step changes a texel by
   a fraction of its value: thicknesses span decades). A smoothness prior,

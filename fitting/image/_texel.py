@@ -11,7 +11,7 @@ import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
 
-from jaxskin import render
+from jaxskin import render, skin_texels
 from jaxskin.scene import SKIN_MAPS
 from jaxskin.view import pixel_entries
 
@@ -438,7 +438,7 @@ def start_map(config, params, fk: FitKey, unit: float, arrays, mask):
     texels = np.asarray(arrays["texels"])
     H, W = mask.shape
     if fk.key in SKIN_MAPS:
-        own = arrays.get(render.map_cover(fk.key))
+        own = arrays.get(skin_texels.map_cover(fk.key))
     else:
         names = [layer.name for layer in config.spectral.layers]
         own = arrays["cover"][names.index(fk.key.split(".")[1])]
