@@ -420,9 +420,7 @@ def _finish(samples, view_mask, k: int, output: str, stops, averaged=None):
         mean = exposed(average(samples)) if linear else downsample(
             decode_srgb(samples), k)
         return jnp.concatenate([mean, alpha], axis=-1)
-    mean = exposed(average(samples))
-    covered = alpha > 0
-    straight = jnp.where(covered, mean / jnp.where(covered, alpha, 1.0), 0.0)
+    straight = _straight(exposed(average(samples)), alpha)
     return jnp.concatenate([encode_srgb(straight) if linear else straight, alpha], axis=-1)
 
 
@@ -435,9 +433,14 @@ def _finish_covered(mean, place_image, output: str, stops, alpha, at_rows):
         return place_image(encode_srgb(mean))
     if output == "linear_rgba":
         return jnp.concatenate([place_image(mean), alpha], axis=-1)
-    covered = at_rows > 0
-    straight = jnp.where(covered, mean / jnp.where(covered, at_rows, 1.0), 0.0)
-    return jnp.concatenate([place_image(encode_srgb(straight)), alpha], axis=-1)
+    return jnp.concatenate([place_image(encode_srgb(_straight(mean, at_rows))), alpha], axis=-1)
+
+
+def _straight(mean, alpha):
+    """Premultiplied `mean` over its coverage `alpha` (straight alpha, as PNG holds it): 0
+    where nothing is covered (value and gradient finite there)."""
+    covered = alpha > 0
+    return jnp.where(covered, mean / jnp.where(covered, alpha, 1.0), 0.0)
 
 
 def _cosmetics_texture(config: SceneConfig, p: Prepared, params: dict, arrays: dict, normals,
